@@ -1,0 +1,123 @@
+"""Motion over the shutter (the paper's time dimension), NumPy side.
+
+Transforms are decomposed into translation, rotation and scale-shear keys (polar decomposition, as in pbrt's
+AnimatedTransform) so that rotations interpolate along arcs (slerp) instead of shrinking through a matrix lerp.
+The Warp twins of ``interpolate`` live in ``motion_kernels.py``; tests compare the two.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def decompose(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Split a 4x4 column-vector affine matrix into (translation (3,), quaternion xyzw (4,), scale-shear (3,3)).
+
+    M[:3,:3] = R @ S with R a rotation and S symmetric (polar decomposition via SVD). Reflections (negative
+    determinant) are folded into S so that R stays a proper rotation.
+    """
+    m = np.asarray(m, dtype=np.float64)
+    t = m[:3, 3].copy()
+    a = m[:3, :3]
+    u, sig, vt = np.linalg.svd(a)
+    r = u @ vt
+    if np.linalg.det(r) < 0:  # mirror: keep R proper, put the flip into S
+        u[:, -1] *= -1.0
+        r = u @ vt
+    s = r.T @ a
+    return t, matrix_to_quat(r), s
+
+
+def matrix_to_quat(r: np.ndarray) -> np.ndarray:
+    """Rotation matrix (3x3) to unit quaternion (x, y, z, w)."""
+    r = np.asarray(r, dtype=np.float64)
+    tr = np.trace(r)
+    if tr > 0.0:
+        k = np.sqrt(tr + 1.0) * 2.0
+        q = [(r[2, 1] - r[1, 2]) / k, (r[0, 2] - r[2, 0]) / k, (r[1, 0] - r[0, 1]) / k, 0.25 * k]
+    elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
+        k = np.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2]) * 2.0
+        q = [0.25 * k, (r[0, 1] + r[1, 0]) / k, (r[0, 2] + r[2, 0]) / k, (r[2, 1] - r[1, 2]) / k]
+    elif r[1, 1] > r[2, 2]:
+        k = np.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2]) * 2.0
+        q = [(r[0, 1] + r[1, 0]) / k, 0.25 * k, (r[1, 2] + r[2, 1]) / k, (r[0, 2] - r[2, 0]) / k]
+    else:
+        k = np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1]) * 2.0
+        q = [(r[0, 2] + r[2, 0]) / k, (r[1, 2] + r[2, 1]) / k, 0.25 * k, (r[1, 0] - r[0, 1]) / k]
+    q = np.array(q)
+    return q / np.linalg.norm(q)
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    x, y, z, w = np.asarray(q, dtype=np.float64)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def slerp(q0: np.ndarray, q1: np.ndarray, u: float) -> np.ndarray:
+    q0 = np.asarray(q0, np.float64)
+    q1 = np.asarray(q1, np.float64)
+    d = float(np.dot(q0, q1))
+    if d < 0.0:  # take the short way round
+        q1, d = -q1, -d
+    if d > 0.9995:
+        q = q0 + u * (q1 - q0)
+        return q / np.linalg.norm(q)
+    th = np.arccos(np.clip(d, -1.0, 1.0))
+    return (np.sin((1 - u) * th) * q0 + np.sin(u * th) * q1) / np.sin(th)
+
+
+def make_transform(times, matrices):
+    """MotionTransform from K sorted times and K 4x4 column-vector matrices.
+
+    Consecutive quaternions are made to lie in the same hemisphere so slerp takes the short arc.
+    """
+    from .scene import MotionTransform
+
+    times = np.asarray(times, np.float64)
+    ts, qs, ss = [], [], []
+    for m in matrices:
+        t, q, s = decompose(m)
+        if qs and np.dot(qs[-1], q) < 0:
+            q = -q
+        ts.append(t)
+        qs.append(q)
+        ss.append(s)
+    if len(times) > 1 and all(
+        np.allclose(ts[0], t) and np.allclose(qs[0], q) and np.allclose(ss[0], s) for t, q, s in zip(ts, qs, ss)
+    ):
+        times, ts, qs, ss = times[:1] * 0.0, ts[:1], qs[:1], ss[:1]
+    return MotionTransform(
+        times=times.astype(np.float32),
+        translation=np.array(ts, np.float32),
+        rotation=np.array(qs, np.float32),
+        scale=np.array(ss, np.float32),
+    )
+
+
+def matrix_at(xf, s: float) -> np.ndarray:
+    """The 4x4 column-vector matrix of a MotionTransform at normalised time s (clamped to its keys)."""
+    times = np.asarray(xf.times, np.float64)
+    k = len(times)
+    if k == 1 or s <= times[0]:
+        i, u = 0, 0.0
+        j = 0
+    elif s >= times[-1]:
+        i = j = k - 1
+        u = 0.0
+    else:
+        j = int(np.searchsorted(times, s, side="right"))
+        i = j - 1
+        span = times[j] - times[i]
+        u = (s - times[i]) / span if span > 0 else 0.0
+    t = (1 - u) * xf.translation[i].astype(np.float64) + u * xf.translation[j]
+    q = slerp(xf.rotation[i], xf.rotation[j], u)
+    sc = (1 - u) * xf.scale[i].astype(np.float64) + u * xf.scale[j]
+    m = np.eye(4)
+    m[:3, :3] = quat_to_matrix(q) @ sc
+    m[:3, 3] = t
+    return m

@@ -1,0 +1,210 @@
+"""The renderer's own plain scene description: numpy arrays and dataclasses.
+
+This is the contract between the USD importer (``usd_scene``) and everything that renders. Nothing here
+knows about pxr, Warp or HTTP. All positions are in scene units (the stage's units; ``meters_per_unit``
+converts), times are **normalised shutter time** ``s`` in [0, 1] over the frame's shutter interval
+``[shutter_open, shutter_close]`` (absolute time codes), and colours are linear Rec.709 RGB.
+
+Motion (the paper's time dimension) is described by *keys*:
+
+* ``MotionTransform`` -- rigid/affine motion, a few decomposed keys (translation, rotation quaternion,
+  scale-shear matrix) interpolated with lerp/slerp/lerp between keys, like pbrt's AnimatedTransform. A curved
+  path (rotation, a 9-sample arc) is simply more keys; the importer adds extra keys for curved motion.
+* ``Mesh.points`` -- deformation, one array of points per key time, interpolated linearly between keys.
+  Velocity/acceleration motion is resampled into such keys by the importer.
+
+A ball that stops halfway is two keys at s=0 and s=0.5 plus one at s=1 equal to the second: it blurs only over
+the half of the shutter in which it moves.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+# Light kinds (the integer ``kind`` the kernels dispatch on).
+LIGHT_RECT = 0
+LIGHT_DISK = 1
+LIGHT_SPHERE = 2
+LIGHT_CYLINDER = 3
+LIGHT_DISTANT = 4
+LIGHT_DOME = 5
+LIGHT_MESH = 6  # emissive geometry, sampled by area
+
+LIGHT_KIND_NAMES = {
+    "rect": LIGHT_RECT,
+    "disk": LIGHT_DISK,
+    "sphere": LIGHT_SPHERE,
+    "cylinder": LIGHT_CYLINDER,
+    "distant": LIGHT_DISTANT,
+    "dome": LIGHT_DOME,
+    "mesh": LIGHT_MESH,
+}
+
+
+@dataclass
+class MotionTransform:
+    """Object-to-world transform over the shutter, as K decomposed keys.
+
+    matrix(s) = T(s) * R(s) * S(s) in the column-vector convention (p_world = M @ p_object), where T is
+    interpolated linearly, R (unit quaternion, x, y, z, w) by slerp and S (3x3 scale/shear, the symmetric
+    polar factor) linearly. K == 1 means static.
+    """
+
+    times: np.ndarray  # (K,) float32, sorted, normalised shutter time in [0, 1]
+    translation: np.ndarray  # (K, 3) float32
+    rotation: np.ndarray  # (K, 4) float32 unit quaternions (x, y, z, w)
+    scale: np.ndarray  # (K, 3, 3) float32
+
+    @property
+    def num_keys(self) -> int:
+        return int(len(self.times))
+
+    @staticmethod
+    def static(matrix: np.ndarray) -> "MotionTransform":
+        """A motionless transform from a 4x4 column-vector matrix (p_world = M @ p)."""
+        from .motion import decompose
+
+        t, q, s = decompose(np.asarray(matrix, dtype=np.float64))
+        return MotionTransform(
+            times=np.zeros(1, np.float32),
+            translation=t[None].astype(np.float32),
+            rotation=q[None].astype(np.float32),
+            scale=s[None].astype(np.float32),
+        )
+
+
+@dataclass
+class Mesh:
+    """A triangle mesh in object space (the bottom level of the two-level hierarchy).
+
+    Several ``Instance`` s may share one mesh (USD native instances, PointInstancer prototypes).
+    """
+
+    name: str  # prim path, for messages
+    point_times: np.ndarray  # (P,) float32 sorted normalised shutter times; P == 1 means not deforming
+    points: np.ndarray  # (P, V, 3) float32 object-space positions per key
+    triangles: np.ndarray  # (T, 3) int32 vertex indices, counter-clockwise seen from the front (right-handed)
+    material_ids: np.ndarray  # (T,) int32 index into Scene.materials per triangle
+    normals: np.ndarray | None = None  # (T, 3, 3) float32 per-corner object-space shading normals, or None
+    uvs: np.ndarray | None = None  # (T, 3, 2) float32 per-corner st, or None
+    double_sided: bool = True
+
+    @property
+    def deforming(self) -> bool:
+        return len(self.point_times) > 1
+
+
+@dataclass
+class Instance:
+    """One placement of a mesh in the world, with its motion over the shutter."""
+
+    mesh: int  # index into Scene.meshes
+    transform: MotionTransform
+    name: str = ""
+    # Visible part of the shutter, in normalised time (time-sampled visibility). Outside it the instance is
+    # absent for camera, shadow and light rays alike.
+    visible_from: float = 0.0
+    visible_to: float = 1.0
+
+
+@dataclass
+class Material:
+    """Constant-input surface description (UsdPreviewSurface subset; issue 3 extends it)."""
+
+    name: str
+    diffuse_color: tuple[float, float, float] = (0.18, 0.18, 0.18)
+    emissive_color: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    opacity: float = 1.0
+    # Filled for later issues; the spine renders diffuse + emission + opacity.
+    specular_color: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    use_specular_workflow: bool = False
+    metallic: float = 0.0
+    roughness: float = 0.5
+    ior: float = 1.5
+
+
+@dataclass
+class Light:
+    """A UsdLux light. Geometry is in the light's local frame (USD conventions):
+
+    rect: ``width`` x ``height`` in the local XY plane, emitting towards -Z;
+    disk: ``radius`` in the XY plane, emitting towards -Z;
+    sphere: ``radius`` about the origin (0 = point light);
+    cylinder: ``length`` along local X, ``radius``;
+    distant: emits along local -Z, ``angle`` = apex angle in degrees (0 = a delta direction);
+    dome: constant radiance from every direction (``texture`` in issue 3);
+    mesh: emissive geometry, ``instance`` index, sampled by triangle area.
+
+    ``radiance`` is the final emitted radiance (intensity * 2^exposure * color * blackbody, already divided by
+    the world-space area when ``normalize`` is on), except for ``distant`` where it is the irradiance on a
+    surface facing the light (the sun convention of Cycles/Karma), converted to radiance by the renderer.
+    """
+
+    kind: int
+    name: str
+    radiance: tuple[float, float, float]
+    transform: MotionTransform
+    width: float = 1.0
+    height: float = 1.0
+    radius: float = 0.5
+    length: float = 1.0
+    angle: float = 0.53  # degrees, distant lights
+    instance: int = -1  # LIGHT_MESH only
+    visible_to_camera: bool = True  # dome lights seen by camera rays
+
+
+@dataclass
+class Camera:
+    """A UsdGeomCamera with its physical units converted to scene units.
+
+    The camera looks down its local -Z with +Y up (USD convention); ``transform`` is camera-to-world.
+    """
+
+    name: str
+    transform: MotionTransform
+    projection: str = "perspective"  # or "orthographic"
+    focal_length: float = 5.0  # scene units (USD focalLength is in tenths of a scene unit)
+    horizontal_aperture: float = 2.0955  # scene units
+    vertical_aperture: float = 1.5291  # scene units
+    horizontal_aperture_offset: float = 0.0  # scene units
+    vertical_aperture_offset: float = 0.0  # scene units
+    clipping_range: tuple[float, float] = (1.0, 1.0e6)  # scene units
+    f_stop: float = 0.0  # unitless; 0 = pinhole
+    focus_distance: float = 0.0  # scene units
+    exposure: float = 0.0  # stops; image scaled by 2^exposure
+
+
+@dataclass
+class RenderSettingsInfo:
+    """What a UsdRenderSettings prim asked for (None = not authored)."""
+
+    resolution: tuple[int, int] | None = None
+    camera_path: str | None = None
+    pixel_aspect_ratio: float = 1.0
+    disable_motion_blur: bool = False
+    disable_depth_of_field: bool = False
+
+
+@dataclass
+class Scene:
+    """Everything needed to render one frame."""
+
+    meshes: list[Mesh]
+    instances: list[Instance]
+    materials: list[Material]
+    lights: list[Light]
+    camera: Camera
+    frame: float  # time code of the frame
+    shutter_open: float  # absolute time code of s = 0
+    shutter_close: float  # absolute time code of s = 1
+    meters_per_unit: float = 0.01
+    up_axis: str = "Y"
+    time_codes_per_second: float = 24.0
+    render_settings: RenderSettingsInfo = field(default_factory=RenderSettingsInfo)
+    warnings: list[str] = field(default_factory=list)
+    source: str = ""  # file it came from, for messages
+
+    def time_code(self, s: float) -> float:
+        """Absolute time code of normalised shutter time s."""
+        return self.shutter_open + s * (self.shutter_close - self.shutter_open)
