@@ -1,0 +1,142 @@
+"""The camera and its lens (the paper's depth of field, section 3), moving over the shutter.
+
+A camera ray is made as in the paper: the pinhole ray through the film point fixes the *focal point* where it
+meets the plane of focus (distance P in front of the lens); a point on the lens disk of radius
+F / (2 n) is chosen from the sample's lens dimensions; the ray runs from the lens point through the focal
+point. Points at depth D then blur into a circle of confusion of diameter C = |V_D - V_P| F / (n V_D) on the
+film (up to the pinhole framing, see README); ``f_stop == 0`` skips the lens and is the pinhole camera, bit
+for bit. Framing follows USD: the film (aperture) is seen through a pinhole at the focal length.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from .motion import matrix_at
+from .motion_kernels import MotionKeys, keys_matrix, upload_keys
+from .sampling import square_to_uniform_disk_concentric
+from .scene import Camera
+
+
+@wp.struct
+class CameraParams:
+    """Everything a kernel needs to make camera rays. Lengths in scene units."""
+
+    keys: MotionKeys  # camera-to-world over the shutter
+    key_count: int
+    orthographic: int
+    focal_length: float  # F, scene units
+    film_size: wp.vec2  # effective aperture (horizontal, vertical) after conforming to the image aspect
+    film_offset: wp.vec2  # aperture offsets, scene units
+    lens_radius: float  # F / (2 n), 0 = pinhole
+    focus_distance: float  # P, scene units
+    near: float  # clipping range, scene units along the view axis
+    far: float
+    width: int  # full image, pixels
+    height: int
+    exposure_scale: float  # 2^exposure
+
+
+@dataclass
+class CameraSetup:
+    """The camera as prepared for a render (NumPy side), with the matrices written into the EXR."""
+
+    params: CameraParams
+    film_size: tuple[float, float]
+    lens_radius: float
+
+    def world_to_camera(self, camera: Camera, s: float = 0.5) -> np.ndarray:
+        return np.linalg.inv(matrix_at(camera.transform, s))
+
+
+def conform_aperture(h_ap: float, v_ap: float, width: int, height: int, pixel_aspect: float = 1.0):
+    """Expand the aperture to the image aspect (UsdRender's default ``expandAperture`` policy)."""
+    image_aspect = width * pixel_aspect / height
+    if h_ap / v_ap < image_aspect:
+        return v_ap * image_aspect, v_ap
+    return h_ap, h_ap / image_aspect
+
+
+def setup_camera(camera: Camera, width: int, height: int, *, pixel_aspect: float = 1.0, dof: bool = True,
+                 device: str = "cpu") -> CameraSetup:
+    keys, _, counts = upload_keys([camera.transform], device)
+    p = CameraParams()
+    p.keys = keys
+    p.key_count = int(counts[0])
+    p.orthographic = int(camera.projection == "orthographic")
+    fw, fh = conform_aperture(camera.horizontal_aperture, camera.vertical_aperture, width, height, pixel_aspect)
+    p.focal_length = float(camera.focal_length)
+    p.film_size = wp.vec2(fw, fh)
+    p.film_offset = wp.vec2(camera.horizontal_aperture_offset, camera.vertical_aperture_offset)
+    lens_radius = 0.0
+    if dof and camera.f_stop > 0.0 and camera.focus_distance > 0.0 and not p.orthographic:
+        lens_radius = camera.focal_length / (2.0 * camera.f_stop)
+    p.lens_radius = float(lens_radius)
+    p.focus_distance = float(camera.focus_distance)
+    p.near = float(camera.clipping_range[0])
+    p.far = float(camera.clipping_range[1])
+    p.width = int(width)
+    p.height = int(height)
+    p.exposure_scale = float(2.0 ** camera.exposure)
+    return CameraSetup(params=p, film_size=(fw, fh), lens_radius=lens_radius)
+
+
+def ndc_matrix(camera: Camera, setup: CameraSetup) -> np.ndarray:
+    """Camera space to NDC ([-1, 1]^2 over the film) for the EXR ``worldToNDC`` attribute (column vectors)."""
+    fw, fh = setup.film_size
+    ox, oy = camera.horizontal_aperture_offset, camera.vertical_aperture_offset
+    near, far = camera.clipping_range
+    m = np.zeros((4, 4))
+    if camera.projection == "orthographic":
+        m[0, 0], m[0, 3] = 2.0 / fw, -2.0 * ox / fw
+        m[1, 1], m[1, 3] = 2.0 / fh, -2.0 * oy / fh
+        m[2, 2], m[2, 3] = -2.0 / (far - near), -(far + near) / (far - near)
+        m[3, 3] = 1.0
+    else:
+        f = camera.focal_length
+        m[0, 0], m[0, 2] = 2.0 * f / fw, 2.0 * ox / fw
+        m[1, 1], m[1, 2] = 2.0 * f / fh, 2.0 * oy / fh
+        m[2, 2], m[2, 3] = -(far + near) / (far - near), -2.0 * far * near / (far - near)
+        m[3, 2] = -1.0
+    return m
+
+
+@wp.func
+def camera_ray(cam: CameraParams, film: wp.vec2, lens_u: wp.vec2, s: float):
+    """World-space ray (origin, unit direction, tmin, tmax) through image position ``film`` (pixels, y down).
+
+    ``lens_u`` are the sample's two lens dimensions, ``s`` its normalised shutter time.
+    Returns (origin, direction, tmin, tmax, forward) where forward is the camera's world view axis.
+    """
+    # film position in scene units on the image plane at distance F (y up)
+    fx = (film[0] / float(cam.width) - 0.5) * cam.film_size[0] + cam.film_offset[0]
+    fy = (0.5 - film[1] / float(cam.height)) * cam.film_size[1] + cam.film_offset[1]
+    o = wp.vec3(0.0, 0.0, 0.0)
+    d = wp.vec3(0.0, 0.0, -1.0)
+    if cam.orthographic != 0:
+        o = wp.vec3(fx, fy, 0.0)
+    else:
+        d = wp.vec3(fx, fy, -cam.focal_length)
+        if cam.lens_radius > 0.0:
+            # the focal point: where the pinhole ray meets the plane of focus
+            focal = d * (cam.focus_distance / cam.focal_length)
+            lens = square_to_uniform_disk_concentric(lens_u) * cam.lens_radius
+            o = wp.vec3(lens[0], lens[1], 0.0)
+            d = focal - o
+    d = wp.normalize(d)
+    # clipping planes are distances along the view axis
+    inv_cos = 1.0 / wp.max(-d[2], 1.0e-8)
+    tmin = cam.near * inv_cos
+    tmax = cam.far * inv_cos
+    if cam.orthographic != 0:
+        tmin = cam.near
+        tmax = cam.far
+    m = keys_matrix(cam.keys, 0, cam.key_count, s)
+    wo = wp.transform_point(m, o)
+    wd = wp.normalize(wp.transform_vector(m, d))
+    fwd = wp.normalize(wp.transform_vector(m, wp.vec3(0.0, 0.0, -1.0)))
+    # world distances differ from camera distances when the camera transform scales
+    scale = wp.length(wp.transform_vector(m, d))
+    return wo, wd, tmin * scale, tmax * scale, fwd

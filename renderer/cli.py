@@ -1,0 +1,184 @@
+"""``drt``: the command line. ``drt render SCENE -o OUT.exr [...]`` renders one frame.
+
+Bad input (missing file, malformed USD, unknown camera, bad numbers) ends with a one-line error on stderr and
+a non-zero exit code, never a traceback and never a partial output file (EXR writes are atomic).
+
+Exit codes: 0 success, 1 render error (bad scene, bad settings, I/O), 2 bad command line, 130 interrupted.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # one line, exit 2 (argparse would print the usage block)
+        sys.stderr.write(f"drt: error: {message}\n")
+        raise SystemExit(2)
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1: {text!r}")
+    return v
+
+
+def _number(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if v != v or v in (float("inf"), float("-inf")):
+        raise argparse.ArgumentTypeError(f"not a finite number: {text!r}")
+    return v
+
+
+def _seed(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if not 0 <= v < 2**32:
+        raise argparse.ArgumentTypeError(f"must be between 0 and 4294967295: {text!r}")
+    return v
+
+
+def add_render_settings(p: argparse.ArgumentParser) -> None:
+    """Flags shared by ``drt render`` and ``drt submit``."""
+    from .film import FILTERS
+    from .integrator import TIME_FILTERS
+    from .render import AOV_NAMES
+
+    p.add_argument("--frame", type=_number, default=None, help="time code to render (default: stage start)")
+    p.add_argument("--camera", default=None, metavar="PRIM_PATH", help="camera prim (default: render settings)")
+    p.add_argument("--width", type=_positive_int, default=None)
+    p.add_argument("--height", type=_positive_int, default=None)
+    p.add_argument("--spp", type=_positive_int, default=16, help="samples per pixel (default 16)")
+    p.add_argument("--seed", type=_seed, default=0)
+    p.add_argument("--filter", choices=list(FILTERS), default="gaussian", help="pixel filter (default gaussian)")
+    p.add_argument("--time-filter", choices=list(TIME_FILTERS), default="box",
+                   help="shutter weighting (default box; strobe = instantaneous at the frame time)")
+    p.add_argument("--shutter", nargs=2, type=_number, metavar=("OPEN", "CLOSE"), default=None,
+                   help="shutter interval relative to the frame, overriding the camera's")
+    p.add_argument("--no-motion-blur", action="store_true")
+    p.add_argument("--no-dof", action="store_true")
+    p.add_argument("--aov", action="append", choices=list(AOV_NAMES), default=[], metavar="NAME",
+                   help=f"extra output ({', '.join(AOV_NAMES)}); repeatable")
+    p.add_argument("--half", action="store_true", help="store colour as 16-bit HALF (default 32-bit FLOAT)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="drt", description="Distributed ray tracing: USD in, OpenEXR out.")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    r = sub.add_parser("render", help="render one frame of a USD scene to an EXR file")
+    r.add_argument("scene", help="a .usd/.usda/.usdc/.usdz file")
+    r.add_argument("-o", "--output", required=True, metavar="OUT.exr")
+    add_render_settings(r)
+    r.add_argument("--tile", type=_positive_int, default=64, help="tile size in pixels (default 64)")
+    r.add_argument("--threads", type=_positive_int, default=None, help="render threads (default: all cores)")
+    r.add_argument("--quiet", action="store_true", help="no warnings or progress bar")
+    return parser
+
+
+class _Progress:
+    """A tqdm bar on a terminal, nothing otherwise."""
+
+    def __init__(self, total: int, enabled: bool):
+        self.bar = None
+        if enabled:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, unit="spl", unit_scale=True, file=sys.stderr, leave=False,
+                            desc="rendering")
+
+    def __call__(self, done: int, total: int) -> None:
+        if self.bar is not None:
+            self.bar.update(done - self.bar.n)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _si(x: float) -> str:
+    for unit, f in (("G", 1e9), ("M", 1e6), ("k", 1e3)):
+        if x >= f:
+            return f"{x / f:.2f} {unit}"
+    return f"{x:.0f} "
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    from .errors import RenderError
+    from .render import RenderOptions, default_threads, prepare, render_frame, write_frame
+    from .usd_scene import load_scene
+
+    out = os.path.abspath(args.output)
+    out_dir = os.path.dirname(out)
+    if not os.path.isdir(out_dir):
+        raise RenderError(f"output directory does not exist: {out_dir}")
+    t_load = time.perf_counter()
+    strobe = args.time_filter == "strobe"
+    scene = load_scene(args.scene, args.frame, camera_path=args.camera,
+                       shutter=tuple(args.shutter) if args.shutter else None,
+                       motion_blur=not (args.no_motion_blur or strobe))
+    options = RenderOptions(width=args.width, height=args.height, spp=args.spp, seed=args.seed,
+                            filter=args.filter, time_filter=args.time_filter, dof=not args.no_dof,
+                            aovs=tuple(dict.fromkeys(args.aov)))
+    prep = prepare(scene, options)
+    load_seconds = time.perf_counter() - t_load
+    if not args.quiet:
+        for w in prep.warnings:
+            sys.stderr.write(f"drt: warning: {w}\n")
+    threads = args.threads or default_threads()
+    bar = _Progress(prep.width * prep.height * options.spp, enabled=sys.stderr.isatty() and not args.quiet)
+    try:
+        result = render_frame(prep, tile_size=args.tile, threads=threads, progress=bar)
+    finally:
+        bar.close()
+    zeroed = write_frame(out, prep, result.sums, half=args.half)
+    if result.nonfinite and not args.quiet:
+        sys.stderr.write(f"drt: warning: {result.nonfinite} samples had NaN/Inf radiance and were zeroed\n")
+    if zeroed and not args.quiet:
+        sys.stderr.write(f"drt: warning: {zeroed} non-finite pixel values were zeroed\n")
+    sps = result.samples / max(result.seconds, 1e-9)
+    rps = result.rays / max(result.seconds, 1e-9)
+    print(f"wrote {args.output} ({prep.width}x{prep.height}, {options.spp} spp, {threads} threads): "
+          f"{result.seconds:.2f} s render + {load_seconds:.2f} s load, {_si(sps)}samples/s, {_si(rps)}rays/s")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        import warp as wp
+
+        wp.config.quiet = True
+        if args.command == "render":
+            return cmd_render(args)
+        parser.error(f"unknown command {args.command}")
+    except KeyboardInterrupt:
+        sys.stderr.write("drt: interrupted\n")
+        return 130
+    except Exception as e:  # noqa: BLE001 - the CLI's contract: one line, never a traceback
+        from .errors import RenderError
+
+        msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        if isinstance(e, (RenderError, OSError)):
+            sys.stderr.write(f"drt: error: {msg}\n")
+        else:
+            sys.stderr.write(f"drt: internal error: {type(e).__name__}: {msg}\n")
+        if os.environ.get("DRT_DEBUG"):
+            raise
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,206 @@
+"""Uploading a Scene's meshes and instances into the two-level, time-keyed hierarchy of ``accel``.
+
+Builds one bottom-level BVH per mesh (bounds per point key), the instances' world bounds on a uniform grid of
+top-level time keys (padded so that the blend between two keys contains the curved path in between), and the
+top-level BVH over them.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from .accel import Geometry
+from .accel_build import Bvh, build_bvh
+from .motion import matrix_at
+from .motion_kernels import upload_keys
+from .scene import Instance, Mesh, MotionTransform, Scene
+
+MAX_TLAS_KEYS = 33  # top-level time keys for moving scenes (32 segments over the shutter)
+SUBSTEPS = 8  # samples per top-level segment when measuring how far curved motion leaves the linear blend
+
+
+@dataclass
+class GeometryStats:
+    triangles: int
+    blas_nodes: int
+    tlas_nodes: int
+    tlas_keys: int
+    build_seconds: float
+    nbytes: int
+
+
+def _mesh_prim_bounds(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Per-key triangle boxes (P, T, 3) of a mesh."""
+    tri = mesh.points[:, mesh.triangles]  # (P, T, 3, 3)
+    return tri.min(axis=2), tri.max(axis=2)
+
+
+def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(..., 8, 3) corners of boxes (..., 3)."""
+    sel = np.array([[(i >> a) & 1 for a in range(3)] for i in range(8)], bool)
+    return np.where(sel, hi[..., None, :], lo[..., None, :])
+
+
+def _mesh_box_at(bvh: Bvh, times: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Root box of a mesh BVH at times s (n,), interpolated between its point keys."""
+    lo, hi = bvh.node_lower[0].astype(np.float64), bvh.node_upper[0].astype(np.float64)  # (P, 3)
+    if len(times) == 1:
+        return np.repeat(lo, len(s), 0), np.repeat(hi, len(s), 0)
+    idx = np.clip(np.searchsorted(times, s, side="right"), 1, len(times) - 1)
+    t0, t1 = times[idx - 1], times[idx]
+    u = np.clip((s - t0) / np.maximum(t1 - t0, 1e-30), 0.0, 1.0)[:, None]
+    return lo[idx - 1] * (1 - u) + lo[idx] * u, hi[idx - 1] * (1 - u) + hi[idx] * u
+
+
+def _world_box(xf: MotionTransform, lo: np.ndarray, hi: np.ndarray, s: np.ndarray):
+    """World boxes (n, 3) of object boxes lo/hi (n, 3) under xf at times s (n,)."""
+    corners = _box_corners(lo, hi)  # (n, 8, 3)
+    out_lo, out_hi = np.empty_like(lo), np.empty_like(hi)
+    for i, si in enumerate(s):
+        m = matrix_at(xf, float(si))
+        w = corners[i] @ m[:3, :3].T + m[:3, 3]
+        out_lo[i], out_hi[i] = w.min(0), w.max(0)
+    return out_lo, out_hi
+
+
+def instance_key_bounds(inst: Instance, mesh_bvh: Bvh, mesh_times: np.ndarray, nkeys: int):
+    """World boxes of an instance at ``nkeys`` uniform shutter times, padded for curved motion.
+
+    Between two keys the traversal blends the key boxes linearly; the true box at an intermediate time (a
+    rotation, an arc) may poke out of that blend. We measure the excess at SUBSTEPS times per segment and grow
+    both keys of the segment by it, plus half the largest step between substeps (the chord error bound for
+    the motion between measured times).
+    """
+    if nkeys == 1 or (inst.transform.num_keys == 1 and len(mesh_times) == 1):
+        lo, hi = _mesh_box_at(mesh_bvh, mesh_times, np.zeros(1))
+        wlo, whi = _world_box(inst.transform, lo, hi, np.zeros(1))
+        return np.repeat(wlo, nkeys, 0), np.repeat(whi, nkeys, 0)
+    key_t = np.linspace(0.0, 1.0, nkeys)
+    lo, hi = _mesh_box_at(mesh_bvh, mesh_times, key_t)
+    klo, khi = _world_box(inst.transform, lo, hi, key_t)
+    nseg = nkeys - 1
+    frac = (np.arange(1, SUBSTEPS) / SUBSTEPS)
+    sub_t = (key_t[:-1, None] + frac[None, :] / nseg).reshape(-1)
+    slo, shi = _mesh_box_at(mesh_bvh, mesh_times, sub_t)
+    wlo, whi = _world_box(inst.transform, slo, shi, sub_t)
+    wlo = wlo.reshape(nseg, SUBSTEPS - 1, 3)
+    whi = whi.reshape(nseg, SUBSTEPS - 1, 3)
+    f = frac[None, :, None]
+    blend_lo = klo[:-1, None] * (1 - f) + klo[1:, None] * f
+    blend_hi = khi[:-1, None] * (1 - f) + khi[1:, None] * f
+    # all measured boxes of a segment, its two ends included, for the chord bound
+    seq_lo = np.concatenate([klo[:-1, None], wlo, klo[1:, None]], 1)
+    seq_hi = np.concatenate([khi[:-1, None], whi, khi[1:, None]], 1)
+    step = np.maximum(np.abs(np.diff(seq_lo, axis=1)).max(1), np.abs(np.diff(seq_hi, axis=1)).max(1))
+    pad_seg = np.maximum((blend_lo - wlo).max(1), (whi - blend_hi).max(1))
+    pad_seg = np.maximum(pad_seg, 0.0) + 0.5 * step  # (nseg, 3)
+    pad = np.zeros((nkeys, 3))
+    pad[:-1] = np.maximum(pad[:-1], pad_seg)
+    pad[1:] = np.maximum(pad[1:], pad_seg)
+    return klo - pad, khi + pad
+
+
+def _tlas_key_count(scene: Scene) -> int:
+    moving = [max(i.transform.num_keys, len(scene.meshes[i.mesh].point_times)) for i in scene.instances
+              if i.transform.num_keys > 1 or scene.meshes[i.mesh].deforming]
+    if not moving:
+        return 1
+    return int(min(MAX_TLAS_KEYS, max(3, max(moving))))
+
+
+def _i32(a, device):
+    return wp.array(np.ascontiguousarray(np.asarray(a, np.int32)), dtype=wp.int32, device=device)
+
+
+def _f32(a, device):
+    return wp.array(np.ascontiguousarray(np.asarray(a, np.float32)), dtype=wp.float32, device=device)
+
+
+def _v3(a, device):
+    a = np.ascontiguousarray(np.asarray(a, np.float32).reshape(-1, 3))
+    if len(a) == 0:
+        a = np.zeros((1, 3), np.float32)
+    return wp.array(a, dtype=wp.vec3, device=device)
+
+
+def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, GeometryStats]:
+    """Build both BVH levels of a scene and upload everything a ray needs."""
+    import time
+
+    t_start = time.perf_counter()
+    blas: list[Bvh] = []
+    for mesh in scene.meshes:
+        lo, hi = _mesh_prim_bounds(mesh)
+        blas.append(build_bvh(lo, hi))
+
+    g = Geometry()
+    n_nodes = np.cumsum([0] + [len(b.node_a) for b in blas])
+    n_bounds = np.cumsum([0] + [len(b.node_a) * len(m.point_times) for b, m in zip(blas, scene.meshes)])
+    n_tris = np.cumsum([0] + [len(m.triangles) for m in scene.meshes])
+    n_verts = np.cumsum([0] + [m.points.shape[0] * m.points.shape[1] for m in scene.meshes])
+    n_keys = np.cumsum([0] + [len(m.point_times) for m in scene.meshes])
+
+    cat = lambda xs, shape, dt: np.concatenate(xs).astype(dt) if xs else np.zeros(shape, dt)  # noqa: E731
+    g.points = _v3(cat([m.points.reshape(-1, 3) for m in scene.meshes], (1, 3), np.float32), device)
+    g.point_times = _f32(cat([m.point_times for m in scene.meshes], (1,), np.float32), device)
+    g.tri_vidx = wp.array(cat([m.triangles for m in scene.meshes], (1, 3), np.int32), dtype=wp.vec3i,
+                          device=device)
+    g.tri_material = _i32(cat([m.material_ids for m in scene.meshes], (1,), np.int32), device)
+    normals = [m.normals.reshape(-1, 3) if m.normals is not None else np.zeros((len(m.triangles) * 3, 3))
+               for m in scene.meshes]
+    g.normals = _v3(cat(normals, (1, 3), np.float32), device)
+    g.blas_a = _i32(cat([b.node_a for b in blas], (1,), np.int32), device)
+    g.blas_b = _i32(cat([b.node_b for b in blas], (1,), np.int32), device)
+    g.blas_lo = _v3(cat([b.node_lower.reshape(-1, 3) for b in blas], (1, 3), np.float32), device)
+    g.blas_hi = _v3(cat([b.node_upper.reshape(-1, 3) for b in blas], (1, 3), np.float32), device)
+    g.blas_prim = _i32(cat([b.prim_order for b in blas], (1,), np.int32), device)
+    prim_off = np.cumsum([0] + [len(b.prim_order) for b in blas])
+    g.mesh_node_off = _i32(n_nodes[:-1], device)
+    g.mesh_bound_off = _i32(n_bounds[:-1], device)
+    g.mesh_prim_off = _i32(prim_off[:-1], device)
+    g.mesh_tri_off = _i32(n_tris[:-1], device)
+    g.mesh_vert_off = _i32(n_verts[:-1], device)
+    g.mesh_nverts = _i32([m.points.shape[1] for m in scene.meshes] or [0], device)
+    g.mesh_key_off = _i32(n_keys[:-1], device)
+    g.mesh_nkeys = _i32([len(m.point_times) for m in scene.meshes] or [1], device)
+    g.mesh_has_normals = _i32([int(m.normals is not None) for m in scene.meshes] or [0], device)
+
+    # --- top level over instances, boxes on a uniform grid of time keys
+    nk = _tlas_key_count(scene)
+    ninst = len(scene.instances)
+    lo = np.empty((nk, ninst, 3), np.float32)
+    hi = np.empty((nk, ninst, 3), np.float32)
+    for i, inst in enumerate(scene.instances):
+        mesh = scene.meshes[inst.mesh]
+        klo, khi = instance_key_bounds(inst, blas[inst.mesh], mesh.point_times.astype(np.float64), nk)
+        lo[:, i], hi[:, i] = klo, khi
+    tlas = build_bvh(lo, hi)
+    g.tlas_a = _i32(tlas.node_a, device)
+    g.tlas_b = _i32(tlas.node_b, device)
+    g.tlas_lo = _v3(tlas.node_lower.reshape(-1, 3), device)
+    g.tlas_hi = _v3(tlas.node_upper.reshape(-1, 3), device)
+    g.tlas_prim = _i32(tlas.prim_order if len(tlas.prim_order) else [0], device)
+    g.tlas_nkeys = nk
+
+    keys, offs, counts = upload_keys([inst.transform for inst in scene.instances], device)
+    g.keys = keys
+    g.inst_mesh = _i32([inst.mesh for inst in scene.instances] or [0], device)
+    g.inst_xf_off = _i32(offs if ninst else [0], device)
+    g.inst_xf_count = _i32(counts if ninst else [1], device)
+    w2o = [np.linalg.inv(matrix_at(inst.transform, 0.0)) for inst in scene.instances] or [np.eye(4)]
+    g.inst_w2o = wp.array(np.array(w2o, np.float32), dtype=wp.mat44, device=device)
+    g.inst_vis_from = _f32([inst.visible_from for inst in scene.instances] or [0.0], device)
+    g.inst_vis_to = _f32([inst.visible_to for inst in scene.instances] or [1.0], device)
+
+    nbytes = sum(b.nbytes for b in blas) + tlas.nbytes
+    stats = GeometryStats(
+        triangles=int(n_tris[-1]),
+        blas_nodes=int(n_nodes[-1]),
+        tlas_nodes=len(tlas.node_a),
+        tlas_keys=nk,
+        build_seconds=time.perf_counter() - t_start,
+        nbytes=int(nbytes),
+    )
+    return g, stats

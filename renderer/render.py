@@ -1,0 +1,319 @@
+"""The renderer as a library: prepare a loaded scene once, render any tile of it, assemble, write the EXR.
+
+    scene = load_scene("shot.usda", frame=12)                 # renderer.usd_scene
+    prep = prepare(scene, RenderOptions(width=640, height=360, spp=64))
+    sums = render_frame(prep, tile_size=64, threads=2)        # or render_tile(prep, Tile(...)) per worker
+    write_frame("out.exr", prep, sums)
+
+``render_tile`` is a pure function of (scene, options, tile): it returns the tile's filtered sums and weights,
+the same bits whoever renders it, in whatever tiling, on however many threads. The service splits frames
+into tiles and calls it from its workers.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field, replace
+from typing import Callable
+
+import numpy as np
+import warp as wp
+
+from . import film
+from .camera import CameraSetup, ndc_matrix, setup_camera
+from .errors import Cancelled, SettingsError
+from .geometry import GeometryStats, upload_geometry
+from .integrator import TIME_BOX, TIME_FILTERS, trace_wave_kernel
+from .lights import upload_lights
+from .materials import upload_materials
+from .motion import matrix_at
+from .scene import Scene
+
+AOV_NAMES = ("depth", "normal", "albedo")
+MAX_SPP = 1 << 16
+MAX_PIXELS = 16384 * 16384
+
+
+@dataclass(frozen=True)
+class RenderOptions:
+    """How to render. Resolution None = the scene's RenderSettings, else 640 wide at the camera's aspect."""
+
+    width: int | None = None
+    height: int | None = None
+    spp: int = 16
+    seed: int = 0
+    filter: str = "gaussian"  # pixel reconstruction filter: box, triangle, gaussian, blackman-harris
+    time_filter: str = "box"  # shutter weighting: box, triangle, strobe (strobe = load the scene still)
+    dof: bool = True
+    aovs: tuple[str, ...] = ()
+
+    def validate(self) -> "RenderOptions":
+        if self.filter not in film.FILTERS:
+            raise SettingsError(f"unknown filter {self.filter!r} (choose from {', '.join(film.FILTERS)})")
+        if self.time_filter not in TIME_FILTERS:
+            raise SettingsError(f"unknown time filter {self.time_filter!r} (choose from {', '.join(TIME_FILTERS)})")
+        if not 1 <= self.spp <= MAX_SPP:
+            raise SettingsError(f"spp must be between 1 and {MAX_SPP}, got {self.spp}")
+        if not 0 <= self.seed < 2**32:
+            raise SettingsError(f"seed must be between 0 and 2^32-1, got {self.seed}")
+        for name, v in (("width", self.width), ("height", self.height)):
+            if v is not None and not 1 <= v <= 16384:
+                raise SettingsError(f"{name} must be between 1 and 16384, got {v}")
+        for a in self.aovs:
+            if a not in AOV_NAMES:
+                raise SettingsError(f"unknown AOV {a!r} (choose from {', '.join(AOV_NAMES)})")
+        return self
+
+
+@dataclass(frozen=True)
+class Tile:
+    """Pixels [x0, x1) x [y0, y1) of the full image (y down)."""
+
+    x0: int
+    y0: int
+    x1: int
+    y1: int
+
+    @property
+    def width(self) -> int:
+        return self.x1 - self.x0
+
+    @property
+    def height(self) -> int:
+        return self.y1 - self.y0
+
+
+@dataclass
+class TileSums:
+    """Filtered sums of one tile: arrays (h, w[, c]) float32."""
+
+    tile: Tile
+    arrays: dict[str, np.ndarray]
+    rays: int = 0
+    nonfinite: int = 0
+
+
+@dataclass
+class PreparedScene:
+    """A scene uploaded for rendering at one resolution: hierarchy built, lights and camera set up."""
+
+    scene: Scene
+    options: RenderOptions
+    width: int
+    height: int
+    pixel_aspect: float
+    geometry: object
+    materials: object
+    lights: object
+    light_count: int
+    camera: CameraSetup
+    stats: GeometryStats
+    device: str = "cpu"
+    warnings: list[str] = field(default_factory=list)
+
+
+def resolve_resolution(scene: Scene, options: RenderOptions) -> tuple[int, int]:
+    rs = scene.render_settings.resolution
+    w, h = options.width, options.height
+    if w is None and h is None and rs is not None:
+        return int(rs[0]), int(rs[1])
+    aspect = scene.camera.horizontal_aperture / scene.camera.vertical_aperture
+    aspect /= scene.render_settings.pixel_aspect_ratio or 1.0
+    if w is None and h is None:
+        w = 640
+    if w is None:
+        w = max(1, round(h * aspect))
+    if h is None:
+        h = max(1, round(w / aspect))
+    return int(w), int(h)
+
+
+_compile_lock = threading.Lock()
+
+
+def load_kernels(device: str = "cpu") -> None:
+    """Compile (or fetch from the kernel cache) the render kernels once, before threads race to do it."""
+    from . import integrator
+
+    with _compile_lock:
+        wp.load_module(integrator, device=device)
+        wp.load_module(film, device=device)
+
+
+def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> PreparedScene:
+    """Build the hierarchy and upload lights, materials and camera: once per (scene, frame)."""
+    options.validate()
+    load_kernels(device)
+    width, height = resolve_resolution(scene, options)
+    if width * height > MAX_PIXELS:
+        raise SettingsError(f"image of {width}x{height} pixels is too large")
+    par = float(scene.render_settings.pixel_aspect_ratio or 1.0)
+    dof = options.dof and not scene.render_settings.disable_depth_of_field
+    geometry, stats = upload_geometry(scene, device)
+    materials = upload_materials(scene.materials, device)
+    lights, light_count = upload_lights(scene, device)
+    cam = setup_camera(scene.camera, width, height, pixel_aspect=par, dof=dof, device=device)
+    return PreparedScene(scene=scene, options=options, width=width, height=height, pixel_aspect=par,
+                         geometry=geometry, materials=materials, lights=lights, light_count=light_count,
+                         camera=cam, stats=stats, device=device, warnings=list(scene.warnings))
+
+
+def render_tile(prep: PreparedScene, tile: Tile,
+                on_wave: Callable[[int, int], None] | None = None) -> TileSums:
+    """Render one tile: its filtered sums and weights, a pure function of (scene, options, tile).
+
+    ``on_wave(samples_done_in_tile, samples_total_in_tile)`` is called after every wave; raising
+    ``Cancelled`` from it stops the render.
+    """
+    opts = prep.options
+    W, H = prep.width, prep.height
+    if not (0 <= tile.x0 < tile.x1 <= W and 0 <= tile.y0 < tile.y1 <= H):
+        raise SettingsError(f"tile {tile} is outside the {W}x{H} image")
+    kind = film.FILTERS[opts.filter]
+    margin = film.filter_margin(kind)
+    rx0, ry0 = max(0, tile.x0 - margin), max(0, tile.y0 - margin)
+    rx1, ry1 = min(W, tile.x1 + margin), min(H, tile.y1 + margin)
+    rw, rh = rx1 - rx0, ry1 - ry0
+    waves = film.wave_schedule(opts.spp)
+    max_wave = max(e - s for s, e in waves)
+    dev = prep.device
+    buf = film.new_sample_buffer(rw * rh * max_wave, dev)
+    acc = film.new_tile_accum(tile.width * tile.height, dev)
+    counters = wp.zeros(2, dtype=wp.int64, device=dev)  # rays traced, non-finite samples zeroed
+    time_filter = TIME_FILTERS[opts.time_filter]
+    total = tile.width * tile.height * opts.spp
+    for start, end in waves:
+        wave = end - start
+        wp.launch(trace_wave_kernel, dim=rw * rh * wave, device=dev,
+                  inputs=[prep.geometry, prep.materials, prep.lights, prep.light_count, prep.camera.params, buf,
+                          counters, wp.uint32(opts.seed), rx0, ry0, rw, start, wave, time_filter])
+        wp.launch(film.gather_kernel, dim=tile.width * tile.height, device=dev,
+                  inputs=[buf, acc, wave, rx0, ry0, rw, rh, tile.x0, tile.y0, tile.width, kind,
+                          float(film.FILTER_RADIUS[kind]), margin])
+        if on_wave is not None:
+            on_wave(tile.width * tile.height * end, total)
+    h, w = tile.height, tile.width
+    arrays = {
+        "rgba": acc.rgba.numpy().reshape(h, w, 4),
+        "weight": acc.weight.numpy().reshape(h, w),
+        "depth": acc.depth.numpy().reshape(h, w),
+        "hit_weight": acc.hit_weight.numpy().reshape(h, w),
+        "normal": acc.normal.numpy().reshape(h, w, 3),
+        "albedo": acc.albedo.numpy().reshape(h, w, 3),
+    }
+    c = counters.numpy()
+    return TileSums(tile=tile, arrays=arrays, rays=int(c[0]), nonfinite=int(c[1]))
+
+
+def split_tiles(width: int, height: int, tile_size: int) -> list[Tile]:
+    if tile_size < 1:
+        raise SettingsError(f"tile size must be >= 1, got {tile_size}")
+    return [Tile(x, y, min(x + tile_size, width), min(y + tile_size, height))
+            for y in range(0, height, tile_size) for x in range(0, width, tile_size)]
+
+
+def assemble(tiles: list[TileSums], width: int, height: int) -> dict[str, np.ndarray]:
+    """Place tile sums into full-image arrays (tiles must not overlap)."""
+    full: dict[str, np.ndarray] = {}
+    for t in tiles:
+        for k, a in t.arrays.items():
+            if k not in full:
+                full[k] = np.zeros((height, width) + a.shape[2:], np.float32)
+            full[k][t.tile.y0:t.tile.y1, t.tile.x0:t.tile.x1] = a
+    return full
+
+
+@dataclass
+class FrameResult:
+    sums: dict[str, np.ndarray]
+    seconds: float
+    samples: int
+    rays: int
+    nonfinite: int
+
+
+def render_frame(prep: PreparedScene, *, tile_size: int = 64, threads: int = 2,
+                 progress: Callable[[int, int], None] | None = None) -> FrameResult:
+    """Render every tile of the frame on ``threads`` threads (Warp launches release the GIL)."""
+    if threads < 1:
+        raise SettingsError(f"threads must be >= 1, got {threads}")
+    tiles = split_tiles(prep.width, prep.height, tile_size)
+    total = prep.width * prep.height * prep.options.spp
+    done = {}
+    lock = threading.Lock()
+
+    def work(tile: Tile) -> TileSums:
+        def on_wave(n: int, _: int) -> None:
+            with lock:
+                done[tile] = n
+                if progress is not None:
+                    progress(sum(done.values()), total)
+        return render_tile(prep, tile, on_wave)
+
+    t0 = time.perf_counter()
+    if threads == 1:
+        results = [work(t) for t in tiles]
+    else:
+        with ThreadPoolExecutor(max_workers=threads) as pool:
+            results = list(pool.map(work, tiles))
+    seconds = time.perf_counter() - t0
+    return FrameResult(sums=assemble(results, prep.width, prep.height), seconds=seconds, samples=total,
+                       rays=sum(r.rays for r in results), nonfinite=sum(r.nonfinite for r in results))
+
+
+def frame_channels(prep: PreparedScene, sums: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """EXR channels of a frame: premultiplied R, G, B, A and the requested AOVs."""
+    r = film.resolve(sums, prep.camera.params.exposure_scale)
+    ch = {"R": r["rgba"][..., 0], "G": r["rgba"][..., 1], "B": r["rgba"][..., 2], "A": r["rgba"][..., 3]}
+    if "depth" in prep.options.aovs:
+        ch["depth.Z"] = r["depth"]
+    if "normal" in prep.options.aovs:
+        ch.update({"N.X": r["normal"][..., 0], "N.Y": r["normal"][..., 1], "N.Z": r["normal"][..., 2]})
+    if "albedo" in prep.options.aovs:
+        ch.update({"albedo.R": r["albedo"][..., 0], "albedo.G": r["albedo"][..., 1],
+                   "albedo.B": r["albedo"][..., 2]})
+    return ch
+
+
+def frame_attributes(prep: PreparedScene) -> dict:
+    """EXR header attributes: camera matrices at the frame time, frame rate, time code, render settings."""
+    scene, o = prep.scene, prep.options
+    s_frame = 0.0
+    span = scene.shutter_close - scene.shutter_open
+    if span > 0:
+        s_frame = min(1.0, max(0.0, (scene.frame - scene.shutter_open) / span))
+    w2c = np.linalg.inv(matrix_at(scene.camera.transform, s_frame))
+    return {
+        "worldToCamera": w2c,
+        "worldToNDC": ndc_matrix(scene.camera, prep.camera) @ w2c,
+        "framesPerSecond": float(scene.time_codes_per_second),
+        "timeCode": float(scene.frame),
+        "drt/camera": scene.camera.name,
+        "drt/spp": int(o.spp),
+        "drt/seed": int(o.seed),
+        "drt/filter": o.filter,
+        "drt/timeFilter": o.time_filter,
+        "drt/shutter": (float(scene.shutter_open - scene.frame), float(scene.shutter_close - scene.frame)),
+        "drt/depthOfField": int(prep.camera.lens_radius > 0),
+        "drt/metersPerUnit": float(scene.meters_per_unit),
+    }
+
+
+def write_frame(path, prep: PreparedScene, sums: dict[str, np.ndarray], *, half: bool = False) -> int:
+    """Write the frame's EXR atomically. Returns the number of non-finite values that had to be zeroed."""
+    from .exr import write_exr
+
+    return write_exr(path, frame_channels(prep, sums), half=half, attributes=frame_attributes(prep))
+
+
+def default_threads() -> int:
+    import os
+
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+
+
+__all__ = ["RenderOptions", "Tile", "TileSums", "PreparedScene", "FrameResult", "prepare", "render_tile",
+           "render_frame", "split_tiles", "assemble", "frame_channels", "frame_attributes", "write_frame",
+           "default_threads", "replace", "math", "TIME_BOX"]
