@@ -66,7 +66,7 @@ def test_out_of_focus_edge_blur_is_half_the_circle_of_confusion(tmp_path, focus,
 def test_fstop_zero_is_the_pinhole_bit_for_bit(tmp_path):
     def make(name, fstop):
         stage = stages.new_stage(tmp_path / name)
-        stages.camera(stage, fstop=fstop, focus=3.0, tenths_per_mm=0.01)
+        stages.camera(stage, fstop=fstop, focus=1.5, tenths_per_mm=0.01)  # the card at 3 m is out of focus
         stages.rect_xy(stage, "/World/Card", -0.3, 0.5, -0.2, 0.4, -3.0, stages.material(stage, "W", (0.8, 0.8, 0.8)))
         stages.distant_light(stage, rotate_x=-30.0)
         stage.Save()
@@ -119,8 +119,9 @@ def test_motion_streak_is_the_shutter_coverage(tmp_path, keys):
 
     expected = pixel_average(profile, 0, W, sub=16)
     assert np.abs(measured - expected).max() < 0.03, np.abs(measured - expected).max()
-    # a ball that stops: the pixels at its resting place are covered for the whole second half
-    assert measured.max() > 0.45
+    if keys[0.5] == keys[1.0] if 0.5 in keys else False:
+        # a bar that stops halfway: the pixels where it rests are covered for the whole second half
+        assert measured.max() > 0.45
 
 
 def test_zero_motion_equals_the_still_scene_bit_for_bit(tmp_path):
