@@ -157,9 +157,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        import warp as wp
+        from .device import init_warp
 
-        wp.config.quiet = True
+        init_warp()
         if args.command == "render":
             return cmd_render(args)
         parser.error(f"unknown command {args.command}")

@@ -136,7 +136,9 @@ _compile_lock = threading.Lock()
 def load_kernels(device: str = "cpu") -> None:
     """Compile (or fetch from the kernel cache) the render kernels once, before threads race to do it."""
     from . import integrator
+    from .device import init_warp
 
+    init_warp()
     with _compile_lock:
         wp.load_module(integrator, device=device)
         wp.load_module(film, device=device)
@@ -279,6 +281,8 @@ def frame_channels(prep: PreparedScene, sums: dict[str, np.ndarray]) -> dict[str
 
 def frame_attributes(prep: PreparedScene) -> dict:
     """EXR header attributes: camera matrices at the frame time, frame rate, time code, render settings."""
+    from .exr import timecode_from_frame
+
     scene, o = prep.scene, prep.options
     s_frame = 0.0
     span = scene.shutter_close - scene.shutter_open
@@ -289,7 +293,8 @@ def frame_attributes(prep: PreparedScene) -> dict:
         "worldToCamera": w2c,
         "worldToNDC": ndc_matrix(scene.camera, prep.camera) @ w2c,
         "framesPerSecond": float(scene.time_codes_per_second),
-        "timeCode": float(scene.frame),
+        "timeCode": timecode_from_frame(max(0, round(scene.frame)), scene.time_codes_per_second),
+        "drt/frame": float(scene.frame),
         "drt/camera": scene.camera.name,
         "drt/spp": int(o.spp),
         "drt/seed": int(o.seed),

@@ -1,0 +1,118 @@
+"""``drt render``: the command-line contract (exit codes, one-line errors, atomic output)."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import stages
+from renderer.exr import read_exr
+
+
+def drt(*args, cwd=None):
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    return subprocess.run([sys.executable, "-m", "renderer.cli", *map(str, args)], capture_output=True, text=True,
+                          cwd=cwd, env=env, timeout=300)
+
+
+@pytest.fixture(scope="module")
+def scene_file(tmp_path_factory):
+    d = tmp_path_factory.mktemp("cli")
+    stage = stages.new_stage(d / "card.usda")
+    stages.camera(stage, fstop=2.0, focus=2.0, tenths_per_mm=0.01, translate=(0, 0, 0))
+    stages.rect_xy(stage, "/World/Card", -0.5, 0.5, -0.4, 0.4, -3.0, stages.material(stage, "W", (0.8, 0.8, 0.8)))
+    stages.distant_light(stage, rotate_x=-20.0)
+    stage.Save()
+    return d / "card.usda"
+
+
+def assert_one_line_error(r, *needles):
+    assert r.returncode != 0
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1, r.stderr
+    assert "Traceback" not in r.stderr
+    for n in needles:
+        assert n in lines[0], lines[0]
+
+
+def test_render_writes_exr_with_aovs_and_reports_speed(scene_file, tmp_path):
+    out = tmp_path / "out.exr"
+    r = drt("render", scene_file, "-o", out, "--width", 40, "--height", 30, "--spp", 4, "--aov", "depth",
+            "--aov", "normal", "--aov", "albedo", "--half", "--seed", 3, "--filter", "blackman-harris",
+            "--shutter", -0.25, 0.25, "--tile", 16, "--threads", 2)
+    assert r.returncode == 0, r.stderr
+    last = r.stdout.strip().splitlines()[-1]
+    assert "samples/s" in last and "rays/s" in last and " s " in last
+    channels, header = read_exr(out)
+    assert set(channels) == {"R", "G", "B", "A", "depth.Z", "N.X", "N.Y", "N.Z", "albedo.R", "albedo.G", "albedo.B"}
+    assert header["channels"]["R"] == "HALF" and header["channels"]["depth.Z"] == "FLOAT"
+    assert header["compression"] == "zip"
+    assert channels["R"].shape == (30, 40)
+    assert header["dataWindow"] == (0, 0, 39, 29) and header["displayWindow"] == (0, 0, 39, 29)
+    for key in ("worldToCamera", "worldToNDC", "framesPerSecond", "timeCode", "drt/spp", "drt/seed"):
+        assert key in header, key
+    centre = channels["depth.Z"][15, 20]
+    assert abs(centre - 3.0) < 1e-3  # the card is 3 m in front of the camera
+    assert channels["A"][15, 20] == 1.0 and channels["A"][0, 0] == 0.0
+
+
+def test_cli_render_matches_library_render_bit_for_bit(scene_file, tmp_path):
+    a, b = tmp_path / "a.exr", tmp_path / "b.exr"
+    assert drt("render", scene_file, "-o", a, "--width", 24, "--height", 16, "--spp", 3, "--tile", 5,
+               "--threads", 1).returncode == 0
+    assert drt("render", scene_file, "-o", b, "--width", 24, "--height", 16, "--spp", 3, "--tile", 64,
+               "--threads", 2).returncode == 0
+    ca, _ = read_exr(a)
+    cb, _ = read_exr(b)
+    for k in ca:
+        assert np.array_equal(ca[k], cb[k]), k
+
+
+def test_missing_scene_file(tmp_path):
+    out = tmp_path / "x.exr"
+    r = drt("render", tmp_path / "nope.usda", "-o", out)
+    assert_one_line_error(r, "nope.usda")
+    assert not out.exists()
+
+
+def test_malformed_usd_names_the_line(tmp_path):
+    bad = tmp_path / "bad.usda"
+    bad.write_text('#usda 1.0\n\ndef Xform "World"\n{\n    def Mesh "M" {\n        int[] faceVertexCounts = [3,\n'
+                   '        what is this\n    }\n}\n')
+    out = tmp_path / "x.exr"
+    r = drt("render", bad, "-o", out)
+    assert_one_line_error(r, "line")
+    assert not out.exists()
+
+
+def test_unknown_camera_path(scene_file, tmp_path):
+    out = tmp_path / "x.exr"
+    r = drt("render", scene_file, "-o", out, "--camera", "/World/NoSuchCam")
+    assert_one_line_error(r, "/World/NoSuchCam")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("flags", [["--spp", "0"], ["--width", "abc"], ["--seed", "-1"], ["--frame", "nan"],
+                                   ["--filter", "mitchell"], ["--shutter", "0"], ["--aov", "beauty"]])
+def test_bad_numbers_and_names(scene_file, tmp_path, flags):
+    out = tmp_path / "x.exr"
+    r = drt("render", scene_file, "-o", out, *flags)
+    assert r.returncode == 2
+    assert_one_line_error(r)
+    assert not out.exists()
+
+
+def test_failed_render_leaves_existing_output_untouched(tmp_path):
+    out = tmp_path / "keep.exr"
+    out.write_bytes(b"previous frame")
+    r = drt("render", tmp_path / "missing.usda", "-o", out)
+    assert r.returncode == 1
+    assert out.read_bytes() == b"previous frame"
+
+
+def test_output_directory_must_exist(scene_file, tmp_path):
+    r = drt("render", scene_file, "-o", tmp_path / "no" / "dir" / "x.exr")
+    assert_one_line_error(r, "directory")
