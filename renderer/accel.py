@@ -64,6 +64,7 @@ class Geometry:
     inst_xf_off: wp.array(dtype=wp.int32)
     inst_xf_count: wp.array(dtype=wp.int32)
     inst_w2o: wp.array(dtype=wp.mat44)  # world-to-object for still instances (xf_count == 1)
+    inst_o2w: wp.array(dtype=wp.mat44)  # object-to-world for still instances
     inst_vis_from: wp.array(dtype=wp.float32)
     inst_vis_to: wp.array(dtype=wp.float32)
     keys: MotionKeys
@@ -161,6 +162,8 @@ def instance_world_to_object(geo: Geometry, inst: int, s: float):
 
 @wp.func
 def instance_object_to_world(geo: Geometry, inst: int, s: float):
+    if geo.inst_xf_count[inst] == 1:
+        return geo.inst_o2w[inst]
     return keys_matrix(geo.keys, geo.inst_xf_off[inst], geo.inst_xf_count[inst], s)
 
 

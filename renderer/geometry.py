@@ -190,8 +190,9 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     g.inst_mesh = _i32([inst.mesh for inst in scene.instances] or [0], device)
     g.inst_xf_off = _i32(offs if ninst else [0], device)
     g.inst_xf_count = _i32(counts if ninst else [1], device)
-    w2o = [np.linalg.inv(matrix_at(inst.transform, 0.0)) for inst in scene.instances] or [np.eye(4)]
-    g.inst_w2o = wp.array(np.array(w2o, np.float32), dtype=wp.mat44, device=device)
+    o2w = [matrix_at(inst.transform, 0.0) for inst in scene.instances] or [np.eye(4)]
+    g.inst_o2w = wp.array(np.array(o2w, np.float32), dtype=wp.mat44, device=device)
+    g.inst_w2o = wp.array(np.array([np.linalg.inv(m) for m in o2w], np.float32), dtype=wp.mat44, device=device)
     g.inst_vis_from = _f32([inst.visible_from for inst in scene.instances] or [0.0], device)
     g.inst_vis_to = _f32([inst.visible_to for inst in scene.instances] or [1.0], device)
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from .accel import Geometry, instance_object_to_world, intersect_closest, mesh_keys_at, transmittance, \
+from .accel import Geometry, instance_world_to_object, intersect_closest, mesh_keys_at, transmittance, \
     triangle_points
 from .bsdf import lambert_eval
 from .camera import CameraParams, camera_ray
@@ -66,8 +66,7 @@ def surface_at(geo: Geometry, inst: int, tri: int, b1: float, b2: float, ro: wp.
                s: float):
     """World position and normals of a hit at time s (vertices and transform evaluated at that instant)."""
     m = geo.inst_mesh[inst]
-    o2w = instance_object_to_world(geo, inst, s)
-    w2o_t = wp.transpose(wp.inverse(o2w))  # normals transform by the inverse transpose
+    w2o_t = wp.transpose(instance_world_to_object(geo, inst, s))  # normals transform by the inverse transpose
     k0, k1, u = mesh_keys_at(geo, m, s)
     p0, p1, p2 = triangle_points(geo, m, tri - geo.mesh_tri_off[m], k0, k1, u)
     ng = wp.normalize(wp.transform_vector(w2o_t, wp.cross(p1 - p0, p2 - p0)))

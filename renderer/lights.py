@@ -17,6 +17,7 @@ import numpy as np
 import warp as wp
 
 from .accel import Geometry, instance_object_to_world, instance_visible, mesh_keys_at, triangle_points
+from .motion import matrix_at
 from .motion_kernels import MotionKeys, keys_matrix, upload_keys
 from .sampling import (sample_cylinder_light, sample_disk_light, sample_rect, sample_sphere_light,
                        sample_triangle_light, square_to_cosine_hemisphere, square_to_uniform_cone, to_world)
@@ -34,8 +35,10 @@ class Lights:
     #                                radius), distant (cos of the half apex angle), in the light's local units
     xf_off: wp.array(dtype=wp.int32)
     xf_count: wp.array(dtype=wp.int32)
+    xf_still: wp.array(dtype=wp.mat44)  # light-to-world of lights that do not move (xf_count == 1)
     keys: MotionKeys
     instance: wp.array(dtype=wp.int32)  # mesh lights: the emissive instance
+    tri_base: wp.array(dtype=wp.int32)  # mesh lights: first emitting triangle of the instance's mesh
     cdf: wp.array(dtype=wp.float32)  # mesh lights: cumulative triangle power, concatenated
     cdf_off: wp.array(dtype=wp.int32)
     cdf_count: wp.array(dtype=wp.int32)
@@ -64,7 +67,7 @@ def pick_triangle(lights: Lights, li: int, u: float):
     prev = float(0.0)
     if lo > 0:
         prev = lights.cdf[off + lo - 1]
-    return lo, lights.cdf[off + lo] - prev
+    return lights.tri_base[li] + lo, lights.cdf[off + lo] - prev
 
 
 @wp.func
@@ -80,8 +83,8 @@ def sample_light(lights: Lights, geo: Geometry, emission: wp.array(dtype=wp.vec3
     Le = lights.radiance[li]
     size = lights.size[li]
     zero = wp.vec3(0.0)
-    m = wp.identity(n=4, dtype=float)
-    if kind != LIGHT_MESH and kind != LIGHT_DOME:
+    m = lights.xf_still[li]
+    if lights.xf_count[li] > 1 and kind != LIGHT_MESH and kind != LIGHT_DOME:
         m = keys_matrix(lights.keys, lights.xf_off[li], lights.xf_count[li], s)
     if kind == LIGHT_RECT or kind == LIGHT_DISK:
         ex = wp.transform_vector(m, wp.vec3(1.0, 0.0, 0.0))
@@ -154,20 +157,22 @@ def _luminance(rgb) -> float:
 
 def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
     """Lights of a scene for the kernels; returns the struct and the number of lights."""
-    kinds, radiance, size, insts, cdfs = [], [], [], [], []
+    kinds, radiance, size, insts, cdfs, bases = [], [], [], [], [], []
     transforms = []
     dome = np.zeros(3)
     dome_visible = 0
     for light in scene.lights:
         rad = np.asarray(light.radiance, np.float64)
         cdf = np.zeros(1, np.float32)
+        first = 0
         if light.kind == LIGHT_MESH:
             inst = scene.instances[light.instance]
             mesh = scene.meshes[inst.mesh]
+            first, end = light.triangles or (0, len(mesh.triangles))
             pts = mesh.points[0].astype(np.float64)
-            tri = pts[mesh.triangles]
+            tri = pts[mesh.triangles[first:end]]
             area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-            emis = np.array([_luminance(scene.materials[m].emissive_color) for m in mesh.material_ids])
+            emis = np.array([_luminance(scene.materials[m].emissive_color) for m in mesh.material_ids[first:end]])
             power = area * np.maximum(emis, 0.0)
             if not np.isfinite(power).all() or power.sum() <= 0:
                 continue
@@ -194,6 +199,7 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
         radiance.append(rad)
         size.append(sz)
         insts.append(light.instance)
+        bases.append(first)
         cdfs.append(cdf)
         transforms.append(light.transform)
     n = len(kinds)
@@ -205,7 +211,10 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
     lt.keys = keys
     lt.xf_off = wp.array(offs if n else np.zeros(1, np.int32), dtype=wp.int32, device=device)
     lt.xf_count = wp.array(counts if n else np.ones(1, np.int32), dtype=wp.int32, device=device)
+    still = [matrix_at(xf, 0.0) for xf in transforms] or [np.eye(4)]
+    lt.xf_still = wp.array(np.array(still, np.float32), dtype=wp.mat44, device=device)
     lt.instance = wp.array(np.array(insts or [-1], np.int32), dtype=wp.int32, device=device)
+    lt.tri_base = wp.array(np.array(bases or [0], np.int32), dtype=wp.int32, device=device)
     lens = [len(c) for c in cdfs] or [1]
     lt.cdf = wp.array(np.concatenate(cdfs) if cdfs else np.zeros(1, np.float32), dtype=wp.float32,
                       device=device)

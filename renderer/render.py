@@ -24,6 +24,7 @@ import warp as wp
 from . import film
 from .camera import CameraSetup, ndc_matrix, setup_camera
 from .errors import Cancelled, SettingsError
+from .flatten import flatten_still_instances
 from .geometry import GeometryStats, upload_geometry
 from .integrator import TIME_BOX, TIME_FILTERS, trace_wave_kernel
 from .lights import upload_lights
@@ -153,9 +154,10 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> Prepar
         raise SettingsError(f"image of {width}x{height} pixels is too large")
     par = float(scene.render_settings.pixel_aspect_ratio or 1.0)
     dof = options.dof and not scene.render_settings.disable_depth_of_field
-    geometry, stats = upload_geometry(scene, device)
-    materials = upload_materials(scene.materials, device)
-    lights, light_count = upload_lights(scene, device)
+    flat = flatten_still_instances(scene)
+    geometry, stats = upload_geometry(flat, device)
+    materials = upload_materials(flat.materials, device)
+    lights, light_count = upload_lights(flat, device)
     cam = setup_camera(scene.camera, width, height, pixel_aspect=par, dof=dof, device=device)
     return PreparedScene(scene=scene, options=options, width=width, height=height, pixel_aspect=par,
                          geometry=geometry, materials=materials, lights=lights, light_count=light_count,

@@ -151,6 +151,7 @@ class Light:
     length: float = 1.0
     angle: float = 0.53  # degrees, distant lights
     instance: int = -1  # LIGHT_MESH only
+    triangles: tuple[int, int] | None = None  # LIGHT_MESH: the emitting triangle range of the mesh (None: all)
     visible_to_camera: bool = True  # dome lights seen by camera rays
 
 

@@ -1,0 +1,95 @@
+"""Merging still instances into one world-space mesh before the hierarchy is built.
+
+A ray pays for every instance it visits: a top-level leaf, a transform into object space, a separate
+bottom-level walk. Geometry that does not move gains nothing from that, so still instances whose mesh is not
+shared (or is small) are transformed into world space once and merged into a single mesh with one BVH. Moving
+and deforming instances, and big meshes instanced many times (PointInstancer forests), stay instanced.
+Emissive instances keep lighting: their light is redirected to the range of merged triangles they became.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from .motion import matrix_at
+from .scene import LIGHT_MESH, Instance, Mesh, MotionTransform, Scene
+
+SHARED_COPY_LIMIT = 1024  # triangles: shared meshes up to this size are copied into the merged mesh
+MERGED_LIMIT = 1 << 23  # triangles the merged mesh may reach through copies of shared meshes
+
+
+def _is_still(scene: Scene, inst: Instance) -> bool:
+    return (inst.transform.num_keys == 1 and not scene.meshes[inst.mesh].deforming
+            and inst.visible_from <= 0.0 and inst.visible_to >= 1.0)
+
+
+def flatten_still_instances(scene: Scene) -> Scene:
+    """An equivalent scene in which mergeable still instances form one world-space mesh (instance 0)."""
+    users = np.bincount([i.mesh for i in scene.instances], minlength=len(scene.meshes))
+    merge, keep = [], []
+    copied = 0
+    for idx, inst in enumerate(scene.instances):
+        ntri = len(scene.meshes[inst.mesh].triangles)
+        ok = _is_still(scene, inst) and (users[inst.mesh] == 1 or
+                                         (ntri <= SHARED_COPY_LIMIT and copied + ntri <= MERGED_LIMIT))
+        if ok and users[inst.mesh] > 1:
+            copied += ntri
+        (merge if ok else keep).append(idx)
+    if len(merge) <= 1:
+        return scene
+
+    points, tris, mats, normals, uvs = [], [], [], [], []
+    ranges = {}  # old instance -> (first, end) triangle of the merged mesh
+    has_normals = any(scene.meshes[scene.instances[i].mesh].normals is not None for i in merge)
+    has_uvs = any(scene.meshes[scene.instances[i].mesh].uvs is not None for i in merge)
+    nvert = ntri = 0
+    for idx in merge:
+        inst = scene.instances[idx]
+        mesh = scene.meshes[inst.mesh]
+        m = matrix_at(inst.transform, 0.0)
+        p = mesh.points[0].astype(np.float64) @ m[:3, :3].T + m[:3, 3]
+        points.append(p.astype(np.float32))
+        tris.append(mesh.triangles + nvert)
+        mats.append(mesh.material_ids)
+        t = len(mesh.triangles)
+        if has_normals:
+            if mesh.normals is not None:
+                nm = np.linalg.inv(m[:3, :3]).T  # normals transform by the inverse transpose
+                normals.append((mesh.normals.reshape(-1, 3) @ nm.T).reshape(t, 3, 3).astype(np.float32))
+            else:  # flat: the geometric normal at every corner
+                v = p[mesh.triangles]
+                n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+                normals.append(np.repeat(n[:, None, :], 3, 1).astype(np.float32))
+        if has_uvs:
+            uvs.append(mesh.uvs if mesh.uvs is not None else np.zeros((t, 3, 2), np.float32))
+        ranges[idx] = (ntri, ntri + t)
+        nvert += len(p)
+        ntri += t
+    merged = Mesh(
+        name="<merged still geometry>",
+        point_times=np.zeros(1, np.float32),
+        points=np.concatenate(points)[None],
+        triangles=np.concatenate(tris).astype(np.int32),
+        material_ids=np.concatenate(mats).astype(np.int32),
+        normals=np.concatenate(normals) if has_normals else None,
+        uvs=np.concatenate(uvs) if has_uvs else None,
+    )
+    meshes = list(scene.meshes) + [merged]
+    instances = [Instance(len(meshes) - 1, MotionTransform.static(np.eye(4)), name="<merged>")]
+    new_index = {}
+    for idx in keep:
+        new_index[idx] = len(instances)
+        instances.append(scene.instances[idx])
+    lights = []
+    for light in scene.lights:
+        if light.kind == LIGHT_MESH and light.instance in ranges:
+            light = replace(light, instance=0, triangles=ranges[light.instance])
+        elif light.kind == LIGHT_MESH:
+            light = replace(light, instance=new_index[light.instance])
+        lights.append(light)
+    # meshes no instance uses any more are dropped by reindexing
+    used = sorted({i.mesh for i in instances})
+    remap = {old: new for new, old in enumerate(used)}
+    instances = [replace(i, mesh=remap[i.mesh]) for i in instances]
+    return replace(scene, meshes=[meshes[i] for i in used], instances=instances, lights=lights)

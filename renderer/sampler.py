@@ -1,0 +1,250 @@
+"""The sample generator: Owen-scrambled Sobol points, stateless and decorrelated across dimensions.
+
+Every value is a pure function of ``(seed, pixel, index, dim)``; nothing is stored between calls, so a sample can be
+replayed alone ("pixel (x, y) sample n failed") and tiling cannot change the image. ``pixel`` is the flattened id
+``y * width + x`` of the FULL image.
+
+Construction (Burley 2020, "Practical Hash-based Owen Scrambling", JCGT 9(4); pbrt-v4's ``PaddedSobolSampler``):
+
+1. ``h = pattern_hash(seed, pixel, dim)`` — a well-mixed 32-bit hash of the request.
+2. The sample index is shuffled by a nested-uniform (Owen) scramble of its bits seeded by ``h``. The first ``2^m``
+   indices map onto one aligned block of ``2^m`` Sobol indices, so they stay a (0, m, 2)-net; different ``dim``
+   (and pixels, seeds) get unrelated shuffles, which is what decorrelates the strata of one dimension pair from
+   those of another (Cook's "decorrelated strata", without storing a permutation).
+3. The 2D Sobol point at the shuffled index is taken: coordinate 0 is van der Corput (bit reversal), coordinate 1
+   is Sobol's second dimension (direction numbers ``v_1 = 2^31, v_k = v_{k-1} ^ (v_{k-1} >> 1)``).
+4. Each coordinate is Owen-scrambled with its own seed derived from ``h``. The scramble is a Laine-Karras style
+   hash applied to the reversed bits (the improved constants of Vegdahl, as used by pbrt-v4 ``FastOwenScrambler``):
+   every output bit depends only on itself and more significant bits of the fraction, which is nested-uniform
+   scrambling.
+5. The top 24 bits become a float32: ``(x >> 8) * 2^-24``; exact, so every result is in ``[0, 0x1.fffffep-1]``.
+
+``sample_1d(.., dim)`` equals ``sample_2d(.., dim).x``: a 1D request uses the same pattern with one coordinate.
+A 2D request at ``dim`` consumes dims ``dim`` and ``dim + 1`` (its shuffle is keyed by ``dim``, the first of the
+pair); callers must not also request ``dim + 1`` on its own.
+
+Dimension allocation (the integrator follows this table; ``b`` is the bounce, 0 for the camera ray's first hit):
+
+=================================================  ===========  ==========================================
+dims                                               request      use
+=================================================  ===========  ==========================================
+``DIM_FILM`` = 0, 1                                ``2d``       position on the film inside the pixel
+``DIM_TIME`` = 2                                   ``1d``       time within the shutter (tent-warped)
+``DIM_LENS`` = 3, 4                                ``2d``       position on the lens (concentric disk)
+``DIM_LIGHT_BASE + b * DIMS_PER_LIGHT`` + 0        ``1d``       choosing a light at bounce ``b``
+``DIM_LIGHT_BASE + b * DIMS_PER_LIGHT`` + 1, 2     ``2d``       position on the chosen light
+=================================================  ===========  ==========================================
+
+``DIMS_PER_LIGHT`` is 3 today; BSDF sampling dims will be appended per bounce later (the constant will grow, so
+always index through it). Any dims work: the hash keys on the full 32-bit ``dim``.
+
+Warp side: ``sample_1d``, ``sample_2d`` (``@wp.func``, arguments ``wp.uint32``). NumPy side: ``np_sample_1d``,
+``np_sample_2d`` (vectorised, broadcasting, bit-identical float32 results; tests compare them).
+"""
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+DIM_FILM = 0
+DIM_TIME = 2
+DIM_LENS = 3
+DIM_LIGHT_BASE = 5
+DIMS_PER_LIGHT = 3
+
+# Largest float32 below 1 (0x1.fffffep-1); every sample is <= this.
+ONE_MINUS_EPSILON = float(np.float32(1.0) - np.float32(2.0**-24))
+
+# 32-bit constants: wrapped in wp.uint32 so the generated C++ uses unsigned literals.
+_M1, _M2 = 0x7FEB352D, 0x846CA68B  # lowbias32 (C. Wellons) finaliser
+_GOLDEN = 0x9E3779B9
+_O1, _O2, _O3 = 0x3D20ADEA, 0x05526C56, 0x53A22864  # Owen scrambler (Vegdahl / pbrt-v4)
+_SOBOL_V1 = 0x80000000
+
+W_M1 = wp.constant(wp.uint32(_M1))
+W_M2 = wp.constant(wp.uint32(_M2))
+W_GOLDEN = wp.constant(wp.uint32(_GOLDEN))
+W_O1 = wp.constant(wp.uint32(_O1))
+W_O2 = wp.constant(wp.uint32(_O2))
+W_O3 = wp.constant(wp.uint32(_O3))
+W_SOBOL_V1 = wp.constant(wp.uint32(_SOBOL_V1))
+W_MASK1 = wp.constant(wp.uint32(0x55555555))
+W_MASK2 = wp.constant(wp.uint32(0x33333333))
+W_MASK4 = wp.constant(wp.uint32(0x0F0F0F0F))
+W_MASK8 = wp.constant(wp.uint32(0x00FF00FF))
+W_TO_UNIT = wp.constant(2.0**-24)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Warp
+# ----------------------------------------------------------------------------------------------------------------
+
+
+@wp.func
+def reverse_bits32(v: wp.uint32) -> wp.uint32:
+    """Reverse the 32 bits of ``v`` (Warp has no builtin)."""
+    v = ((v >> wp.uint32(1)) & W_MASK1) | ((v & W_MASK1) << wp.uint32(1))
+    v = ((v >> wp.uint32(2)) & W_MASK2) | ((v & W_MASK2) << wp.uint32(2))
+    v = ((v >> wp.uint32(4)) & W_MASK4) | ((v & W_MASK4) << wp.uint32(4))
+    v = ((v >> wp.uint32(8)) & W_MASK8) | ((v & W_MASK8) << wp.uint32(8))
+    return (v >> wp.uint32(16)) | (v << wp.uint32(16))
+
+
+@wp.func
+def mix32(x: wp.uint32) -> wp.uint32:
+    """A bijective 32-bit integer hash with good avalanche (lowbias32)."""
+    x = x ^ (x >> wp.uint32(16))
+    x = x * W_M1
+    x = x ^ (x >> wp.uint32(15))
+    x = x * W_M2
+    return x ^ (x >> wp.uint32(16))
+
+
+@wp.func
+def hash_combine(seed: wp.uint32, v: wp.uint32) -> wp.uint32:
+    """Boost-style combine, as in Burley 2020."""
+    return seed ^ (v + W_GOLDEN + (seed << wp.uint32(6)) + (seed >> wp.uint32(2)))
+
+
+@wp.func
+def pattern_hash(seed: wp.uint32, pixel: wp.uint32, dim: wp.uint32) -> wp.uint32:
+    """The per-(seed, pixel, dim) key from which the index shuffle and the coordinate scrambles derive."""
+    return mix32(hash_combine(hash_combine(mix32(seed), mix32(pixel)), mix32(dim)))
+
+
+@wp.func
+def owen_scramble(v: wp.uint32, seed: wp.uint32) -> wp.uint32:
+    """Nested-uniform scramble of the bits of ``v`` read as a binary fraction (MSB first)."""
+    v = reverse_bits32(v)
+    v = v ^ (v * W_O1)
+    v = v + seed
+    v = v * ((seed >> wp.uint32(16)) | wp.uint32(1))
+    v = v ^ (v * W_O2)
+    v = v ^ (v * W_O3)
+    return reverse_bits32(v)
+
+
+@wp.func
+def sobol_dim1(index: wp.uint32) -> wp.uint32:
+    """Sobol's second dimension (32-bit fraction); dimension 0 is ``reverse_bits32(index)``."""
+    r = wp.uint32(0)
+    v = W_SOBOL_V1
+    i = index
+    while i != wp.uint32(0):
+        if (i & wp.uint32(1)) != wp.uint32(0):
+            r = r ^ v
+        i = i >> wp.uint32(1)
+        v = v ^ (v >> wp.uint32(1))
+    return r
+
+
+@wp.func
+def u32_to_unit_float(x: wp.uint32) -> float:
+    """Top 24 bits as a float32 in [0, 1 - 2^-24], exact."""
+    return wp.float32(x >> wp.uint32(8)) * W_TO_UNIT
+
+
+@wp.func
+def sample_1d(seed: wp.uint32, pixel: wp.uint32, index: wp.uint32, dim: wp.uint32) -> float:
+    """One value in [0, 1) for dimension ``dim``; equals ``sample_2d(seed, pixel, index, dim)[0]``."""
+    h = pattern_hash(seed, pixel, dim)
+    i = owen_scramble(index, h)
+    x = owen_scramble(reverse_bits32(i), mix32(h + wp.uint32(1)))
+    return u32_to_unit_float(x)
+
+
+@wp.func
+def sample_2d(seed: wp.uint32, pixel: wp.uint32, index: wp.uint32, dim: wp.uint32) -> wp.vec2:
+    """A point in [0, 1)^2 for dimensions (``dim``, ``dim + 1``): stratified as a (0, 2)-sequence over ``index``."""
+    h = pattern_hash(seed, pixel, dim)
+    i = owen_scramble(index, h)
+    x = owen_scramble(reverse_bits32(i), mix32(h + wp.uint32(1)))
+    y = owen_scramble(sobol_dim1(i), mix32(h + wp.uint32(2)))
+    return wp.vec2(u32_to_unit_float(x), u32_to_unit_float(y))
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# NumPy twins (vectorised over broadcast arguments; uint32 arithmetic wraps exactly as in Warp)
+# ----------------------------------------------------------------------------------------------------------------
+
+_U = np.uint32
+
+
+def _u32(x) -> np.ndarray:
+    a = np.asarray(x)
+    if a.dtype.kind == "f":
+        raise TypeError("sampler arguments are integers")
+    return a.astype(np.uint64).astype(np.uint32) if a.dtype != np.uint32 else a
+
+
+def np_reverse_bits32(v: np.ndarray) -> np.ndarray:
+    v = _u32(v)
+    v = ((v >> _U(1)) & _U(0x55555555)) | ((v & _U(0x55555555)) << _U(1))
+    v = ((v >> _U(2)) & _U(0x33333333)) | ((v & _U(0x33333333)) << _U(2))
+    v = ((v >> _U(4)) & _U(0x0F0F0F0F)) | ((v & _U(0x0F0F0F0F)) << _U(4))
+    v = ((v >> _U(8)) & _U(0x00FF00FF)) | ((v & _U(0x00FF00FF)) << _U(8))
+    return (v >> _U(16)) | (v << _U(16))
+
+
+def np_mix32(x: np.ndarray) -> np.ndarray:
+    x = _u32(x)
+    x = x ^ (x >> _U(16))
+    x = x * _U(_M1)
+    x = x ^ (x >> _U(15))
+    x = x * _U(_M2)
+    return x ^ (x >> _U(16))
+
+
+def np_hash_combine(seed: np.ndarray, v: np.ndarray) -> np.ndarray:
+    seed, v = _u32(seed), _u32(v)
+    return seed ^ (v + _U(_GOLDEN) + (seed << _U(6)) + (seed >> _U(2)))
+
+
+def np_pattern_hash(seed, pixel, dim) -> np.ndarray:
+    return np_mix32(np_hash_combine(np_hash_combine(np_mix32(seed), np_mix32(pixel)), np_mix32(dim)))
+
+
+def np_owen_scramble(v, seed) -> np.ndarray:
+    v, seed = _u32(v), _u32(seed)
+    v = np_reverse_bits32(v)
+    v = v ^ (v * _U(_O1))
+    v = v + seed
+    v = v * ((seed >> _U(16)) | _U(1))
+    v = v ^ (v * _U(_O2))
+    v = v ^ (v * _U(_O3))
+    return np_reverse_bits32(v)
+
+
+def np_sobol_dim1(index) -> np.ndarray:
+    i = _u32(index)
+    r = np.zeros_like(i)
+    v = _U(_SOBOL_V1)
+    for b in range(32):
+        r = r ^ np.where(((i >> _U(b)) & _U(1)) != 0, v, _U(0)).astype(np.uint32)
+        v = _U(v ^ (v >> _U(1)))
+    return r
+
+
+def np_u32_to_unit_float(x) -> np.ndarray:
+    return (_u32(x) >> _U(8)).astype(np.float32) * np.float32(2.0**-24)
+
+
+def np_sample_1d(seed, pixel, index, dim) -> np.ndarray:
+    """NumPy twin of ``sample_1d``: float32 array of the broadcast shape, bit-identical to Warp."""
+    with np.errstate(over="ignore"):
+        seed, pixel, index, dim = np.broadcast_arrays(_u32(seed), _u32(pixel), _u32(index), _u32(dim))
+        h = np_pattern_hash(seed, pixel, dim)
+        i = np_owen_scramble(index, h)
+        x = np_owen_scramble(np_reverse_bits32(i), np_mix32(h + _U(1)))
+        return np_u32_to_unit_float(x)
+
+
+def np_sample_2d(seed, pixel, index, dim) -> np.ndarray:
+    """NumPy twin of ``sample_2d``: float32 array of the broadcast shape + (2,), bit-identical to Warp."""
+    with np.errstate(over="ignore"):
+        seed, pixel, index, dim = np.broadcast_arrays(_u32(seed), _u32(pixel), _u32(index), _u32(dim))
+        h = np_pattern_hash(seed, pixel, dim)
+        i = np_owen_scramble(index, h)
+        x = np_owen_scramble(np_reverse_bits32(i), np_mix32(h + _U(1)))
+        y = np_owen_scramble(np_sobol_dim1(i), np_mix32(h + _U(2)))
+        return np.stack([np_u32_to_unit_float(x), np_u32_to_unit_float(y)], axis=-1)

@@ -1,0 +1,179 @@
+"""Camera import: which camera, its physical parameters in scene units, the shutter, and UsdRenderSettings.
+
+Camera choice: an explicit path, else the UsdRenderSettings camera (stage metadata ``renderSettingsPrimPath``, or
+the only RenderSettings prim), else the first Camera in traversal order, else an automatic camera framing the
+scene bounds (``auto_camera``).
+
+Units: ``focalLength``, the apertures and their offsets are in tenths of a scene unit (so focalLength 50 on a
+centimetre stage is 5.0 scene units); ``clippingRange`` and ``focusDistance`` are in scene units; the shutter is
+in time codes relative to the frame.
+"""
+from __future__ import annotations
+
+import numpy as np
+from pxr import Sdf, Usd, UsdGeom, UsdRender
+
+from .errors import SceneError
+from .scene import Camera, MotionTransform, RenderSettingsInfo
+from .usd_motion import TransformSampler, motion_transform
+
+AUTO_FOCAL_35MM = 35.0  # the automatic camera's lens, in "mm" against a 36 mm wide aperture
+
+
+def _get(prim, name: str, frame: float, default):
+    a = prim.GetAttribute(name)
+    v = a.Get(frame) if a else None
+    return default if v is None else v
+
+
+def render_settings(stage: Usd.Stage, frame: float, warn) -> tuple[RenderSettingsInfo, object]:
+    """(RenderSettingsInfo, settings prim or None) from ``renderSettingsPrimPath`` or the only RenderSettings prim."""
+    prim = None
+    meta = stage.GetMetadata("renderSettingsPrimPath") if stage.HasAuthoredMetadata("renderSettingsPrimPath") else ""
+    if meta:
+        p = stage.GetPrimAtPath(meta) if Sdf.Path.IsValidPathString(meta) else None
+        if p and p.IsA(UsdRender.Settings):
+            prim = p
+        else:
+            warn(f"renderSettingsPrimPath {meta} is not a RenderSettings prim; ignored")
+    if prim is None:
+        found = [p for p in stage.Traverse() if p.IsA(UsdRender.Settings)]
+        if found:
+            prim = found[0]
+            if len(found) > 1:
+                warn(f"{len(found)} RenderSettings prims and no renderSettingsPrimPath: using {found[0].GetPath()}")
+    info = RenderSettingsInfo()
+    if prim is None:
+        return info, None
+    rs = UsdRender.Settings(prim)
+    res = rs.GetResolutionAttr().Get(frame) if rs.GetResolutionAttr().HasAuthoredValue() else None
+    if res is not None and res[0] > 0 and res[1] > 0:
+        info.resolution = (int(res[0]), int(res[1]))
+    targets = rs.GetCameraRel().GetForwardedTargets()
+    if targets:
+        info.camera_path = str(targets[0])
+    info.pixel_aspect_ratio = float(_get(prim, "pixelAspectRatio", frame, 1.0))
+    info.disable_motion_blur = bool(_get(prim, "disableMotionBlur", frame, False)) or bool(
+        _get(prim, "instantaneousShutter", frame, False))
+    info.disable_depth_of_field = bool(_get(prim, "disableDepthOfField", frame, False))
+    return info, prim
+
+
+def find_camera(stage: Usd.Stage, camera_path: str | None, settings: RenderSettingsInfo, warn):
+    """The camera prim to render through, or None (auto camera). Raises SceneError for a bad explicit path."""
+    if camera_path is not None:
+        if not Sdf.Path.IsValidPathString(camera_path) or not Sdf.Path(camera_path).IsAbsolutePath():
+            raise SceneError(f"camera prim not found: {camera_path} (not an absolute prim path)")
+        prim = stage.GetPrimAtPath(camera_path)
+        if not prim or not prim.IsActive():
+            raise SceneError(f"camera prim not found: {camera_path}")
+        if not prim.IsA(UsdGeom.Camera):
+            raise SceneError(f"prim is not a Camera: {camera_path} (type {prim.GetTypeName() or 'none'})")
+        return prim
+    if settings.camera_path:
+        prim = stage.GetPrimAtPath(settings.camera_path)
+        if prim and prim.IsA(UsdGeom.Camera):
+            return prim
+        warn(f"RenderSettings camera {settings.camera_path} is not a Camera; using the first camera in the stage")
+    for prim in stage.Traverse():
+        if prim.IsA(UsdGeom.Camera):
+            return prim
+    return None
+
+
+def shutter_offsets(prim, frame: float) -> tuple[float, float]:
+    """The camera's (shutter:open, shutter:close), relative to the frame (USD defaults 0, 0)."""
+    if prim is None:
+        return 0.0, 0.0
+    cam = UsdGeom.Camera(prim)
+    return float(cam.GetShutterOpenAttr().Get(frame) or 0.0), float(cam.GetShutterCloseAttr().Get(frame) or 0.0)
+
+
+def _exposure_stops(cam: UsdGeom.Camera, frame: float) -> float:
+    """Exposure in stops: log2 of UsdGeomCamera's linear exposure scale (``exposure`` and the ``exposure:*``
+    time/iso/fStop/responsivity inputs), or the plain ``exposure`` attribute if that cannot be computed."""
+    try:
+        scale = float(cam.ComputeLinearExposureScale(frame))
+        if scale > 0 and np.isfinite(scale):
+            return float(np.log2(scale))
+    except Exception:  # noqa: BLE001 - older usd-core without the exposure:* inputs
+        pass
+    return float(cam.GetExposureAttr().Get(frame) or 0.0)
+
+
+def read_camera(prim, sampler: TransformSampler, settings: RenderSettingsInfo, warn) -> Camera:
+    """A UsdGeomCamera with its lens in scene units and its camera-to-world motion over the shutter."""
+    frame = sampler.shutter.frame
+    cam = UsdGeom.Camera(prim)
+    path = str(prim.GetPath())
+    times, rows = sampler.motion(prim)
+    tenth = lambda attr: float(attr.Get(frame)) / 10.0  # noqa: E731
+    near, far = cam.GetClippingRangeAttr().Get(frame)
+    out = Camera(
+        name=path,
+        transform=motion_transform(sampler.shutter.normalise(times), rows),
+        projection=str(cam.GetProjectionAttr().Get(frame)),
+        focal_length=tenth(cam.GetFocalLengthAttr()),
+        horizontal_aperture=tenth(cam.GetHorizontalApertureAttr()),
+        vertical_aperture=tenth(cam.GetVerticalApertureAttr()),
+        horizontal_aperture_offset=tenth(cam.GetHorizontalApertureOffsetAttr()),
+        vertical_aperture_offset=tenth(cam.GetVerticalApertureOffsetAttr()),
+        clipping_range=(float(near), float(far)),
+        f_stop=float(cam.GetFStopAttr().Get(frame)),
+        focus_distance=float(cam.GetFocusDistanceAttr().Get(frame)),
+        exposure=_exposure_stops(cam, frame),
+    )
+    if out.projection not in ("perspective", "orthographic"):
+        warn(f"camera {path}: unknown projection {out.projection!r}, using perspective")
+        out.projection = "perspective"
+    if out.focal_length <= 0 or out.horizontal_aperture <= 0 or out.vertical_aperture <= 0:
+        raise SceneError(f"camera {path} has a non-positive focalLength or aperture")
+    if settings.disable_depth_of_field:
+        out.f_stop = 0.0
+    if out.f_stop > 0 and out.focus_distance <= 0:
+        warn(f"camera {path}: fStop {out.f_stop} without a focusDistance; depth of field disabled")
+        out.f_stop = 0.0
+    return out
+
+
+def auto_camera(bounds: np.ndarray | None, up_axis: str, settings: RenderSettingsInfo) -> tuple[Camera, np.ndarray]:
+    """A perspective camera framing world bounds ((2, 3) min/max) from a 3/4 view above, the stage's up kept up.
+
+    Returns (camera, its row-vector world matrix at the frame).
+    """
+    if bounds is None or not np.all(np.isfinite(bounds)):
+        bounds = np.array([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]])
+    center = 0.5 * (bounds[0] + bounds[1])
+    radius = max(0.5 * float(np.linalg.norm(bounds[1] - bounds[0])), 1e-3)
+    h_ap = 2.0955  # scene units (USD default 20.955 tenths)
+    aspect = (settings.resolution[0] / settings.resolution[1] * settings.pixel_aspect_ratio
+              if settings.resolution else 16.0 / 9.0)
+    v_ap = h_ap / aspect
+    focal = h_ap * AUTO_FOCAL_35MM / 36.0
+    half_fov = np.arctan(0.5 * min(h_ap, v_ap) / focal)
+    dist = 1.1 * radius / np.sin(half_fov)
+    if up_axis == "Z":
+        up, front, right = np.array([0.0, 0, 1]), np.array([0.0, -1, 0]), np.array([1.0, 0, 0])
+    else:
+        up, front, right = np.array([0.0, 1, 0]), np.array([0.0, 0, 1]), np.array([1.0, 0, 0])
+    view = right + front + 0.6 * up  # camera sits front-right, above
+    eye = center + dist * view / np.linalg.norm(view)
+    back = (eye - center) / np.linalg.norm(eye - center)  # camera +Z (it looks down -Z)
+    x = np.cross(up, back)
+    x /= np.linalg.norm(x)
+    y = np.cross(back, x)
+    col = np.eye(4)
+    col[:3, 0], col[:3, 1], col[:3, 2], col[:3, 3] = x, y, back, eye
+    cam = Camera(
+        name="auto camera",
+        transform=MotionTransform.static(col),
+        focal_length=float(focal),
+        horizontal_aperture=h_ap,
+        vertical_aperture=float(v_ap),
+        clipping_range=(float(max(dist - 2.0 * radius, dist * 1e-3)), float(dist + 4.0 * radius)),
+        f_stop=0.0,
+        focus_distance=float(dist),
+    )
+    return cam, col.T
+
+

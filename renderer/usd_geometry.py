@@ -1,0 +1,547 @@
+"""Geometry import: UsdGeomMesh topology and primvars, and the implicit primitives, as object-space triangles.
+
+Everything here works on one prim and returns a ``GeomData`` (numpy only). Faces are triangulated by count
+group: triangles pass through, convex polygons are fanned, concave ones are ear-clipped. Triangles are
+expressed first as *corners* (positions in ``faceVertexIndices``) so that every primvar interpolation expands the
+same way: constant -> broadcast, uniform -> per face, vertex/varying -> per point, faceVarying -> per corner.
+``orientation = leftHanded`` swaps two corners so the result is counter-clockwise seen from the front.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pxr import Usd, UsdGeom
+
+from .usd_motion import Shutter
+
+SPHERE_SEGMENTS = 64  # around the axis
+SPHERE_RINGS = 32  # pole to pole
+PRIMITIVE_TYPES = ("Sphere", "Cube", "Cylinder", "Cylinder_1", "Cone", "Capsule", "Capsule_1", "Plane")
+
+
+@dataclass
+class GeomData:
+    """A triangulated prim in object space; ``tri_faces`` maps triangles back to authored faces."""
+
+    point_times: np.ndarray  # (P,) absolute time codes of the point keys
+    points: np.ndarray  # (P, V, 3) float32
+    triangles: np.ndarray  # (T, 3) int32
+    tri_faces: np.ndarray  # (T,) int64 authored face index per triangle
+    num_faces: int
+    normals: np.ndarray | None = None  # (T, 3, 3) float32
+    uvs: np.ndarray | None = None  # (T, 3, 2) float32
+    double_sided: bool = False
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Triangulation
+
+
+def _newell_normals(p: np.ndarray) -> np.ndarray:
+    """(F, n, 3) polygon points -> (F, 3) area-weighted normals (Newell's method)."""
+    q = np.roll(p, -1, axis=1)
+    return np.stack(
+        [
+            np.sum((p[..., 1] - q[..., 1]) * (p[..., 2] + q[..., 2]), axis=1),
+            np.sum((p[..., 2] - q[..., 2]) * (p[..., 0] + q[..., 0]), axis=1),
+            np.sum((p[..., 0] - q[..., 0]) * (p[..., 1] + q[..., 1]), axis=1),
+        ],
+        axis=1,
+    )
+
+
+def _ear_clip(p2: np.ndarray) -> list[tuple[int, int, int]]:
+    """Ear clipping of one simple polygon given in 2D (n, 2), counter-clockwise. Returns local index triples."""
+    idx = list(range(len(p2)))
+    tris: list[tuple[int, int, int]] = []
+
+    def cross(o, a, b):
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    guard = 0
+    while len(idx) > 3 and guard < 4 * len(p2) * len(p2):
+        guard += 1
+        m = len(idx)
+        for k in range(m):
+            i0, i1, i2 = idx[k - 1], idx[k], idx[(k + 1) % m]
+            a, b, c = p2[i0], p2[i1], p2[i2]
+            if cross(a, b, c) <= 1e-12:
+                continue  # reflex or degenerate corner
+            inside = False
+            for j in idx:
+                if j in (i0, i1, i2):
+                    continue
+                q = p2[j]
+                if cross(a, b, q) >= 0 and cross(b, c, q) >= 0 and cross(c, a, q) >= 0:
+                    inside = True
+                    break
+            if not inside:
+                tris.append((i0, i1, i2))
+                idx.pop(k)
+                break
+        else:  # no ear found (self-intersecting or degenerate): fan the rest
+            break
+    for k in range(1, len(idx) - 1):
+        tris.append((idx[0], idx[k], idx[k + 1]))
+    return tris
+
+
+def triangulate(counts: np.ndarray, indices: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Triangulate polygons. Returns (corners (T, 3) int64 into ``indices``, faces (T,) int64).
+
+    Triangles keep the polygons' winding. Faces with fewer than 3 vertices are dropped.
+    """
+    counts = np.asarray(counts, np.int64)
+    nf = len(counts)
+    if nf and np.all(counts == 3):
+        corners = np.arange(3 * nf, dtype=np.int64).reshape(nf, 3)
+        return corners, np.arange(nf, dtype=np.int64)
+    starts = np.zeros(nf, np.int64)
+    if nf:
+        starts[1:] = np.cumsum(counts)[:-1]
+    out_c: list[np.ndarray] = []
+    out_f: list[np.ndarray] = []
+    for n in np.unique(counts):
+        n = int(n)
+        if n < 3:
+            continue
+        faces = np.nonzero(counts == n)[0]
+        corner = starts[faces, None] + np.arange(n)  # (F, n)
+        if n == 3:
+            out_c.append(corner)
+            out_f.append(faces)
+            continue
+        p = points[indices[corner]].astype(np.float64)  # (F, n, 3)
+        normal = _newell_normals(p)
+        e = np.roll(p, -1, axis=1) - p
+        turn = np.einsum("fij,fj->fi", np.cross(np.roll(e, 1, axis=1), e), normal)
+        scale = np.einsum("fij,fij->fi", e, e).max(axis=1) + 1e-30
+        convex = np.all(turn >= -1e-9 * scale[:, None], axis=1)
+        fan = np.stack([np.zeros(n - 2, np.int64), np.arange(1, n - 1), np.arange(2, n)], axis=1)  # (n-2, 3)
+        if np.any(convex):
+            cf = corner[convex]
+            out_c.append(cf[:, fan].reshape(-1, 3))
+            out_f.append(np.repeat(faces[convex], n - 2))
+        for fi in np.nonzero(~convex)[0]:
+            nrm = normal[fi]
+            ax = int(np.argmax(np.abs(nrm)))
+            u, v = [(1, 2), (2, 0), (0, 1)][ax]
+            p2 = p[fi][:, [u, v]]
+            if nrm[ax] < 0:
+                p2 = p2[:, ::-1]  # keep the polygon counter-clockwise in the projection
+            local = np.array(_ear_clip(p2), np.int64).reshape(-1, 3)
+            out_c.append(corner[fi][local])
+            out_f.append(np.full(len(local), faces[fi], np.int64))
+    if not out_c:
+        return np.zeros((0, 3), np.int64), np.zeros(0, np.int64)
+    corners = np.concatenate(out_c)
+    tri_faces = np.concatenate(out_f)
+    order = np.argsort(tri_faces, kind="stable")  # keep triangles in face order
+    return corners[order], tri_faces[order]
+
+
+def expand_primvar(values, interpolation: str, corners: np.ndarray, tri_faces: np.ndarray, fvi: np.ndarray,
+                   num_faces: int, num_points: int) -> np.ndarray | None:
+    """Expand a primvar of any interpolation to per-triangle-corner values (T, 3, C); None if sizes mismatch."""
+    if values is None:
+        return None
+    v = np.asarray(values, np.float32)
+    if v.ndim == 1:
+        v = v[:, None]
+    if len(v) == 0:
+        return None
+    t = len(corners)
+    if interpolation == UsdGeom.Tokens.constant:
+        return np.ascontiguousarray(np.broadcast_to(v[0], (t, 3, v.shape[1])))
+    if interpolation == UsdGeom.Tokens.uniform:
+        if len(v) < num_faces:
+            return None
+        return np.ascontiguousarray(np.repeat(v[tri_faces][:, None, :], 3, axis=1))
+    if interpolation in (UsdGeom.Tokens.vertex, UsdGeom.Tokens.varying):
+        if len(v) < num_points:
+            return None
+        return v[fvi[corners]]
+    if interpolation == UsdGeom.Tokens.faceVarying:
+        if len(v) < len(fvi):
+            return None
+        return v[corners]
+    return None
+
+
+def _smooth_vertex_normals(points: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals expanded per corner (T, 3, 3): a stand-in for subdivision limit normals."""
+    p = points.astype(np.float64)
+    fn = np.cross(p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]])
+    vn = np.zeros_like(p)
+    for k in range(3):
+        np.add.at(vn, tris[:, k], fn)
+    ln = np.linalg.norm(vn, axis=1, keepdims=True)
+    vn = np.where(ln > 0, vn / np.where(ln > 0, ln, 1.0), 0.0)
+    return vn[tris].astype(np.float32)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Point keys (deformation, velocities)
+
+
+def point_keys(pb: UsdGeom.PointBased, shutter: Shutter, count: int, warn) -> tuple[np.ndarray, np.ndarray] | None:
+    """(times (P,), points (P, V, 3) float32) over the shutter, or None if the frame has no usable points.
+
+    With ``velocities`` authored, ``UsdGeomPointBased.ComputePointsAtTimes`` applies the USD formula
+    p(t) = p(tS) + v (t - tS)/tcps + a/2 ((t - tS)/tcps)^2 from the sample tS at or before the frame (five keys
+    when ``accelerations`` make the path curved). Otherwise every authored points sample inside the shutter is a
+    key, evaluated with USD's own interpolation; samples whose point count differs from the frame's are dropped.
+    """
+    attr = pb.GetPointsAttr()
+    frame = shutter.frame
+    base = attr.Get(frame)
+    if base is None:
+        return None
+    base = np.asarray(base, np.float32).reshape(-1, 3)
+    if len(base) != count:
+        return None
+    single = (np.array([frame]), base[None])
+    if shutter.static:
+        return single
+    path = str(pb.GetPath())
+    vel = pb.GetVelocitiesAttr()
+    if vel and vel.HasAuthoredValue():
+        v = vel.Get(frame)
+        if v is not None and len(v) == len(base):
+            acc = pb.GetAccelerationsAttr()
+            curved = bool(acc and acc.HasAuthoredValue())
+            times = shutter.uniform(5) if curved else shutter.keys()
+            arrays = pb.ComputePointsAtTimes([Usd.TimeCode(float(t)) for t in times], Usd.TimeCode(frame))
+            if arrays and all(len(a) == len(base) for a in arrays):
+                keys = np.stack([np.asarray(a, np.float32).reshape(-1, 3) for a in arrays])
+                return _collapse(times, keys)
+            warn("velocities could not be applied (point counts differ); those prims are not deformation-blurred",
+                 path)
+    if not attr.ValueMightBeTimeVarying():
+        return single
+    times = shutter.keys(attr.GetTimeSamplesInInterval(shutter.interval()))
+    keys, kept = [], []
+    for t in times:
+        a = attr.Get(float(t))
+        a = None if a is None else np.asarray(a, np.float32).reshape(-1, 3)
+        if a is None or len(a) != len(base):
+            continue
+        keys.append(a)
+        kept.append(t)
+    if len(kept) < len(times):
+        warn("point count changes within the shutter; deformation blur dropped for", path)
+        return single
+    return _collapse(np.array(kept), np.stack(keys))
+
+
+def _collapse(times: np.ndarray, keys: np.ndarray):
+    if len(keys) > 1 and all(np.array_equal(keys[0], k) for k in keys[1:]):
+        return times[:1], keys[:1]
+    return times, keys
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# UsdGeomMesh
+
+
+def _primvar(prim, name: str, frame: float, warn):
+    """(flattened values, interpolation) of primvars:name, or None if absent/empty."""
+    pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar(name)
+    if not pv or not pv.HasAuthoredValue():
+        return None
+    if pv.GetElementSize() != 1:
+        warn(f"primvars with elementSize != 1 ignored ({name})", str(prim.GetPath()))
+        return None
+    vals = pv.ComputeFlattened(frame)
+    if vals is None or len(vals) == 0:
+        return None
+    return vals, pv.GetInterpolation()
+
+
+def _uv_primvar(prim, frame: float, warn):
+    hit = _primvar(prim, "st", frame, warn)
+    if hit is not None:
+        return hit
+    for pv in UsdGeom.PrimvarsAPI(prim).GetPrimvarsWithAuthoredValues():  # any texture-coordinate primvar
+        if pv.GetElementSize() != 1:
+            continue
+        if str(pv.GetTypeName().role) == "TextureCoordinate" or pv.GetPrimvarName() in ("uv", "UVMap", "st0"):
+            vals = pv.ComputeFlattened(frame)
+            if vals is not None and len(vals) and np.asarray(vals).ndim == 2 and np.asarray(vals).shape[1] == 2:
+                return vals, pv.GetInterpolation()
+    return None
+
+
+def read_mesh(prim, shutter: Shutter, warn) -> GeomData | None:
+    """Triangulate a UsdGeomMesh at the frame (topology) with point keys over the shutter."""
+    mesh = UsdGeom.Mesh(prim)
+    path = str(prim.GetPath())
+    frame = shutter.frame
+    counts = mesh.GetFaceVertexCountsAttr().Get(frame)
+    fvi = mesh.GetFaceVertexIndicesAttr().Get(frame)
+    pts = mesh.GetPointsAttr().Get(frame)
+    if counts is None or fvi is None or pts is None or len(counts) == 0 or len(pts) == 0:
+        warn("meshes without faces or points skipped", path)
+        return None
+    counts = np.asarray(counts, np.int64)
+    fvi = np.asarray(fvi, np.int64)
+    base = np.asarray(pts, np.float32).reshape(-1, 3)
+    if int(counts.sum()) != len(fvi) or np.any(counts < 0) or fvi.min() < 0 or fvi.max() >= len(base):
+        warn("meshes with invalid topology (face counts/indices out of range) skipped", path)
+        return None
+    if not np.all(np.isfinite(base)):
+        warn("meshes with NaN/infinite points skipped", path)
+        return None
+    corners, tri_faces = triangulate(counts, fvi, base)
+    if len(corners) == 0:
+        warn("meshes with zero triangles skipped", path)
+        return None
+    if mesh.GetOrientationAttr().Get(frame) == UsdGeom.Tokens.leftHanded:
+        corners = corners[:, [0, 2, 1]]
+    keys = point_keys(mesh, shutter, len(base), warn)
+    if keys is None:
+        keys = (np.array([frame]), base[None])
+    if not np.all(np.isfinite(keys[1])):
+        warn("meshes with NaN/infinite points skipped", path)
+        return None
+    nf, npnt = len(counts), len(base)
+    tris = fvi[corners]
+
+    normals = None
+    hit = _primvar(prim, "normals", frame, warn)
+    if hit is None:
+        n_attr = mesh.GetNormalsAttr()
+        n_val = n_attr.Get(frame) if n_attr.HasAuthoredValue() else None
+        if n_val is not None and len(n_val):
+            hit = (n_val, mesh.GetNormalsInterpolation())
+    if hit is not None:
+        normals = expand_primvar(hit[0], hit[1], corners, tri_faces, fvi, nf, npnt)
+        if normals is None or normals.shape[-1] != 3:
+            warn("normals with a size that does not match their interpolation ignored", path)
+            normals = None
+    scheme = mesh.GetSubdivisionSchemeAttr().Get(frame)
+    if scheme is not None and scheme != UsdGeom.Tokens.none:
+        warn("subdivision surfaces rendered as their control cage (smooth vertex normals)", path)
+        if normals is None:
+            normals = _smooth_vertex_normals(base, tris)
+
+    uvs = None
+    hit = _uv_primvar(prim, frame, warn)
+    if hit is not None:
+        uvs = expand_primvar(hit[0], hit[1], corners, tri_faces, fvi, nf, npnt)
+        if uvs is None or uvs.shape[-1] != 2:
+            warn("texture coordinates with a size that does not match their interpolation ignored", path)
+            uvs = None
+
+    return GeomData(
+        point_times=keys[0],
+        points=np.ascontiguousarray(keys[1], np.float32),
+        triangles=np.ascontiguousarray(tris, np.int32),
+        tri_faces=tri_faces,
+        num_faces=nf,
+        normals=None if normals is None else np.ascontiguousarray(normals, np.float32),
+        uvs=None if uvs is None else np.ascontiguousarray(uvs, np.float32),
+        double_sided=bool(mesh.GetDoubleSidedAttr().Get(frame)),
+    )
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Implicit primitives, tessellated as surfaces of revolution about +Z, then turned to their axis
+
+
+def _lathe(polylines, segments: int):
+    """Revolve profile polylines [(r, z, nr, nz), ...] about +Z. Returns (points, triangles, vertex normals)."""
+    pts, nrm, tris = [], [], []
+    th = 2.0 * np.pi * np.arange(segments) / segments
+    c, s = np.cos(th), np.sin(th)
+    base = 0
+    for line in polylines:
+        prof = np.asarray(line, np.float64)  # (m, 4)
+        m = len(prof)
+        r, z, nr, nz = prof[:, 0:1], prof[:, 1:2], prof[:, 2:3], prof[:, 3:4]
+        p = np.stack([r * c, r * s, np.broadcast_to(z, (m, segments))], -1).reshape(-1, 3)
+        n = np.stack([nr * c, nr * s, np.broadcast_to(nz, (m, segments))], -1).reshape(-1, 3)
+        j, k = np.meshgrid(np.arange(m - 1), np.arange(segments), indexing="ij")
+        a = base + j * segments + k
+        b = base + j * segments + (k + 1) % segments
+        cc = b + segments
+        d = a + segments
+        t = np.concatenate([np.stack([a, b, cc], -1).reshape(-1, 3), np.stack([a, cc, d], -1).reshape(-1, 3)])
+        pts.append(p)
+        nrm.append(n)
+        tris.append(t)
+        base += len(p)
+    p = np.concatenate(pts)
+    n = np.concatenate(nrm)
+    t = np.concatenate(tris)
+    area = np.linalg.norm(np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]), axis=1)
+    t = t[area > 1e-12 * max(1.0, float(np.abs(p).max()) ** 2)]  # drop the degenerate pole triangles
+    ln = np.linalg.norm(n, axis=1, keepdims=True)
+    n = n / np.where(ln > 0, ln, 1.0)
+    return p, t, n
+
+
+def _arc(radius: float, z0: float, a0: float, a1: float, steps: int):
+    """Profile of a circular arc (latitude a0 -> a1, radians) of a sphere centred at z0."""
+    a = np.linspace(a0, a1, steps + 1)
+    return [(radius * np.cos(x), z0 + radius * np.sin(x), np.cos(x), np.sin(x)) for x in a]
+
+
+def _sphere(radius: float):
+    return _lathe([_arc(radius, 0.0, -np.pi / 2, np.pi / 2, SPHERE_RINGS)], SPHERE_SEGMENTS)
+
+
+def _frustum(r_bottom: float, r_top: float, height: float, bottom_cap: bool = True, top_cap: bool = True):
+    h = 0.5 * height
+    slope = np.array([height, r_bottom - r_top])
+    slope = slope / (np.linalg.norm(slope) or 1.0)
+    lines = [[(r_bottom, -h, slope[0], slope[1]), (r_top, h, slope[0], slope[1])]]
+    if bottom_cap and r_bottom > 0:
+        lines.append([(0.0, -h, 0.0, -1.0), (r_bottom, -h, 0.0, -1.0)])
+    if top_cap and r_top > 0:
+        lines.append([(r_top, h, 0.0, 1.0), (0.0, h, 0.0, 1.0)])
+    return _lathe(lines, SPHERE_SEGMENTS)
+
+
+def _capsule(r_bottom: float, r_top: float, height: float):
+    h = 0.5 * height
+    q = SPHERE_RINGS // 2
+    line = _arc(r_bottom, -h, -np.pi / 2, 0.0, q) + _arc(r_top, h, 0.0, np.pi / 2, q)
+    return _lathe([line], SPHERE_SEGMENTS)
+
+
+def _cube(size: float):
+    h = 0.5 * size
+    pts, nrm, tris = [], [], []
+    for axis in range(3):
+        for sign in (1.0, -1.0):
+            u, v = (axis + 1) % 3, (axis + 2) % 3
+            n = np.zeros(3)
+            n[axis] = sign
+            quad = []
+            for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
+                p = np.zeros(3)
+                p[axis], p[u], p[v] = sign * h, a * h, b * h
+                quad.append(p)
+            base = len(pts)
+            pts += quad
+            nrm += [n] * 4
+            t = [(0, 1, 2), (0, 2, 3)] if sign > 0 else [(0, 2, 1), (0, 3, 2)]
+            tris += [(base + i, base + j, base + k) for i, j, k in t]
+    return np.array(pts), np.array(tris, np.int64), np.array(nrm)
+
+
+def _plane(width: float, length: float):
+    w, l = 0.5 * width, 0.5 * length
+    p = np.array([(-w, -l, 0), (w, -l, 0), (w, l, 0), (-w, l, 0)], np.float64)
+    return p, np.array([(0, 1, 2), (0, 2, 3)], np.int64), np.tile([0.0, 0.0, 1.0], (4, 1))
+
+
+_AXIS_PERM = {"Z": [0, 1, 2], "X": [2, 0, 1], "Y": [1, 2, 0]}  # cyclic permutations are rotations: +Z -> axis
+
+
+def _get(prim, name: str, t: float, default):
+    a = prim.GetAttribute(name)
+    v = a.Get(t) if a else None
+    return default if v is None else v
+
+
+def _primitive_params(prim, t: float) -> tuple:
+    kind = prim.GetTypeName()
+    g = lambda n, d: float(_get(prim, n, t, d))  # noqa: E731
+    if kind == "Sphere":
+        return (g("radius", 1.0),)
+    if kind == "Cube":
+        return (g("size", 2.0),)
+    if kind in ("Cylinder", "Capsule"):
+        r = g("radius", 0.5 if kind == "Capsule" else 1.0)
+        return (r, r, g("height", 1.0 if kind == "Capsule" else 2.0))
+    if kind in ("Cylinder_1", "Capsule_1"):
+        return (g("radiusBottom", 1.0 if kind == "Cylinder_1" else 0.5),
+                g("radiusTop", 1.0 if kind == "Cylinder_1" else 0.5),
+                g("height", 2.0 if kind == "Cylinder_1" else 1.0))
+    if kind == "Cone":
+        return (g("radius", 1.0), 0.0, g("height", 2.0))
+    if kind == "Plane":
+        return (g("width", 2.0), g("length", 2.0))
+    raise ValueError(kind)
+
+
+def _tessellate(kind: str, params: tuple):
+    if kind == "Sphere":
+        return _sphere(*params)
+    if kind == "Cube":
+        return _cube(*params)
+    if kind in ("Cylinder", "Cylinder_1", "Cone"):
+        return _frustum(*params)
+    if kind in ("Capsule", "Capsule_1"):
+        return _capsule(*params)
+    return _plane(*params)
+
+
+_PRIMITIVE_ATTRS = ("radius", "size", "height", "radiusTop", "radiusBottom", "width", "length")
+
+
+def primitive_signature(prim, frame: float) -> tuple | None:
+    """A hashable description of a static implicit primitive (equal signatures tessellate identically), or None
+    for meshes and animated primitives."""
+    kind = prim.GetTypeName()
+    if kind not in PRIMITIVE_TYPES:
+        return None
+    for name in _PRIMITIVE_ATTRS:
+        a = prim.GetAttribute(name)
+        if a and a.ValueMightBeTimeVarying():
+            return None
+    try:
+        params = _primitive_params(prim, frame)
+    except (TypeError, ValueError):
+        return None
+    return (kind, params, str(_get(prim, "axis", frame, "Z")), bool(_get(prim, "doubleSided", frame, False)))
+
+
+def read_primitive(prim, shutter: Shutter, warn) -> GeomData | None:
+    """Tessellate a Sphere/Cube/Cylinder/Cone/Capsule/Plane (attribute-animated sizes become point keys)."""
+    kind = prim.GetTypeName()
+    frame = shutter.frame
+    samples: list[float] = []
+    for name in _PRIMITIVE_ATTRS:
+        a = prim.GetAttribute(name)
+        if a and a.ValueMightBeTimeVarying():
+            samples += shutter.samples_of(a) + [shutter.open, shutter.close]
+    times = shutter.keys(samples) if samples else np.array([frame])
+    perm = _AXIS_PERM.get(str(_get(prim, "axis", frame, "Z")), _AXIS_PERM["Z"])
+    keys = []
+    tris = nrm = None
+    for t in times:
+        params = _primitive_params(prim, float(t))
+        if not all(np.isfinite(params)) or min(params) < 0:
+            warn("primitives with invalid sizes skipped", str(prim.GetPath()))
+            return None
+        p, tris, nrm = _tessellate(kind, params)
+        keys.append(p[:, perm])
+    nrm = nrm[:, perm]
+    if len(tris) == 0:
+        warn("primitives of zero size skipped", str(prim.GetPath()))
+        return None
+    times, pts = _collapse(np.asarray(times), np.stack(keys).astype(np.float32))
+    ds = _get(prim, "doubleSided", frame, kind == "Plane")
+    return GeomData(
+        point_times=times,
+        points=np.ascontiguousarray(pts),
+        triangles=np.ascontiguousarray(tris, np.int32),
+        tri_faces=np.zeros(len(tris), np.int64),
+        num_faces=1,
+        normals=np.ascontiguousarray(nrm[tris], np.float32),
+        uvs=None,
+        double_sided=bool(ds),
+    )
+
+
+def read_geometry(prim, shutter: Shutter, warn) -> GeomData | None:
+    """GeomData for a Mesh or implicit primitive, else None."""
+    if prim.IsA(UsdGeom.Mesh):
+        return read_mesh(prim, shutter, warn)
+    if prim.GetTypeName() in PRIMITIVE_TYPES:
+        return read_primitive(prim, shutter, warn)
+    return None

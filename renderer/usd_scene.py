@@ -1,0 +1,541 @@
+"""USD import entry point: ``load_scene(path, frame)`` turns a USD stage into the renderer's plain ``Scene``.
+
+No pxr object leaves the ``usd_*`` modules. This module opens the stage (payloads loaded), picks the camera and
+shutter, walks the stage (native instances expanded as instance proxies, PointInstancers expanded per instance,
+purpose and visibility honoured) and assembles meshes, instances, materials, lights and camera. The parts live in
+``usd_geometry`` (meshes, primitives), ``usd_materials``, ``usd_lights``, ``usd_camera`` and ``usd_motion``.
+
+Policies worth knowing:
+
+* **Purpose**: ``default`` and ``render`` prims are drawn, ``guide`` never; ``proxy`` prims are drawn only when the
+  stage has no prim of purpose ``render`` at all (a stage-wide rule, simpler than per-model proxy pairing).
+* **Visibility**: inherited ``invisible`` hides the subtree. Time-sampled visibility becomes the instance's
+  ``visible_from``/``visible_to`` (the hull of the visible part of the shutter, with a warning if it toggles more
+  than once). Prims inside PointInstancer prototypes use their visibility at the frame.
+* **Instancing**: instance proxies of the same prototype prim with the same material assignment share one Mesh;
+  PointInstancer instances share the prototypes' meshes; identical static implicit primitives share one Mesh.
+* **Static frames**: with motion blur off (argument, RenderSettings ``disableMotionBlur``) or an empty shutter,
+  ``shutter_open == shutter_close == frame`` and every key is a single key at the frame.
+"""
+from __future__ import annotations
+
+import os
+import re
+
+import numpy as np
+from pxr import Tf, Usd, UsdGeom, UsdRender, UsdShade
+
+from . import scene as sc
+from . import usd_camera, usd_lights
+from .errors import SceneError, SettingsError
+from .usd_geometry import PRIMITIVE_TYPES, primitive_signature, read_geometry
+from .usd_materials import MaterialTable
+from .usd_motion import Shutter, TransformSampler, motion_transforms, refine_keys
+
+_PI_ATTRS = ("positions", "orientations", "orientationsf", "scales", "velocities", "angularVelocities",
+             "accelerations", "protoIndices")
+
+
+class WarningLog:
+    """Human-readable warnings, grouped: one line per kind of problem listing a few of the prims concerned."""
+
+    MAX_ITEMS = 4
+
+    def __init__(self):
+        self._groups: dict[str, list[str]] = {}
+
+    def __call__(self, message: str, item: str | None = None) -> None:
+        items = self._groups.setdefault(message, [])
+        if item is not None and item not in items:
+            items.append(item)
+
+    def lines(self) -> list[str]:
+        out = []
+        for message, items in self._groups.items():
+            if not items:
+                out.append(message)
+                continue
+            shown = ", ".join(items[: self.MAX_ITEMS])
+            more = f" and {len(items) - self.MAX_ITEMS} more" if len(items) > self.MAX_ITEMS else ""
+            out.append(f"{message} ({len(items)}): {shown}{more}")
+        return out
+
+
+def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_path: str | None = None,
+               shutter: tuple[float, float] | None = None, motion_blur: bool = True) -> sc.Scene:
+    """Load one frame of a USD stage as a ``Scene``.
+
+    ``frame`` defaults to the stage's startTimeCode (0 if no range is authored). The shutter is ``frame +``
+    the camera's (shutter:open, shutter:close), or ``frame + shutter`` when given. Raises SceneError (one-line
+    message) for a missing or malformed file or a bad camera path.
+    """
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise SceneError(f"scene file not found: {path}")
+    if shutter is not None:
+        if len(shutter) != 2 or not all(np.isfinite(shutter)) or shutter[0] > shutter[1]:
+            raise SettingsError(f"shutter must be (open, close) with open <= close, got {tuple(shutter)}")
+    if frame is not None and not np.isfinite(frame):
+        raise SettingsError(f"frame must be finite, got {frame}")
+    stage = _open_stage(path)
+    try:
+        return _Importer(stage, path, frame, camera_path, shutter, motion_blur).run()
+    except Tf.ErrorException as e:
+        raise SceneError(f"cannot read {os.path.basename(path)}: {_pxr_message(e)}") from None
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Opening and error messages
+
+
+def _pxr_message(err: Exception) -> str:
+    """The first meaningful pxr error text, squeezed onto one line."""
+    text = str(err)
+    parts = re.findall(r"Error in '[^']*' at line \d+ in file [^:]+ : '(.*?)'\s*(?=\n\s*Error in|$)", text, re.S)
+    msg = parts[0] if parts else text
+    msg = re.sub(r"pxrInternal_[A-Za-z0-9_]*::", "", msg)
+    msg = re.sub(r"\b[A-Za-z_]+::", "", msg)
+    return " ".join(msg.split())
+
+
+def _open_stage(path: str) -> Usd.Stage:
+    name = os.path.basename(path)
+    try:
+        stage = Usd.Stage.Open(path, Usd.Stage.LoadAll)
+    except Tf.ErrorException as e:
+        msg = _pxr_message(e)
+        m = re.search(r"[^\s:]*:(\d+):(\d+):\s*(.*)", msg)
+        if m:
+            raise SceneError(f"malformed USD in {name}: syntax error at line {m.group(1)} "
+                             f"(column {m.group(2)}): {m.group(3)}") from None
+        m = re.search(r"line (\d+)", msg)
+        where = f" at line {m.group(1)}" if m else ""
+        raise SceneError(f"malformed USD in {name}{where}: {msg}") from None
+    except Exception as e:  # noqa: BLE001 - any other pxr failure is a user error about this file
+        raise SceneError(f"malformed USD in {name}: {' '.join(str(e).split())}") from None
+    if stage is None:
+        raise SceneError(f"malformed USD in {name}: the stage could not be opened")
+    return stage
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The importer
+
+
+class _Importer:
+    def __init__(self, stage, source, frame, camera_path, shutter_override, motion_blur):
+        self.stage = stage
+        self.source = source
+        self.warn = WarningLog()
+        if frame is None:
+            frame = stage.GetStartTimeCode() if stage.HasAuthoredTimeCodeRange() else 0.0
+        self.frame = float(frame)
+        self.camera_path = camera_path
+        self.shutter_override = shutter_override
+        self.motion_blur = motion_blur
+        self.meshes: list[sc.Mesh] = []
+        self.instances: list[sc.Instance] = []
+        self.lights: list[sc.Light] = []
+        self._mesh_cache: dict[tuple, int | None] = {}
+        self._mesh_bounds: list[np.ndarray] = []
+        self._lo = np.full(3, np.inf)
+        self._hi = np.full(3, -np.inf)
+        self._vis_chain: dict[str, tuple[bool, tuple[float, ...]]] = {}
+        self._proxies: list = []
+        self._saw_render = False
+
+    # -- top level ------------------------------------------------------------------------------------------------
+    def run(self) -> sc.Scene:
+        stage, warn = self.stage, self.warn
+        errors = stage.GetCompositionErrors()
+        if errors:
+            warn(f"{len(errors)} composition error(s) (missing references/payloads?); the rest was loaded",
+                 str(errors[0]).splitlines()[0] if str(errors[0]) else None)
+        settings, _ = usd_camera.render_settings(stage, self.frame, warn)
+        cam_prim = usd_camera.find_camera(stage, self.camera_path, settings, warn)
+        self.shutter = self._shutter(cam_prim, settings)
+        self.xf = TransformSampler(self.shutter)
+        self.materials = MaterialTable(self.frame, warn)
+
+        self._traverse()
+        if not self._saw_render:
+            for prim, interval in self._proxies:
+                self._guarded(self._gprim, prim, interval)
+        if not self.instances:
+            warn("no renderable geometry in stage")
+
+        if cam_prim is not None:
+            try:
+                camera = usd_camera.read_camera(cam_prim, self.xf, settings, warn)
+            except (ValueError, TypeError, ArithmeticError) as e:
+                raise SceneError(f"camera {cam_prim.GetPath()} cannot be read: {' '.join(str(e).split())}") from None
+            cam_row = self.xf.world(cam_prim, [self.frame])[0]
+        else:
+            bounds = np.stack([self._lo, self._hi]) if np.all(self._hi >= self._lo) else None
+            camera, cam_row = usd_camera.auto_camera(bounds, self._up_axis(), settings)
+            warn("no camera in stage: framing the scene bounds automatically")
+
+        self._emissive_lights()
+        if not self.lights:
+            self.lights.append(usd_lights.default_light(cam_row, self._up_axis()))
+            warn(usd_lights.default_light_warning())
+
+        return sc.Scene(
+            meshes=self.meshes,
+            instances=self.instances,
+            materials=self.materials.materials or [sc.Material(name="default grey")],
+            lights=self.lights,
+            camera=camera,
+            frame=self.frame,
+            shutter_open=self.shutter.open,
+            shutter_close=self.shutter.close,
+            meters_per_unit=float(UsdGeom.GetStageMetersPerUnit(stage)),
+            up_axis=self._up_axis(),
+            time_codes_per_second=float(stage.GetTimeCodesPerSecond()),
+            render_settings=settings,
+            warnings=warn.lines(),
+            source=self.source,
+        )
+
+    def _up_axis(self) -> str:
+        return "Z" if str(UsdGeom.GetStageUpAxis(self.stage)) == "Z" else "Y"
+
+    def _shutter(self, cam_prim, settings: sc.RenderSettingsInfo) -> Shutter:
+        tcps = float(self.stage.GetTimeCodesPerSecond())
+        if self.shutter_override is not None:
+            o, c = (float(x) for x in self.shutter_override)
+        else:
+            o, c = usd_camera.shutter_offsets(cam_prim, self.frame)
+            if o > c:
+                self.warn(f"camera shutter:open {o} is after shutter:close {c}; motion blur disabled")
+                o = c = 0.0
+        if not self.motion_blur or settings.disable_motion_blur or o == c:
+            return Shutter(self.frame, self.frame, self.frame, tcps)
+        return Shutter(self.frame, self.frame + o, self.frame + c, tcps)
+
+    # -- traversal ------------------------------------------------------------------------------------------------
+    def _traverse(self) -> None:
+        predicate = Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)
+        it = iter(Usd.PrimRange.Stage(self.stage, predicate))
+        purposes: dict[str, object] = {}
+        for prim in it:
+            parent_info = purposes.get(str(prim.GetPath().GetParentPath()))
+            if prim.IsA(UsdShade.Material) or prim.IsA(UsdShade.Shader) or prim.IsA(UsdShade.NodeGraph) or \
+                    prim.IsA(UsdRender.SettingsBase) or prim.IsA(UsdRender.Var):
+                it.PruneChildren()
+                continue
+            img = UsdGeom.Imageable(prim)
+            if not img:
+                if parent_info is not None:
+                    purposes[str(prim.GetPath())] = parent_info
+                continue
+            if self._statically_invisible(img):
+                it.PruneChildren()
+                continue
+            info = img.ComputePurposeInfo(parent_info) if parent_info is not None else img.ComputePurposeInfo()
+            purposes[str(prim.GetPath())] = info
+            purpose = str(info.purpose)
+            if prim.IsA(UsdGeom.PointInstancer):
+                it.PruneChildren()
+                if purpose != "guide":
+                    self._guarded(self._visit_gprim, prim, purpose)
+            elif prim.IsA(UsdGeom.Mesh) or prim.GetTypeName() in PRIMITIVE_TYPES:
+                it.PruneChildren()
+                if purpose != "guide":
+                    self._guarded(self._visit_gprim, prim, purpose)
+                if usd_lights.is_light(prim):
+                    self.warn("mesh lights (MeshLightAPI) are rendered as plain geometry", str(prim.GetPath()))
+            elif usd_lights.is_light(prim):
+                self._guarded(self._light, prim)
+            elif prim.IsA(UsdGeom.Gprim):
+                it.PruneChildren()
+                if purpose != "guide":
+                    self.warn("unsupported geometry types skipped", f"{prim.GetPath()} ({prim.GetTypeName()})")
+
+    def _guarded(self, fn, prim, *args) -> None:
+        """Run fn(prim, ...); a prim whose data cannot be read (wrong types, bad values) is skipped with a warning."""
+        try:
+            fn(prim, *args)
+        except (Tf.ErrorException, ValueError, TypeError, ArithmeticError) as e:
+            self.warn("prims with unreadable data skipped",
+                      f"{prim.GetPath()} ({type(e).__name__}: {' '.join(str(e).split())[:160]})")
+
+    def _statically_invisible(self, img) -> bool:
+        attr = img.GetVisibilityAttr()
+        if not attr or not attr.HasAuthoredValue():
+            return False
+        if attr.ValueMightBeTimeVarying() and not self.shutter.static:
+            return False
+        return attr.Get(self.frame) == UsdGeom.Tokens.invisible
+
+    def _visit_gprim(self, prim, purpose: str) -> None:
+        interval = self._visible_interval(prim)
+        if interval is None:
+            return
+        if purpose == "proxy":
+            self._proxies.append((prim, interval))
+            return
+        if purpose == "render":
+            self._saw_render = True
+        self._gprim(prim, interval)
+
+    def _gprim(self, prim, interval) -> None:
+        if prim.IsA(UsdGeom.PointInstancer):
+            self._point_instancer(prim, interval)
+            return
+        mesh = self._mesh_index(prim)
+        if mesh is None:
+            return
+        times, rows = self.xf.motion(prim)
+        self._add_instances([mesh], [str(prim.GetPath())], times, rows[None], interval)
+
+    # -- visibility -----------------------------------------------------------------------------------------------
+    def _visibility_chain(self, prim) -> tuple[bool, tuple[float, ...]]:
+        if not prim or prim.IsPseudoRoot():
+            return False, ()
+        key = str(prim.GetPath())
+        hit = self._vis_chain.get(key)
+        if hit is None:
+            varying, samples = self._visibility_chain(prim.GetParent())
+            img = UsdGeom.Imageable(prim)
+            attr = img.GetVisibilityAttr() if img else None
+            if attr and attr.HasAuthoredValue() and attr.ValueMightBeTimeVarying():
+                varying = True
+                samples = tuple(sorted(set(samples) | set(self.shutter.samples_of(attr))))
+            hit = self._vis_chain[key] = (varying, samples)
+        return hit
+
+    def _visible_interval(self, prim) -> tuple[float, float] | None:
+        """The visible part of the shutter as (s0, s1), or None if the prim is invisible throughout."""
+        varying, samples = self._visibility_chain(prim)
+        img = UsdGeom.Imageable(prim)
+        if not varying:
+            return (0.0, 1.0)
+        if self.shutter.static or not samples:
+            return (0.0, 1.0) if img.ComputeVisibility(self.frame) != UsdGeom.Tokens.invisible else None
+        breaks = [self.shutter.open, *samples, self.shutter.close]
+        visible = [img.ComputeVisibility(t) != UsdGeom.Tokens.invisible for t in breaks[:-1]]
+        if not any(visible):
+            return None
+        first = visible.index(True)
+        last = len(visible) - 1 - visible[::-1].index(True)
+        if not all(visible[first: last + 1]):
+            self.warn("visibility toggles more than once within the shutter: visible over the hull",
+                      str(prim.GetPath()))
+        s = self.shutter.normalise([breaks[first], breaks[last + 1]])
+        return float(s[0]), float(s[1])
+
+    # -- meshes and instances -------------------------------------------------------------------------------------
+    def _mesh_index(self, prim) -> int | None:
+        src = prim.GetPrimInPrototype() if prim.IsInstanceProxy() else prim
+        shape = primitive_signature(prim, self.frame) or str(src.GetPath())  # equal spheres share one mesh
+        key = (shape, self.materials.key_of(prim))
+        if key in self._mesh_cache:
+            return self._mesh_cache[key]
+        geom = read_geometry(prim, self.shutter, self.warn)
+        index = None
+        if geom is not None:
+            index = len(self.meshes)
+            self.meshes.append(sc.Mesh(
+                name=str(prim.GetPath()),
+                point_times=self.shutter.normalise(geom.point_times),
+                points=geom.points,
+                triangles=geom.triangles,
+                material_ids=self.materials.assign(prim, geom.tri_faces, geom.num_faces),
+                normals=geom.normals,
+                uvs=geom.uvs,
+                double_sided=geom.double_sided,
+            ))
+            flat = geom.points.reshape(-1, 3)
+            self._mesh_bounds.append(np.stack([flat.min(axis=0), flat.max(axis=0)]).astype(np.float64))
+        self._mesh_cache[key] = index
+        return index
+
+    def _add_instances(self, meshes, names, times, rows, interval) -> None:
+        """Instances of meshes[i] with row-vector world matrices rows[i] (N, K, 4, 4) at absolute times (K,)."""
+        rows = np.asarray(rows, np.float64)
+        finite = np.all(np.isfinite(rows), axis=(1, 2, 3))
+        if not np.all(finite):
+            self.warn("instances with non-finite transforms skipped", names[int(np.argmin(finite))])
+        xfs = motion_transforms(self.shutter.normalise(times), rows)
+        s0, s1 = interval
+        for mesh, name, xf, ok in zip(meshes, names, xfs, finite):
+            if ok:
+                self.instances.append(sc.Instance(mesh=int(mesh), transform=xf, name=name,
+                                                  visible_from=s0, visible_to=s1))
+        # world bounds, for the automatic camera
+        meshes = np.asarray(meshes)[finite]
+        rows = rows[finite]
+        if len(meshes):
+            b = np.stack([self._mesh_bounds[m] for m in meshes])  # (N, 2, 3)
+            sel = np.array(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij")).reshape(3, 8).T  # (8, 3)
+            corners = b[:, sel, [0, 1, 2]]  # (N, 8, 3)
+            world = np.einsum("nci,nkij->nkcj", corners, rows[:, :, :3, :3]) + rows[:, :, None, 3, :3]
+            self._lo = np.minimum(self._lo, world.reshape(-1, 3).min(axis=0))
+            self._hi = np.maximum(self._hi, world.reshape(-1, 3).max(axis=0))
+
+    # -- point instancers ------------------------------------------------------------------------------------------
+    def _point_instancer(self, prim, interval) -> None:
+        times = self._pi_key_times(prim)
+        meshes, names, rows = self._pi_placements(prim, times)
+        if not meshes:
+            return
+        if len(times) > 1:
+            times, rows = refine_keys(lambda ts: self._pi_placements(prim, ts)[2], times)
+        self._add_instances(meshes, names, times, rows, interval)
+
+    def _pi_key_times(self, prim) -> np.ndarray:
+        sh = self.shutter
+        if sh.static:
+            return np.array([self.frame])
+        moving, samples = self.xf.chain(prim)
+        samples = list(samples)
+        curved = False
+        for name in _PI_ATTRS:
+            a = prim.GetAttribute(name)
+            if not a or not a.HasAuthoredValue():
+                continue
+            if name in ("velocities", "angularVelocities", "accelerations"):
+                moving = True
+                curved = curved or name != "velocities"
+            if a.ValueMightBeTimeVarying():
+                moving = True
+                samples += sh.samples_of(a)
+        for target in UsdGeom.PointInstancer(prim).GetPrototypesRel().GetForwardedTargets():
+            proto = self.stage.GetPrimAtPath(target)
+            if not proto:
+                continue
+            for p in Usd.PrimRange(proto, Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)):
+                xf = UsdGeom.Xformable(p)
+                if xf and xf.TransformMightBeTimeVarying():
+                    moving = True
+                    samples += sh.inner(xf.GetTimeSamplesInInterval(sh.interval()))
+        if not moving:
+            return np.array([self.frame])
+        keys = sh.keys(samples)
+        return np.union1d(keys, sh.uniform(5)) if curved else keys
+
+    def _pi_placements(self, prim, times) -> tuple[list[int], list[str], np.ndarray]:
+        """(mesh per placement, names, row-vector world matrices (M, K, 4, 4)) of every instance's geometry."""
+        pi = UsdGeom.PointInstancer(prim)
+        path = str(prim.GetPath())
+        frame = self.frame
+        targets = pi.GetPrototypesRel().GetForwardedTargets()
+        proto_idx = pi.GetProtoIndicesAttr().Get(frame)
+        k = len(times)
+        empty = ([], [], np.zeros((0, k, 4, 4)))
+        if proto_idx is None or len(proto_idx) == 0 or not targets:
+            return empty
+        proto_idx = np.asarray(proto_idx, np.int64)
+        n = len(proto_idx)
+        mask = np.asarray(pi.ComputeMaskAtTime(frame) or [True] * n, bool)
+        if len(mask) != n:
+            mask = np.ones(n, bool)
+        tcs = [Usd.TimeCode(float(t)) for t in times]
+        inst = pi.ComputeInstanceTransformsAtTimes(tcs, Usd.TimeCode(frame), UsdGeom.PointInstancer.ExcludeProtoXform,
+                                                   UsdGeom.PointInstancer.IgnoreMask)
+        if not inst or any(len(x) != n for x in inst):
+            one = pi.ComputeInstanceTransformsAtTime(Usd.TimeCode(frame), Usd.TimeCode(frame),
+                                                     UsdGeom.PointInstancer.ExcludeProtoXform,
+                                                     UsdGeom.PointInstancer.IgnoreMask)
+            if one is None or len(one) != n:
+                self.warn("PointInstancers with inconsistent positions/protoIndices skipped", path)
+                return empty
+            self.warn("PointInstancers whose instance transforms cannot be evaluated over the shutter are static",
+                      path)
+            inst = [one] * k
+        inst = np.stack([np.asarray(x, np.float64).reshape(n, 4, 4) for x in inst], axis=1)  # (N, K, 4, 4)
+        inst = inst @ self.xf.world(prim, times)[None]
+        if np.any((proto_idx < 0) | (proto_idx >= len(targets))):
+            self.warn("PointInstancer protoIndices out of range ignored", path)
+        meshes: list[int] = []
+        names: list[str] = []
+        rows: list[np.ndarray] = []
+        for j, target in enumerate(targets):
+            sel = np.nonzero((proto_idx == j) & mask)[0]
+            proto = self.stage.GetPrimAtPath(target)
+            if len(sel) == 0 or not proto:
+                continue
+            sub_meshes, sub_names, sub_rows = self._subtree_placements(proto, times)
+            if not sub_meshes:
+                continue
+            parent = np.linalg.inv(self.xf.world(proto.GetParent(), times))  # (K, 4, 4)
+            rel = sub_rows @ parent[None]  # (M, K, 4, 4) relative to the prototype's parent
+            world = np.einsum("mkab,nkbc->nmkac", rel, inst[sel])  # (n, M, K, 4, 4)
+            rows.append(world.reshape(-1, k, 4, 4))
+            meshes += sub_meshes * len(sel)
+            base = str(proto.GetParent().GetPath()).rstrip("/")
+            rel_names = [nm[len(base):] if nm.startswith(base + "/") else "/" + nm.lstrip("/") for nm in sub_names]
+            names += [f"{path}[{i}]{nm}" for i in sel for nm in rel_names]
+        if not rows:
+            return empty
+        return meshes, names, np.concatenate(rows)
+
+    def _subtree_placements(self, root, times) -> tuple[list[int], list[str], np.ndarray]:
+        """Geometry under a prototype root (visibility and purpose at the frame, nested instancers expanded)."""
+        meshes: list[int] = []
+        names: list[str] = []
+        rows: list[np.ndarray] = []
+        it = iter(Usd.PrimRange(root, Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)))
+        for prim in it:
+            img = UsdGeom.Imageable(prim)
+            if not img:
+                continue
+            vis = img.GetVisibilityAttr()
+            if vis and vis.HasAuthoredValue() and vis.Get(self.frame) == UsdGeom.Tokens.invisible:
+                it.PruneChildren()
+                continue
+            purpose = img.GetPurposeAttr().Get()
+            if purpose == UsdGeom.Tokens.guide:
+                it.PruneChildren()
+                continue
+            if purpose == UsdGeom.Tokens.proxy and self._saw_render:
+                it.PruneChildren()
+                continue
+            if prim.IsA(UsdGeom.PointInstancer):
+                it.PruneChildren()
+                m, nm, r = self._pi_placements(prim, times)
+                meshes += m
+                names += nm
+                rows.append(r)
+            elif prim.IsA(UsdGeom.Mesh) or prim.GetTypeName() in PRIMITIVE_TYPES:
+                it.PruneChildren()
+                mesh = self._mesh_index(prim)
+                if mesh is not None:
+                    meshes.append(mesh)
+                    names.append(str(prim.GetPath()))
+                    rows.append(self.xf.world(prim, times)[None])
+            elif usd_lights.is_light(prim):
+                self.warn("lights inside PointInstancer prototypes ignored", str(prim.GetPath()))
+        if not meshes:
+            return [], [], np.zeros((0, len(times), 4, 4))
+        return meshes, names, np.concatenate(rows)
+
+    # -- lights ---------------------------------------------------------------------------------------------------
+    def _light(self, prim) -> None:
+        if self._visible_interval(prim) is None:
+            return
+        light = usd_lights.read_light(prim, self.xf, self.warn)
+        if light is not None:
+            self.lights.append(light)
+
+    def _emissive_lights(self) -> None:
+        """A LIGHT_MESH light for every instance whose mesh uses a material with non-zero emissive_color."""
+        mats = self.materials.materials
+        emission: dict[int, tuple | None] = {}
+        for i, inst in enumerate(self.instances):
+            if inst.mesh not in emission:
+                used = np.unique(self.meshes[inst.mesh].material_ids)
+                em = [mats[m].emissive_color for m in used if max(mats[m].emissive_color) > 0]
+                if len(set(em)) > 1:
+                    self.warn("meshes with several emissive materials are sampled with the brightest one",
+                              self.meshes[inst.mesh].name)
+                emission[inst.mesh] = max(em, key=lambda c: sum(c)) if em else None
+            em = emission[inst.mesh]
+            if em is not None:
+                self.lights.append(sc.Light(kind=sc.LIGHT_MESH, name=inst.name or self.meshes[inst.mesh].name,
+                                            radiance=tuple(float(x) for x in em), transform=inst.transform,
+                                            instance=i))
+
+
+__all__ = ["load_scene", "WarningLog"]
