@@ -1,0 +1,114 @@
+#!/usr/bin/env python3
+"""Benchmarks: prints figures, asserts nothing. ``python bench/bench.py [--spp N] [--scenes a,b]``.
+
+For the scenes in ../shared/bench/scenes (640x360, ANCHORS.md settings): samples/s and rays/s at 2 threads
+against Blender Cycles' figures on the same machine kind; scaling from 1 to 2 threads; the cost of motion blur
+(motion scene vs the same scene still) and of depth of field (vs the pinhole); BVH build time and bytes per
+triangle of the 1M-triangle scene; first-run kernel compile time (empty kernel cache). Targets (issue 2):
+motion blur and depth of field each at most +10 %; 2 threads >= 1.9x one; Cornell samples/s >= Cycles.
+Noise between runs on a shared 2-core machine is large: compare the ratios printed in one run.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import pathlib
+import re
+import subprocess
+import sys
+import tempfile
+import time
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+SHARED = ROOT.parent / "shared" / "bench"
+if not SHARED.is_dir():
+    SHARED = pathlib.Path("/work/shared/bench")
+
+
+def cycles_anchors() -> dict[str, float]:
+    """Cycles samples/s per scene from ANCHORS.md (M samples/s)."""
+    out = {}
+    text = (SHARED / "ANCHORS.md").read_text()
+    for line in text.splitlines():
+        m = re.match(r"\|\s*(\w+) \(.*?\)\s*\|\s*[\d,]+\s*\|\s*([\d.]+) M", line)
+        if m:
+            out[m.group(1)] = float(m.group(2)) * 1e6
+    return out
+
+
+def render(path, *, spp, threads, motion_blur=True, dof=True, tile=64, repeats=1):
+    from renderer.render import RenderOptions, prepare, render_frame
+    from renderer.usd_scene import load_scene
+
+    t0 = time.perf_counter()
+    scene = load_scene(path, motion_blur=motion_blur)
+    t1 = time.perf_counter()
+    prep = prepare(scene, RenderOptions(width=640, height=360, spp=spp, dof=dof))
+    t2 = time.perf_counter()
+    best = None
+    for _ in range(repeats):
+        r = render_frame(prep, tile_size=tile, threads=threads)
+        if best is None or r.seconds < best.seconds:
+            best = r
+    return {"load": t1 - t0, "prepare": t2 - t1, "seconds": best.seconds, "sps": best.samples / best.seconds,
+            "rps": best.rays / best.seconds, "stats": prep.stats}
+
+
+def first_compile_seconds() -> float:
+    """Kernel compile time with an empty Warp kernel cache (a fresh process)."""
+    with tempfile.TemporaryDirectory() as cache:
+        code = ("import time, warp as wp; wp.config.kernel_cache_dir = %r; "
+                "from renderer.render import load_kernels; t = time.perf_counter(); load_kernels(); "
+                "print(time.perf_counter() - t)") % cache
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
+                             env=dict(os.environ, PYTHONPATH=str(ROOT)))
+        return float(out.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--spp", type=int, default=64)
+    ap.add_argument("--scenes", default="cornell,dof,motion,gloss,heavy")
+    ap.add_argument("--repeats", type=int, default=1)
+    ap.add_argument("--skip-compile", action="store_true")
+    args = ap.parse_args()
+    from renderer.device import init_warp
+
+    init_warp()
+    scenes = SHARED / "scenes"
+    anchors = cycles_anchors()
+    spp = args.spp
+    print(f"# drt benchmark: 640x360, {spp} spp, direct lighting (issue 2 spine), scenes from {scenes}")
+    print(f"{'scene':8} {'tris':>9} {'load s':>7} {'build s':>7} {'render s':>8} {'Msamples/s':>10} "
+          f"{'Mrays/s':>8} {'Cycles':>7} {'vs Cycles':>9}")
+    results = {}
+    for name in args.scenes.split(","):
+        r = render(scenes / f"{name}.usda", spp=spp, threads=2, repeats=args.repeats)
+        results[name] = r
+        cyc = anchors.get(name)
+        st = r["stats"]
+        print(f"{name:8} {st.triangles:9d} {r['load']:7.2f} {st.build_seconds:7.2f} {r['seconds']:8.2f} "
+              f"{r['sps'] / 1e6:10.3f} {r['rps'] / 1e6:8.3f} {cyc / 1e6 if cyc else float('nan'):7.2f} "
+              f"{r['sps'] / cyc if cyc else float('nan'):8.2f}x")
+    if "heavy" in results:
+        st = results["heavy"]["stats"]
+        print(f"\nheavy: hierarchy build {st.build_seconds:.2f} s (both levels, incl. upload), "
+              f"{st.nbytes / max(st.triangles, 1):.1f} bytes/triangle for the BVHs")
+    if "cornell" in results:
+        one = render(scenes / "cornell.usda", spp=spp, threads=1, repeats=args.repeats)
+        print(f"scaling cornell 1 -> 2 threads: {results['cornell']['sps'] / one['sps']:.2f}x (target >= 1.9x)")
+    if "motion" in results:
+        still = render(scenes / "motion.usda", spp=spp, threads=2, motion_blur=False, repeats=args.repeats)
+        cost = results["motion"]["seconds"] / still["seconds"] - 1
+        print(f"motion blur cost (motion vs the same scene still): {cost * 100:+.1f} % (target <= +10 %)")
+    if "dof" in results:
+        pin = render(scenes / "dof.usda", spp=spp, threads=2, dof=False, repeats=args.repeats)
+        cost = results["dof"]["seconds"] / pin["seconds"] - 1
+        print(f"depth of field cost (f/2.8 vs pinhole): {cost * 100:+.1f} % (target <= +10 %)")
+    if not args.skip_compile:
+        print(f"first-run kernel compile (empty cache): {first_compile_seconds():.1f} s")
+
+
+if __name__ == "__main__":
+    main()
