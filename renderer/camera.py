@@ -26,6 +26,7 @@ class CameraParams:
 
     keys: MotionKeys  # camera-to-world over the shutter
     key_count: int
+    still: wp.mat44  # camera-to-world when key_count == 1
     orthographic: int
     focal_length: float  # F, scene units
     film_size: wp.vec2  # effective aperture (horizontal, vertical) after conforming to the image aspect
@@ -65,6 +66,7 @@ def setup_camera(camera: Camera, width: int, height: int, *, pixel_aspect: float
     p = CameraParams()
     p.keys = keys
     p.key_count = int(counts[0])
+    p.still = wp.mat44(*matrix_at(camera.transform, 0.0).astype(np.float32).reshape(-1))
     p.orthographic = int(camera.projection == "orthographic")
     fw, fh = conform_aperture(camera.horizontal_aperture, camera.vertical_aperture, width, height, pixel_aspect)
     p.focal_length = float(camera.focal_length)
@@ -133,7 +135,9 @@ def camera_ray(cam: CameraParams, film: wp.vec2, lens_u: wp.vec2, s: float):
     if cam.orthographic != 0:
         tmin = cam.near
         tmax = cam.far
-    m = keys_matrix(cam.keys, 0, cam.key_count, s)
+    m = cam.still
+    if cam.key_count > 1:
+        m = keys_matrix(cam.keys, 0, cam.key_count, s)
     wo = wp.transform_point(m, o)
     wd = wp.normalize(wp.transform_vector(m, d))
     fwd = wp.normalize(wp.transform_vector(m, wp.vec3(0.0, 0.0, -1.0)))

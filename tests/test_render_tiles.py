@@ -93,3 +93,24 @@ def test_no_nan_reaches_the_image(scene):
     for v in r.sums.values():
         assert np.isfinite(v).all()
     assert r.nonfinite == 0
+
+
+def test_progress_reaches_the_total_and_cancellation_stops_between_waves(scene):
+    from renderer.errors import Cancelled
+
+    prep = prepare(scene, RenderOptions(width=16, height=16, spp=8))
+    seen = []
+    render_frame(prep, tile_size=8, threads=2, progress=lambda done, total: seen.append((done, total)))
+    assert seen[-1] == (16 * 16 * 8, 16 * 16 * 8)
+    assert [d for d, _ in seen] == sorted(d for d, _ in seen)
+
+    waves = []
+
+    def stop_after_two(done, total):
+        waves.append(done)
+        if len(waves) == 2:
+            raise Cancelled()
+
+    with pytest.raises(Cancelled):
+        render_tile(prep, Tile(0, 0, 16, 16), stop_after_two)
+    assert waves == [16 * 16 * 1, 16 * 16 * 2]  # stopped after the second wave, before the third
