@@ -168,6 +168,20 @@ def instance_object_to_world(geo: Geometry, inst: int, s: float):
 
 
 @wp.func
+def visit_order(a: int, b: int, ta: float, tb: float):
+    """Children to push for a closest-hit walk: (nearer, farther, how many were hit); the nearer is popped first."""
+    if ta < BIG and tb < BIG:
+        if ta <= tb:
+            return a, b, 2
+        return b, a, 2
+    if ta < BIG:
+        return a, a, 1
+    if tb < BIG:
+        return b, b, 1
+    return a, b, 0
+
+
+@wp.func
 def node_box(lo: wp.array(dtype=wp.vec3), hi: wp.array(dtype=wp.vec3), b: int, k0: int, k1: int, u: float):
     """Box of a node whose keys start at b, interpolated between keys k0 and k1."""
     if k1 == k0:
@@ -209,21 +223,13 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float, s
         else:
             lo_a, hi_a = node_box(geo.blas_lo, geo.blas_hi, boff + a * nk, k0, k1, u)
             lo_b, hi_b = node_box(geo.blas_lo, geo.blas_hi, boff + b * nk, k0, k1, u)
-            ta = box_entry(lo_a, hi_a, ro, inv_d, t_best)
-            tb = box_entry(lo_b, hi_b, ro, inv_d, t_best)
-            if ta < BIG and tb < BIG:
-                if ta <= tb:
-                    stack[sp] = b
-                    stack[sp + 1] = a
-                else:
-                    stack[sp] = a
-                    stack[sp + 1] = b
-                sp += 2
-            elif ta < BIG:
-                stack[sp] = a
+            near, far, count = visit_order(a, b, box_entry(lo_a, hi_a, ro, inv_d, t_best),
+                                           box_entry(lo_b, hi_b, ro, inv_d, t_best))
+            if count == 2:
+                stack[sp] = far
                 sp += 1
-            elif tb < BIG:
-                stack[sp] = b
+            if count >= 1:
+                stack[sp] = near
                 sp += 1
     return best
 
@@ -273,21 +279,13 @@ def intersect_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, tmax: float, s: f
         else:
             lo_a, hi_a = node_box(geo.tlas_lo, geo.tlas_hi, a * nk, k0, k1, u)
             lo_b, hi_b = node_box(geo.tlas_lo, geo.tlas_hi, b * nk, k0, k1, u)
-            ta = box_entry(lo_a, hi_a, ro, inv_d, best.t)
-            tb = box_entry(lo_b, hi_b, ro, inv_d, best.t)
-            if ta < BIG and tb < BIG:
-                if ta <= tb:
-                    stack[sp] = b
-                    stack[sp + 1] = a
-                else:
-                    stack[sp] = a
-                    stack[sp + 1] = b
-                sp += 2
-            elif ta < BIG:
-                stack[sp] = a
+            near, far, count = visit_order(a, b, box_entry(lo_a, hi_a, ro, inv_d, best.t),
+                                           box_entry(lo_b, hi_b, ro, inv_d, best.t))
+            if count == 2:
+                stack[sp] = far
                 sp += 1
-            elif tb < BIG:
-                stack[sp] = b
+            if count >= 1:
+                stack[sp] = near
                 sp += 1
     return best
 

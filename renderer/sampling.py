@@ -480,24 +480,23 @@ def cylinder_light_pdf(
     a = wp.dot(d_perp, d_perp)
     if a == 0.0:
         return 0.0
-    b = wp.dot(o_perp, d_perp)
-    c = wp.dot(o_perp, o_perp) - radius * radius
-    disc = b * b - a * c
-    if disc < 0.0:
+    # Roots of |o_perp + t d_perp| = radius via the closest-approach vector (pbrt-v4's accurate discriminant):
+    # t = t_mid -+ sqrt(disc) / a with disc = a (r^2 - |c|^2); at either root |cos_light| = sqrt(disc) / r.
+    t_mid = -wp.dot(o_perp, d_perp) / a
+    c = o_perp + t_mid * d_perp
+    disc = a * (radius * radius - wp.dot(c, c))
+    if disc <= 0.0:
         return 0.0
-    sq = wp.sqrt(disc)
-    # Numerically stable roots of a t^2 + 2 b t + c = 0.
-    q = -(b + wp.where(b < 0.0, -sq, sq))
-    if q == 0.0:
-        return 0.0
-    t0 = wp.min(q / a, c / q)
-    t1 = wp.max(q / a, c / q)
+    half_chord = wp.sqrt(disc) / a
+    cos_l = wp.sqrt(disc) / radius
     area = TWO_PI * radius * length
     half = 0.5 * length
+    t0 = t_mid - half_chord
+    t1 = t_mid + half_chord
     if t0 > 0.0 and wp.abs(wp.dot(o + t0 * dir, axis)) <= half:
-        return _area_pdf(t0, dir, wp.normalize(o_perp + t0 * d_perp), area)
+        return t0 * t0 / (cos_l * area)
     if t1 > 0.0 and wp.abs(wp.dot(o + t1 * dir, axis)) <= half:
-        return _area_pdf(t1, dir, wp.normalize(o_perp + t1 * d_perp), area)
+        return t1 * t1 / (cos_l * area)
     return 0.0
 
 
@@ -871,35 +870,35 @@ def np_sample_cylinder_light(p_ref, center, axis, length, radius, u) -> NpLightS
 
 
 def np_cylinder_hits(p_ref, dirn, center, axis, length, radius):
-    """Both roots of the ray/lateral-surface intersection: (t0, ok0, n0, t1, ok1, n1), t0 <= t1."""
+    """Both crossings of the ray with the lateral surface: (t0, ok0, t1, ok1, |cos_light|), t0 <= t1.
+
+    ``|cos_light|`` (the same at both crossings) is ``sqrt(disc) / radius``; ``dirn`` must be unit.
+    """
     p_ref, dirn, center, axis, length, radius = map(_f, (p_ref, dirn, center, axis, length, radius))
     o = p_ref - center
     o_perp = o - _dot(o, axis)[..., None] * axis
     d_perp = dirn - _dot(dirn, axis)[..., None] * axis
     a = _dot(d_perp, d_perp)
-    b = _dot(o_perp, d_perp)
-    c = _dot(o_perp, o_perp) - radius * radius
-    disc = b * b - a * c
-    valid = (a > 0) & (disc >= 0)
-    sq = np.sqrt(np.maximum(disc, 0.0))
     with np.errstate(invalid="ignore", divide="ignore"):
-        q = -(b + np.where(b < 0, -sq, sq))
-        valid &= q != 0
-        r0, r1 = q / a, c / q
-        t0 = np.where(valid, np.minimum(r0, r1), 0.0)
-        t1 = np.where(valid, np.maximum(r0, r1), 0.0)
+        t_mid = -_dot(o_perp, d_perp) / a
+        c = o_perp + t_mid[..., None] * d_perp
+        disc = a * (radius * radius - _dot(c, c))
+        valid = (a > 0) & (disc > 0)
+        half_chord = np.sqrt(np.maximum(disc, 0.0)) / a
+        cos_l = np.sqrt(np.maximum(disc, 0.0)) / radius
     out = []
-    for t in (t0, t1):
+    for t in (t_mid - half_chord, t_mid + half_chord):
         ok = valid & (t > 0) & (np.abs(_dot(o + t[..., None] * dirn, axis)) <= 0.5 * length)
-        out += [np.where(ok, t, 0.0), ok, _normalize(o_perp + t[..., None] * d_perp)]
-    return tuple(out)
+        out += [np.where(ok, t, 0.0), ok]
+    return (*out, np.where(valid, cos_l, 0.0))
 
 
 def np_cylinder_light_pdf(p_ref, dirn, center, axis, length, radius) -> np.ndarray:
-    t0, ok0, n0, t1, ok1, n1 = np_cylinder_hits(p_ref, dirn, center, axis, length, radius)
-    dirn, length, radius = _f(dirn), _f(length), _f(radius)
-    area = 2 * np.pi * radius * length
-    return np.where(ok0, _np_area_pdf(t0, dirn, n0, area), np.where(ok1, _np_area_pdf(t1, dirn, n1, area), 0.0))
+    t0, ok0, t1, ok1, cos_l = np_cylinder_hits(p_ref, dirn, center, axis, length, radius)
+    area = 2 * np.pi * _f(radius) * _f(length)
+    t = np.where(ok0, t0, t1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(ok0 | ok1, t * t / (cos_l * area), 0.0)
 
 
 def np_sample_triangle_light(p_ref, p0, p1, p2, u) -> NpLightSample:
