@@ -33,12 +33,15 @@ RAY_EPSILON = 2.0e-5  # relative offset of secondary ray origins (times 1 + |p|_
 
 
 @wp.func
-def shutter_time(kind: int, u: float):
-    """Normalised shutter time of a sample from its time dimension, weighted by the temporal filter."""
+def shutter_time(kind: int, u: float, frame_s: float):
+    """Normalised shutter time of a sample from its time dimension, weighted by the temporal filter.
+
+    ``frame_s`` is the frame's own time in normalised shutter time, the one instant a strobe shutter sees.
+    """
     if kind == TIME_TRIANGLE:
         return sample_tent(u)
     if kind == TIME_STROBE:
-        return 0.5  # the scene was loaded still at the frame time: any s gives the same instant
+        return frame_s
     return u
 
 
@@ -128,6 +131,7 @@ def trace_wave_kernel(
     wave_start: int,  # sample index of this wave's first sample
     wave: int,  # samples per pixel in this wave
     time_filter: int,
+    frame_s: float,  # the frame time in normalised shutter time (strobe)
 ):
     tid = wp.tid()
     j = tid % wave
@@ -138,7 +142,7 @@ def trace_wave_kernel(
     index = wp.uint32(wave_start + j)
 
     film_u = sample_2d(seed, pixel, index, wp.uint32(DIM_FILM))
-    s = shutter_time(time_filter, sample_1d(seed, pixel, index, wp.uint32(DIM_TIME)))
+    s = shutter_time(time_filter, sample_1d(seed, pixel, index, wp.uint32(DIM_TIME)), frame_s)
     lens_u = sample_2d(seed, pixel, index, wp.uint32(DIM_LENS))
     ro, rd, tmin, tmax, fwd = camera_ray(cam, wp.vec2(float(px) + film_u[0], float(py) + film_u[1]), lens_u, s)
     cam_origin = ro

@@ -11,11 +11,10 @@ into tiles and calls it from its workers.
 """
 from __future__ import annotations
 
-import math
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
@@ -26,7 +25,7 @@ from .camera import CameraSetup, ndc_matrix, setup_camera
 from .errors import Cancelled, SettingsError
 from .flatten import flatten_still_instances
 from .geometry import GeometryStats, upload_geometry
-from .integrator import TIME_BOX, TIME_FILTERS, trace_wave_kernel
+from .integrator import TIME_FILTERS, trace_wave_kernel
 from .lights import upload_lights
 from .materials import upload_materials
 from .motion import matrix_at
@@ -46,7 +45,7 @@ class RenderOptions:
     spp: int = 16
     seed: int = 0
     filter: str = "gaussian"  # pixel reconstruction filter: box, triangle, gaussian, blackman-harris
-    time_filter: str = "box"  # shutter weighting: box, triangle, strobe (strobe = load the scene still)
+    time_filter: str = "box"  # shutter weighting: box, triangle, strobe (the instant of the frame)
     dof: bool = True
     aovs: tuple[str, ...] = ()
 
@@ -192,7 +191,8 @@ def render_tile(prep: PreparedScene, tile: Tile,
         wave = end - start
         wp.launch(trace_wave_kernel, dim=rw * rh * wave, device=dev,
                   inputs=[prep.geometry, prep.materials, prep.lights, prep.light_count, prep.camera.params, buf,
-                          counters, wp.uint32(opts.seed), rx0, ry0, rw, start, wave, time_filter])
+                          counters, wp.uint32(opts.seed), rx0, ry0, rw, start, wave, time_filter,
+                          frame_shutter_time(prep.scene)])
         wp.launch(film.gather_kernel, dim=tile.width * tile.height, device=dev,
                   inputs=[buf, acc, wave, rx0, ry0, rw, rh, tile.x0, tile.y0, tile.width, kind,
                           float(film.FILTER_RADIUS[kind]), margin])
@@ -281,16 +281,20 @@ def frame_channels(prep: PreparedScene, sums: dict[str, np.ndarray]) -> dict[str
     return ch
 
 
+def frame_shutter_time(scene: Scene) -> float:
+    """The frame's time code as normalised shutter time (clamped to the shutter)."""
+    span = scene.shutter_close - scene.shutter_open
+    if span <= 0:
+        return 0.0
+    return min(1.0, max(0.0, (scene.frame - scene.shutter_open) / span))
+
+
 def frame_attributes(prep: PreparedScene) -> dict:
     """EXR header attributes: camera matrices at the frame time, frame rate, time code, render settings."""
     from .exr import timecode_from_frame
 
     scene, o = prep.scene, prep.options
-    s_frame = 0.0
-    span = scene.shutter_close - scene.shutter_open
-    if span > 0:
-        s_frame = min(1.0, max(0.0, (scene.frame - scene.shutter_open) / span))
-    w2c = np.linalg.inv(matrix_at(scene.camera.transform, s_frame))
+    w2c = np.linalg.inv(matrix_at(scene.camera.transform, frame_shutter_time(scene)))
     return {
         "worldToCamera": w2c,
         "worldToNDC": ndc_matrix(scene.camera, prep.camera) @ w2c,
@@ -323,4 +327,4 @@ def default_threads() -> int:
 
 __all__ = ["RenderOptions", "Tile", "TileSums", "PreparedScene", "FrameResult", "prepare", "render_tile",
            "render_frame", "split_tiles", "assemble", "frame_channels", "frame_attributes", "write_frame",
-           "default_threads", "replace", "math", "TIME_BOX"]
+           "default_threads", "load_kernels"]

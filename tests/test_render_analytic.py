@@ -124,6 +124,17 @@ def test_motion_streak_is_the_shutter_coverage(tmp_path, keys):
         assert measured.max() > 0.45
 
 
+def test_strobe_shutter_sees_the_frame_instant(tmp_path):
+    """Frame 0 with a shutter (-0.5, 0.5) around it: the strobe shows the bar sharp where it is at time 0."""
+    path = coverage_stage(tmp_path / "strobe.usda", {-0.5: -2.0, 0.0: 0.0, 0.5: 2.0})
+    scene = load_scene(path, 0.0, shutter=(-0.5, 0.5))
+    prep = prepare(scene, RenderOptions(width=64, height=4, spp=16, filter="box", time_filter="strobe"))
+    ch = frame_channels(prep, render_frame(prep, tile_size=32).sums)
+    row = ch["R"].mean(0)
+    # the bar spans x in [-0.25, 0.25] m: pixels 29.5 .. 34.5, fully covered pixels 30..33
+    assert np.all(row[30:34] == 1.0) and np.all(row[:29] == 0.0) and np.all(row[35:] == 0.0)
+
+
 def test_zero_motion_equals_the_still_scene_bit_for_bit(tmp_path):
     a, _ = render_rgb(coverage_stage(tmp_path / "a.usda", {0.0: 0.3, 1.0: 0.3}), width=32, height=4, spp=8)
     b, _ = render_rgb(coverage_stage(tmp_path / "b.usda", {0.0: 0.3}), width=32, height=4, spp=8)
