@@ -29,7 +29,7 @@ direction ``dir`` (0 if the ray misses). Shapes are two-sided here; which side e
 sampler                                                    strategy
 =========================================================  =======================================================
 ``sample_rect(p_ref, corner, edge_u, edge_v, u)``          spherical rectangle (Urena et al. 2013) while its solid
-                                                           angle is in [3e-4, 6.22] sr (pbrt-v4's range), else by
+                                                           angle is in [3e-4, 6.22] sr (``SPH_RECT_*``), else by
                                                            area. ``edge_u`` must be orthogonal to ``edge_v``.
 ``sample_disk_light(p_ref, center, normal, radius, u)``    area (concentric map)
 ``sample_sphere_light(p_ref, center, radius, u)``          uniform in the cone the sphere subtends (pbrt-v4
@@ -43,7 +43,10 @@ For area sampling the pdf is ``dist^2 / (|cos_light| * area)``. A ray can cross 
 ``cylinder_light_pdf`` uses the first hit only (the far point is shadowed by the near one), so on a cylinder the
 pdf of a direction is that of the visible point, not the density of directions (the tests account for this).
 
-NumPy twins return ``NpLightSample`` (same fields, arrays). Geometry arguments broadcast against the batch.
+Vectors named ``normal``, ``axis`` and ``dir`` must be unit length; shapes must not be degenerate.
+
+NumPy twins return ``NpLightSample`` (same fields, arrays). Geometry arguments broadcast against the batch. Extra
+NumPy helpers for tests: ``np_rect_solid_angle`` (the strategy switch) and ``np_cylinder_hits`` (both crossings).
 """
 from __future__ import annotations
 
@@ -62,8 +65,8 @@ PI_OVER_2 = wp.constant(0.5 * math.pi)
 PI_OVER_4 = wp.constant(0.25 * math.pi)
 ONE_MINUS_EPS = wp.constant(float(np.float32(1.0) - np.float32(2.0**-24)))
 
-# Spherical-rectangle sampling is used only for solid angles in this range (pbrt-v4 BilinearPatch): below it
-# float32 cancellation spoils the warp, above it p_ref is nearly on the light.
+# Spherical-rectangle sampling is used only for solid angles in this range (pbrt-v4's thresholds for spherical
+# triangles): below it float32 cancellation spoils the warp, above it p_ref is nearly on the light.
 SPH_RECT_MIN_SOLID_ANGLE = 3e-4
 SPH_RECT_MAX_SOLID_ANGLE = 6.22
 W_SPH_MIN = wp.constant(SPH_RECT_MIN_SOLID_ANGLE)

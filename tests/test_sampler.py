@@ -1,0 +1,206 @@
+"""Tests of renderer/sampler.py: Warp == NumPy bit for bit, range, purity, (0,m,2)-nets, decorrelation, convergence."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import warp as wp
+
+from chi2 import Rectangle, assert_chi2
+from renderer import sampler as SM
+
+wp.set_module_options({"enable_backward": False})
+
+N_CHI2_TESTS = 3  # chi-square tests in this file, for the Sidak correction
+
+
+@wp.kernel
+def k_samples(
+    seed: wp.array(dtype=wp.uint32),
+    pixel: wp.array(dtype=wp.uint32),
+    index: wp.array(dtype=wp.uint32),
+    dim: wp.array(dtype=wp.uint32),
+    out_1d: wp.array(dtype=float),
+    out_2d: wp.array(dtype=wp.vec2),
+):
+    i = wp.tid()
+    out_1d[i] = SM.sample_1d(seed[i], pixel[i], index[i], dim[i])
+    out_2d[i] = SM.sample_2d(seed[i], pixel[i], index[i], dim[i])
+
+
+def warp_samples(seed, pixel, index, dim):
+    """Run sample_1d and sample_2d on broadcast uint32 arguments; returns float32 arrays like the NumPy twins."""
+    args = [np.ascontiguousarray(a, dtype=np.uint32).ravel() for a in np.broadcast_arrays(seed, pixel, index, dim)]
+    n = len(args[0])
+    out_1d, out_2d = wp.zeros(n, dtype=float), wp.zeros(n, dtype=wp.vec2)
+    wp.launch(k_samples, dim=n, inputs=[wp.array(a, dtype=wp.uint32) for a in args], outputs=[out_1d, out_2d],
+              device="cpu")
+    shape = np.broadcast_shapes(*(np.shape(a) for a in (seed, pixel, index, dim)))
+    return out_1d.numpy().reshape(shape), out_2d.numpy().reshape(shape + (2,))
+
+
+def test_dimension_constants():
+    assert (SM.DIM_FILM, SM.DIM_TIME, SM.DIM_LENS, SM.DIM_LIGHT_BASE, SM.DIMS_PER_LIGHT) == (0, 2, 3, 5, 3)
+    assert SM.DIM_FILM + 2 <= SM.DIM_TIME < SM.DIM_LENS and SM.DIM_LENS + 2 <= SM.DIM_LIGHT_BASE
+
+
+def test_warp_matches_numpy_bit_for_bit():
+    rng = np.random.default_rng(0)
+    n = 200_000
+    rand = lambda: rng.integers(0, 2**32, n, dtype=np.uint64).astype(np.uint32)  # noqa: E731
+    seed, pixel, index, dim = rand(), rand(), rand(), rand()
+    # Structured values too: small indices, dims and pixels, and the extremes of uint32.
+    seed[:4096], pixel[:4096], dim[:4096] = 0, np.arange(4096) % 7, np.arange(4096) // 512
+    index[:4096] = np.arange(4096)
+    index[4096:4100] = [0, 1, 2**31, 2**32 - 1]
+    w1, w2 = warp_samples(seed, pixel, index, dim)
+    n1, n2 = SM.np_sample_1d(seed, pixel, index, dim), SM.np_sample_2d(seed, pixel, index, dim)
+    assert n1.dtype == np.float32 and n2.dtype == np.float32
+    np.testing.assert_array_equal(w1.view(np.uint32), n1.view(np.uint32))
+    np.testing.assert_array_equal(w2.view(np.uint32), n2.view(np.uint32))
+
+
+def test_helpers_match_known_values():
+    v = np.array([0, 1, 2, 3, 0x80000000, 0xFFFFFFFF, 0x12345678], dtype=np.uint32)
+    expected = [int(f"{int(x):032b}"[::-1], 2) for x in v]
+    np.testing.assert_array_equal(SM.np_reverse_bits32(v), np.array(expected, dtype=np.uint32))
+    # Sobol's second dimension in index (not Gray-code) order: direction numbers 1/2, 3/4, 5/8, ...
+    got = SM.np_sobol_dim1(np.arange(8)) / 2.0**32
+    np.testing.assert_array_equal(got, [0, 0.5, 0.75, 0.25, 0.625, 0.125, 0.375, 0.875])
+    # The Owen scramble is a bijection on 32 bits that keeps prefixes: equal top-k bits in, equal top-k bits out.
+    x = np.arange(2**16, dtype=np.uint32) << np.uint32(16)
+    y = SM.np_owen_scramble(x, np.uint32(0xDEADBEEF))
+    assert len(np.unique(y)) == len(y)
+    for k in (1, 4, 9):
+        np.testing.assert_array_equal(np.unique(y >> np.uint32(32 - k)), np.arange(2**k))
+        same = (x >> np.uint32(32 - k)) == (x[123] >> np.uint32(32 - k))
+        assert len(np.unique(y[same] >> np.uint32(32 - k))) == 1
+
+
+def test_values_in_unit_interval():
+    rng = np.random.default_rng(1)
+    n = 100_000
+    rand = lambda: rng.integers(0, 2**32, n, dtype=np.uint64).astype(np.uint32)  # noqa: E731
+    s1 = SM.np_sample_1d(rand(), rand(), rand(), rand())
+    s2 = SM.np_sample_2d(rand(), rand(), rand(), rand())
+    for s in (s1, s2):
+        assert s.min() >= 0.0 and s.max() < 1.0 and s.max() <= np.float32(SM.ONE_MINUS_EPSILON)
+    # Some index reaches the extreme of [0, 1) exactly: the construction is exact in 24 bits.
+    w1, _ = warp_samples(0, 0, np.arange(2**16), 0)
+    assert w1.min() < 2.0**-16 and w1.max() > 1 - 2.0**-16
+
+
+def test_pure_and_order_independent():
+    rng = np.random.default_rng(2)
+    n = 50_000
+    args = [rng.integers(0, 2**20, n).astype(np.uint32) for _ in range(4)]
+    a1, a2 = warp_samples(*args)
+    perm = rng.permutation(n)
+    b1, b2 = warp_samples(*(a[perm] for a in args))
+    np.testing.assert_array_equal(b1, a1[perm])
+    np.testing.assert_array_equal(b2, a2[perm])
+    c1, c2 = warp_samples(*args)
+    np.testing.assert_array_equal(c1, a1)
+    np.testing.assert_array_equal(c2, a2)
+    # A single call equals the batched one (no hidden state).
+    k = 777
+    single = SM.np_sample_2d(*(int(a[k]) for a in args))
+    np.testing.assert_array_equal(single, a2[k])
+
+
+def test_1d_is_first_coordinate_of_2d():
+    idx = np.arange(1024)
+    for dim in (0, 2, 3, 17):
+        np.testing.assert_array_equal(SM.np_sample_1d(5, 99, idx, dim), SM.np_sample_2d(5, 99, idx, dim)[:, 0])
+
+
+def is_net(points: np.ndarray, m: int) -> bool:
+    """Every elementary interval of area 2^-m (2^a by 2^b cells, a + b = m) holds exactly one point."""
+    for a in range(m + 1):
+        b = m - a
+        cx = np.floor(points[:, 0] * 2**a).astype(np.int64)
+        cy = np.floor(points[:, 1] * 2**b).astype(np.int64)
+        if not np.all(np.bincount(cx * 2**b + cy, minlength=2**m) == 1):
+            return False
+    return True
+
+
+@pytest.mark.parametrize("m", [4, 5, 6, 7, 8])
+def test_first_2_pow_m_samples_form_a_0m2_net(m):
+    for seed, pixel, dim in [(0, 0, 0), (1, 12345, 3), (7, 2**31 + 5, 5), (123, 42, 11), (2**32 - 1, 7, 2**20)]:
+        _, pts = warp_samples(seed, pixel, np.arange(2**m), dim)
+        assert is_net(pts, m), f"seed={seed} pixel={pixel} dim={dim}: first {2**m} samples are not a (0,{m},2)-net"
+        # Any aligned block of 2^m indices is a net too (progressive rendering in waves keeps its strata).
+        _, pts = warp_samples(seed, pixel, np.arange(3 * 2**m, 4 * 2**m), dim)
+        assert is_net(pts, m)
+        # 1D: stratified in 2^m intervals.
+        x, _ = warp_samples(seed, pixel, np.arange(2**m), dim)
+        np.testing.assert_array_equal(np.sort(np.floor(x * 2**m)), np.arange(2**m))
+
+
+def test_dimensions_are_decorrelated():
+    """Pearson r between coordinates of different dimension requests over 4096 indices of one pixel."""
+    n = 4096
+    idx = np.arange(n)
+    pairs = [(SM.DIM_FILM, SM.DIM_LENS), (SM.DIM_FILM, SM.DIM_TIME), (SM.DIM_LENS, SM.DIM_LIGHT_BASE + 1),
+             (SM.DIM_TIME, SM.DIM_LIGHT_BASE), (SM.DIM_LIGHT_BASE, SM.DIM_LIGHT_BASE + SM.DIMS_PER_LIGHT)]
+    rs = []
+    for pixel in (0, 1, 640 * 480 - 1):
+        for da, db in pairs:
+            xa = SM.np_sample_2d(3, pixel, idx, da)
+            xb = SM.np_sample_2d(3, pixel, idx, db)
+            rs += [np.corrcoef(xa[:, i], xb[:, j])[0, 1] for i in range(2) for j in range(2)]
+    rs = np.array(rs)
+    # Independent sequences give r ~ N(0, 1/n). The nested index shuffles tie the strata of two dimensions
+    # hierarchically, which widens that a little (about 1.2x in sd); a real correlation would be far larger.
+    assert np.abs(rs).max() < 0.1, f"max |r| = {np.abs(rs).max():.3f}"
+    assert np.mean(rs**2) * n < 3.0, f"mean r^2 = {np.mean(rs**2):.2e} vs 1/n = {1 / n:.2e}"
+
+
+@pytest.mark.parametrize("da,db", [(SM.DIM_FILM, SM.DIM_LENS), (SM.DIM_TIME, SM.DIM_LIGHT_BASE),
+                                   (SM.DIM_LENS, SM.DIM_LIGHT_BASE + 1)])
+def test_cross_dimension_points_are_uniform(da, db):
+    """(dim da, dim db) over indices and pixels fills the square uniformly: no structure from shared strata.
+
+    Pooled over 64 pixels of 1024 samples. Within ONE pixel the cell counts are not independent (a nested shuffle
+    pairs cells, e.g. the 2x2 counts satisfy N00 = N11), which spreads the chi-square statistic wider than its
+    distribution although every cell is equally likely; pixels have unrelated shuffles, so pooling restores
+    the test's assumptions.
+    """
+    per_pixel, pixels = 1024, 64
+
+    def sample(k):
+        pixel, index = 1000 + k // per_pixel, k % per_pixel
+        return np.stack([SM.np_sample_1d(9, pixel, index, da), SM.np_sample_1d(9, pixel, index, db)], axis=1)
+
+    assert_chi2(sample, lambda p: np.ones(len(p)), Rectangle(res=(32, 32)),
+                uniforms=np.arange(per_pixel * pixels, dtype=np.uint32), n_tests=N_CHI2_TESTS)
+
+
+def test_pixels_and_seeds_give_different_sequences():
+    idx = np.arange(256)
+    base = SM.np_sample_2d(0, 0, idx, 0)
+    for other in (SM.np_sample_2d(0, 1, idx, 0), SM.np_sample_2d(1, 0, idx, 0), SM.np_sample_2d(0, 0, idx, 2)):
+        assert np.mean(np.all(other == base, axis=1)) < 0.02
+        assert abs(np.corrcoef(base[:, 0], other[:, 0])[0, 1]) < 0.2
+    # Neighbouring pixels' first samples are not aligned (decorrelated across the image).
+    first = SM.np_sample_2d(0, np.arange(4096), 0, 0)
+    assert abs(np.corrcoef(first[:-1, 0], first[1:, 0])[0, 1]) < 0.06
+    assert len(np.unique(first[:, 0])) > 4000
+
+
+def test_integration_converges_faster_than_monte_carlo():
+    def f(p):
+        return np.exp(-((p[..., 0] - 0.3) ** 2 + (p[..., 1] - 0.6) ** 2) * 3.0) * np.cos(2.0 * p[..., 0] * p[..., 1])
+
+    # Reference integral and variance on a fine grid.
+    g = (np.arange(2048) + 0.5) / 2048
+    grid = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1)
+    exact, var = f(grid).mean(), f(grid).var()
+    n, pixels = 256, np.arange(64)
+    pts = SM.np_sample_2d(11, pixels[:, None], np.arange(n)[None, :], SM.DIM_LENS).astype(np.float64)
+    estimates = f(pts).mean(axis=1)
+    rmse = np.sqrt(np.mean((estimates - exact) ** 2))
+    iid_rmse = np.sqrt(var / n)
+    assert rmse < 0.1 * iid_rmse, f"RMSE {rmse:.2e} vs iid {iid_rmse:.2e}"
+    # The estimator is unbiased across pixels (Owen scrambling): the mean error is within a few standard errors.
+    assert abs(estimates.mean() - exact) < 4 * estimates.std() / np.sqrt(len(pixels)) + 1e-7
