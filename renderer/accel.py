@@ -53,6 +53,9 @@ class Geometry:
     mesh_key_off: wp.array(dtype=wp.int32)
     mesh_nkeys: wp.array(dtype=wp.int32)
     mesh_has_normals: wp.array(dtype=wp.int32)
+    uvs: wp.array(dtype=wp.vec2)  # 3 per global triangle when mesh_has_uvs
+    mesh_has_uvs: wp.array(dtype=wp.int32)
+    mesh_closed: wp.array(dtype=wp.int32)  # 1: the mesh bounds a solid (every edge shared by two triangles)
     # --- top level
     tlas_a: wp.array(dtype=wp.int32)
     tlas_b: wp.array(dtype=wp.int32)
@@ -288,82 +291,3 @@ def intersect_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, tmax: float, s: f
                 stack[sp] = near
                 sp += 1
     return best
-
-
-@wp.func
-def blas_transmittance(geo: Geometry, opacity: wp.array(dtype=wp.float32), m: int, ro: wp.vec3, rd: wp.vec3,
-                       tmax: float, s: float, trans: float):
-    """Multiply ``trans`` by (1 - opacity) of every triangle of mesh m crossed before tmax; stops at 0."""
-    k0, k1, u = mesh_keys_at(geo, m, s)
-    nk = geo.mesh_nkeys[m]
-    noff = geo.mesh_node_off[m]
-    boff = geo.mesh_bound_off[m]
-    poff = geo.mesh_prim_off[m]
-    inv_d = safe_inverse(rd)
-    stack = stack_t()
-    stack[0] = 0
-    sp = int(1)
-    tr = trans
-    while sp > 0 and tr > 0.0:
-        sp -= 1
-        n = stack[sp]
-        a = geo.blas_a[noff + n]
-        b = geo.blas_b[noff + n]
-        if a < 0:
-            first = -(a + 1)
-            for i in range(b):
-                lt = geo.blas_prim[poff + first + i]
-                p0, p1, p2 = triangle_points(geo, m, lt, k0, k1, u)
-                t, b1, b2 = triangle_hit(p0, p1, p2, ro, rd, tmax)
-                if t < BIG:
-                    tr = tr * (1.0 - opacity[geo.tri_material[geo.mesh_tri_off[m] + lt]])
-        else:
-            lo_a, hi_a = node_box(geo.blas_lo, geo.blas_hi, boff + a * nk, k0, k1, u)
-            if box_entry(lo_a, hi_a, ro, inv_d, tmax) < BIG:
-                stack[sp] = a
-                sp += 1
-            lo_b, hi_b = node_box(geo.blas_lo, geo.blas_hi, boff + b * nk, k0, k1, u)
-            if box_entry(lo_b, hi_b, ro, inv_d, tmax) < BIG:
-                stack[sp] = b
-                sp += 1
-    return tr
-
-
-@wp.func
-def transmittance(geo: Geometry, opacity: wp.array(dtype=wp.float32), ro: wp.vec3, rd: wp.vec3, tmax: float,
-                  s: float):
-    """Fraction of light passing along the segment ro + t rd, t in (0, tmax), at time s (shadow rays).
-
-    Every surface crossed multiplies by (1 - opacity): order does not matter for a product, so this is an
-    any-hit walk that stops as soon as the ray is fully blocked.
-    """
-    k0, k1, u = tlas_keys_at(geo, s)
-    nk = geo.tlas_nkeys
-    inv_d = safe_inverse(rd)
-    stack = stack_t()
-    stack[0] = 0
-    sp = int(1)
-    tr = float(1.0)
-    while sp > 0 and tr > 0.0:
-        sp -= 1
-        n = stack[sp]
-        a = geo.tlas_a[n]
-        b = geo.tlas_b[n]
-        if a < 0:
-            first = -(a + 1)
-            for i in range(b):
-                inst = geo.tlas_prim[first + i]
-                if instance_visible(geo, inst, s) and tr > 0.0:
-                    w2o = instance_world_to_object(geo, inst, s)
-                    tr = blas_transmittance(geo, opacity, geo.inst_mesh[inst], wp.transform_point(w2o, ro),
-                                            wp.transform_vector(w2o, rd), tmax, s, tr)
-        else:
-            lo_a, hi_a = node_box(geo.tlas_lo, geo.tlas_hi, a * nk, k0, k1, u)
-            if box_entry(lo_a, hi_a, ro, inv_d, tmax) < BIG:
-                stack[sp] = a
-                sp += 1
-            lo_b, hi_b = node_box(geo.tlas_lo, geo.tlas_hi, b * nk, k0, k1, u)
-            if box_entry(lo_b, hi_b, ro, inv_d, tmax) < BIG:
-                stack[sp] = b
-                sp += 1
-    return tr

@@ -49,6 +49,23 @@ def _seed(text: str) -> int:
     return v
 
 
+def _depth(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if not 0 <= v <= 64:
+        raise argparse.ArgumentTypeError(f"must be between 0 and 64: {text!r}")
+    return v
+
+
+def _clamp(text: str) -> float:
+    v = _number(text)
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0: {text!r}")
+    return v
+
+
 def add_render_settings(p: argparse.ArgumentParser) -> None:
     """Flags shared by ``drt render`` and ``drt submit``."""
     from .film import FILTERS
@@ -71,11 +88,26 @@ def add_render_settings(p: argparse.ArgumentParser) -> None:
     p.add_argument("--aov", action="append", choices=list(AOV_NAMES), default=[], metavar="NAME",
                    help=f"extra output ({', '.join(AOV_NAMES)}); repeatable")
     p.add_argument("--half", action="store_true", help="store colour as 16-bit HALF (default 32-bit FLOAT)")
+    p.add_argument("--max-depth", type=_depth, default=8, metavar="N",
+                   help="bounces after the camera ray (default 8; 1 = direct lighting only)")
+    p.add_argument("--clamp", type=_clamp, default=0.0, metavar="X",
+                   help="clamp each sample's radiance to X per channel to cut fireflies (default 0 = off)")
+
+
+def new_parser() -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
+    """The ``drt`` parser (one-line errors, exit 2) and its sub-command group, for commands to be added to."""
+    parser = _Parser(prog="drt", description="Distributed ray tracing: USD in, OpenEXR out.")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    return parser, sub
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="drt", description="Distributed ray tracing: USD in, OpenEXR out.")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    parser, sub = new_parser()
+    add_render_command(sub)
+    return parser
+
+
+def add_render_command(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     r = sub.add_parser("render", help="render one frame of a USD scene to an EXR file")
     r.add_argument("scene", help="a .usd/.usda/.usdc/.usdz file")
     r.add_argument("-o", "--output", required=True, metavar="OUT.exr")
@@ -83,7 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--tile", type=_positive_int, default=64, help="tile size in pixels (default 64)")
     r.add_argument("--threads", type=_positive_int, default=None, help="render threads (default: all cores)")
     r.add_argument("--quiet", action="store_true", help="no warnings or progress bar")
-    return parser
+    return r
 
 
 class _Progress:
@@ -129,7 +161,7 @@ def cmd_render(args: argparse.Namespace) -> int:
                        motion_blur=not (args.no_motion_blur or strobe))
     options = RenderOptions(width=args.width, height=args.height, spp=args.spp, seed=args.seed,
                             filter=args.filter, time_filter=args.time_filter, dof=not args.no_dof,
-                            aovs=tuple(dict.fromkeys(args.aov)))
+                            aovs=tuple(dict.fromkeys(args.aov)), max_depth=args.max_depth, clamp=args.clamp)
     prep = prepare(scene, options)
     load_seconds = time.perf_counter() - t_load
     if not args.quiet:
@@ -156,13 +188,18 @@ def cmd_render(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.command != "render":
+        parser.error(f"unknown command {args.command}")
+    return render_main(args)
+
+
+def render_main(args: argparse.Namespace) -> int:
+    """Run ``drt render`` with parsed arguments under the CLI's error contract; returns the exit code."""
     try:
         from .device import init_warp
 
         init_warp()
-        if args.command == "render":
-            return cmd_render(args)
-        parser.error(f"unknown command {args.command}")
+        return cmd_render(args)
     except KeyboardInterrupt:
         sys.stderr.write("drt: interrupted\n")
         return 130

@@ -1,35 +1,48 @@
-"""The integrator: one distributed-ray-tracing sample per thread.
+"""The integrator: one distributed-ray-tracing sample per thread, a path of up to ``max_depth`` bounces.
 
 A sample is a point in every dimension at once (the paper's central idea): its film position (antialiasing),
 its time (motion blur: camera, geometry, lights and shadows are all evaluated at that one instant), its lens
-position (depth of field) and its light positions (penumbras). All come from ``sampler`` as pure functions of
-(seed, pixel, sample index, dimension), so the sample can be replayed exactly.
+position (depth of field), and at every bounce a light position (penumbrae) and a BSDF direction (gloss,
+translucency). All come from ``sampler`` as pure functions of (seed, pixel, sample index, dimension), so the
+sample can be replayed exactly.
 
-Shading here is what the spine needs: emission, Lambertian diffuse, direct lighting from every light with
-shadow rays through partially opaque surfaces, and opacity layers along the camera ray. Path tracing,
-gloss and translucency arrive with issue 3.
+At every surface, light is gathered twice and the two estimates combined by the power heuristic (Veach's
+multiple importance sampling): a light chosen by power and a point on it (a shadow ray), and the direction
+the BSDF samples, which may hit an emitter by itself. Paths end by Russian roulette after a few bounces.
+Inside a closed solid entered through its surface, light is absorbed along the distance travelled
+(Beer-Lambert). Samples with NaN/Inf radiance are counted and zeroed; ``clamp`` (off by default) limits a
+sample's radiance to cut fireflies, never silently.
 """
 from __future__ import annotations
 
 import warp as wp
 
-from .accel import Geometry, instance_world_to_object, intersect_closest, mesh_keys_at, transmittance, \
-    triangle_points
-from .bsdf import lambert_eval
+from .accel import BIG, Geometry, instance_object_to_world, instance_world_to_object, intersect_closest, \
+    mesh_keys_at, triangle_points
+from .bsdf import SurfaceParams, bsdf_albedo_hint, bsdf_setup, lobes_eval, lobes_pdf, lobes_sample
 from .camera import CameraParams, camera_ray
 from .film import SampleBuffer
-from .lights import Lights, sample_light, dome_radiance
-from .materials import Materials
-from .sampler import DIM_FILM, DIM_LENS, DIM_LIGHT_BASE, DIM_TIME, DIMS_PER_LIGHT, sample_1d, sample_2d
+from .light_sample import area_light_hit, choose_light, infinite_light_eval, mesh_light_pdf, sample_light
+from .lights import Lights
+from .materials import MaterialSample, Materials, apply_normal_map, eval_material, triangle_tangent
+from .sampler import DIM_FILM, DIM_LENS, DIM_LIGHT_BASE, DIM_TIME, sample_1d, sample_2d
 from .sampling import sample_tent
+from .shadow import hit_uv, transmittance
+from .textures import Textures
+from .scene import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_DOME, LIGHT_RECT, LIGHT_SPHERE
 
 TIME_BOX = 0
 TIME_TRIANGLE = 1
 TIME_STROBE = 2
 TIME_FILTERS = {"box": TIME_BOX, "triangle": TIME_TRIANGLE, "strobe": TIME_STROBE}
 
-MAX_LAYERS = 8  # partially opaque surfaces a camera ray passes through before it stops
+# Sample dimensions of bounce k start at DIM_LIGHT_BASE + k * DIMS_PER_BOUNCE:
+# +0 light choice, +1..2 point on the light, +3 BSDF lobe, +4..5 BSDF direction, +6 Russian roulette.
+DIMS_PER_BOUNCE = 7
+RR_START = 3  # bounces before Russian roulette may end a path
 RAY_EPSILON = 2.0e-5  # relative offset of secondary ray origins (times 1 + |p|_inf, scene units)
+FLAG_DELTA = 1
+FLAG_TRANSMISSION = 2
 
 
 @wp.func
@@ -56,36 +69,58 @@ def finite3(v: wp.vec3):
     return wp.isfinite(v[0]) and wp.isfinite(v[1]) and wp.isfinite(v[2])
 
 
+@wp.func
+def power_heuristic(pdf_a: float, pdf_b: float):
+    a = pdf_a * pdf_a
+    b = pdf_b * pdf_b
+    if a + b <= 0.0:
+        return 0.0
+    return a / (a + b)
+
+
 @wp.struct
 class SurfacePoint:
     p: wp.vec3  # world position
     ng: wp.vec3  # geometric normal, facing the incoming ray
     ns: wp.vec3  # shading normal, same hemisphere as ng
+    tangent: wp.vec4  # world dP/du and uv handedness (w = 0: no usable uvs), for normal maps
+    uv: wp.vec2  # st at the hit, NaN where the mesh has none
+    front: int  # 1 when the ray hit the side the triangle's winding faces (entering a closed solid)
     material: int
 
 
 @wp.func
 def surface_at(geo: Geometry, inst: int, tri: int, b1: float, b2: float, ro: wp.vec3, rd: wp.vec3, t: float,
                s: float):
-    """World position and normals of a hit at time s (vertices and transform evaluated at that instant)."""
+    """Position, normals, uv and tangent of a hit at time s (vertices and transform at that instant)."""
     m = geo.inst_mesh[inst]
+    o2w = instance_object_to_world(geo, inst, s)
     w2o_t = wp.transpose(instance_world_to_object(geo, inst, s))  # normals transform by the inverse transpose
     k0, k1, u = mesh_keys_at(geo, m, s)
     p0, p1, p2 = triangle_points(geo, m, tri - geo.mesh_tri_off[m], k0, k1, u)
     ng = wp.normalize(wp.transform_vector(w2o_t, wp.cross(p1 - p0, p2 - p0)))
+    b0 = 1.0 - b1 - b2
     ns = ng
     if geo.mesh_has_normals[m] != 0:
-        b0 = 1.0 - b1 - b2
         n = geo.normals[3 * tri] * b0 + geo.normals[3 * tri + 1] * b1 + geo.normals[3 * tri + 2] * b2
         nw = wp.transform_vector(w2o_t, n)
         if wp.length(nw) > 0.0:
             ns = wp.normalize(nw)
-    # two-sided: both normals face the viewer
-    if wp.dot(ng, rd) > 0.0:
-        ng = -ng
-    if wp.dot(ns, ng) < 0.0:
+    if wp.dot(ns, ng) < 0.0:  # keep the shading normal on the geometric normal's side
         ns = -ns
     sp = SurfacePoint()
+    sp.uv = hit_uv(geo, m, tri, b1, b2)
+    sp.tangent = wp.vec4(0.0)
+    if geo.mesh_has_uvs[m] != 0:
+        # from world-space corners, so a mirroring transform is accounted for in the handedness
+        sp.tangent = triangle_tangent(wp.transform_point(o2w, p0), wp.transform_point(o2w, p1),
+                                      wp.transform_point(o2w, p2), geo.uvs[3 * tri], geo.uvs[3 * tri + 1],
+                                      geo.uvs[3 * tri + 2])
+    sp.front = 1
+    if wp.dot(ng, rd) > 0.0:  # hit from behind: both normals face the viewer, and we are leaving
+        ng = -ng
+        ns = -ns
+        sp.front = 0
     sp.p = ro + rd * t
     sp.ng = ng
     sp.ns = ns
@@ -94,44 +129,72 @@ def surface_at(geo: Geometry, inst: int, tri: int, b1: float, b2: float, ro: wp.
 
 
 @wp.func
-def direct_lighting(geo: Geometry, mats: Materials, lights: Lights, light_count: int, sp: SurfacePoint,
-                    albedo: wp.vec3, s: float, seed: wp.uint32, pixel: wp.uint32, index: wp.uint32):
-    """Light reaching the point from every light, one shadow ray each. Returns (radiance, rays traced)."""
-    L = wp.vec3(0.0)
-    rays = int(0)
-    origin = offset_origin(sp.p, sp.ng)
-    for li in range(light_count):
-        dim = wp.uint32(DIM_LIGHT_BASE + DIMS_PER_LIGHT * li)
-        u_pick = sample_1d(seed, pixel, index, dim)
-        u_pos = sample_2d(seed, pixel, index, dim + wp.uint32(1))
-        wi, dist, weight, ok = sample_light(lights, geo, mats.emission, li, origin, sp.ns, s, u_pick, u_pos)
-        if ok:
-            cos_s = wp.dot(sp.ns, wi)
-            if cos_s > 0.0 and wp.dot(sp.ng, wi) > 0.0:
-                rays += 1
-                tr = transmittance(geo, mats.opacity, origin, wi, dist * (1.0 - 1.0e-4), s)
-                if tr > 0.0:
-                    L += wp.cw_mul(lambert_eval(albedo, sp.ns, wi), weight) * (cos_s * tr)
-    return L, rays
+def shading_normal(sp: SurfacePoint, ms: MaterialSample):
+    """The shading normal facing the viewer, with the material's normal map applied."""
+    if ms.has_normal_map == 0 or sp.tangent[3] == 0.0:
+        return sp.ns
+    # the normal map is defined on the front (winding) side
+    nf = sp.ns
+    if sp.front == 0:
+        nf = -sp.ns
+    n = apply_normal_map(nf, sp.tangent, ms.normal_ts)
+    if sp.front == 0:
+        n = -n
+    if wp.dot(n, sp.ng) <= 0.0:  # a map tilting the normal below the surface: keep the interpolated one
+        return sp.ns
+    return n
+
+
+@wp.func
+def surface_params(ms: MaterialSample, thin: int):
+    p = SurfaceParams()
+    p.diffuse_color = ms.diffuse_color
+    p.specular_color = ms.specular_color
+    p.use_specular_workflow = ms.use_specular_workflow
+    p.metallic = ms.metallic
+    p.roughness = ms.roughness
+    p.clearcoat = ms.clearcoat
+    p.clearcoat_roughness = ms.clearcoat_roughness
+    p.opacity = ms.opacity
+    p.ior = ms.ior
+    p.thin = thin
+    return p
+
+
+@wp.func
+def is_area_light(kind: int):
+    return kind == LIGHT_RECT or kind == LIGHT_DISK or kind == LIGHT_SPHERE or kind == LIGHT_CYLINDER
+
+
+@wp.func
+def is_infinite_light(kind: int):
+    return kind == LIGHT_DOME or kind == LIGHT_DISTANT
+
+
+@wp.struct
+class PathSettings:
+    max_depth: int  # bounces after the camera ray (0: emission and direct light only... see README)
+    clamp: float  # maximum sample radiance per channel, 0 = off
+    time_filter: int
+    frame_s: float  # the frame time in normalised shutter time (strobe)
+    seed: wp.uint32
 
 
 @wp.kernel
 def trace_wave_kernel(
     geo: Geometry,
     mats: Materials,
+    tex: Textures,
     lights: Lights,
-    light_count: int,
     cam: CameraParams,
     buf: SampleBuffer,
     counters: wp.array(dtype=wp.int64),  # [rays traced, non-finite samples zeroed]
-    seed: wp.uint32,
+    settings: PathSettings,
     region_x0: int,
     region_y0: int,
     region_w: int,
     wave_start: int,  # sample index of this wave's first sample
     wave: int,  # samples per pixel in this wave
-    time_filter: int,
-    frame_s: float,  # the frame time in normalised shutter time (strobe)
 ):
     tid = wp.tid()
     j = tid % wave
@@ -140,59 +203,155 @@ def trace_wave_kernel(
     py = region_y0 + pr // region_w
     pixel = wp.uint32(py * cam.width + px)
     index = wp.uint32(wave_start + j)
+    seed = settings.seed
 
     film_u = sample_2d(seed, pixel, index, wp.uint32(DIM_FILM))
-    s = shutter_time(time_filter, sample_1d(seed, pixel, index, wp.uint32(DIM_TIME)), frame_s)
+    s = shutter_time(settings.time_filter, sample_1d(seed, pixel, index, wp.uint32(DIM_TIME)), settings.frame_s)
     lens_u = sample_2d(seed, pixel, index, wp.uint32(DIM_LENS))
     ro, rd, tmin, tmax, fwd = camera_ray(cam, wp.vec2(float(px) + film_u[0], float(py) + film_u[1]), lens_u, s)
     cam_origin = ro
 
     L = wp.vec3(0.0)
+    beta = wp.vec3(1.0)  # path throughput
     alpha = float(0.0)
-    throughput = float(1.0)
-    depth = float(0.0)
-    normal = wp.vec3(0.0)
+    depth_aov = float(0.0)
+    normal_aov = wp.vec3(0.0)
     albedo_aov = wp.vec3(0.0)
     rays = int(0)
     origin = ro + rd * tmin
-    remaining = tmax - tmin
-    layer = int(0)
-    while layer < MAX_LAYERS and throughput > 0.0:
+    t_far = tmax - tmin
+    prev_delta = int(1)  # the camera ray: what it sees directly gets no MIS weight
+    prev_pdf = float(0.0)
+    prev_n = wp.vec3(0.0)
+    sigma = wp.vec3(0.0)  # absorption coefficient of the solid the path is inside (1/scene unit)
+    see_through = int(1)  # so far only straight pass-through events: the background shows (alpha)
+    bounce = int(0)
+    alive = int(1)
+    while alive != 0:
         rays += 1
-        hit = intersect_closest(geo, origin, rd, remaining, s)
+        hit = intersect_closest(geo, origin, rd, t_far, s)
+        # UsdLux area lights are not in the BVH: rays after the first bounce may reach them directly
+        if bounce > 0:
+            for li in range(lights.count):
+                if is_area_light(lights.kind[li]):
+                    t_l, Le, pdf_l = area_light_hit(lights, li, origin, rd, hit.t, s)
+                    if t_l < BIG:
+                        w = float(1.0)
+                        if prev_delta == 0:
+                            w = power_heuristic(prev_pdf, lights.select_pdf[li] * pdf_l)
+                        L += wp.cw_mul(beta, Le) * w
         if hit.inst < 0:
-            L += dome_radiance(lights, rd) * throughput
-            if lights.dome_visible != 0:
-                alpha += throughput
-            throughput = 0.0
+            for li in range(lights.count):
+                kind = lights.kind[li]
+                # domes hidden from the camera stay hidden behind pass-through surfaces too
+                if is_infinite_light(kind) and not (see_through != 0 and kind == LIGHT_DOME and
+                                                    lights.dome_visible == 0):
+                    Le, pdf_l = infinite_light_eval(lights, li, rd, prev_n, s)
+                    w = float(1.0)
+                    if prev_delta == 0:
+                        w = power_heuristic(prev_pdf, lights.select_pdf[li] * pdf_l)
+                    L += wp.cw_mul(beta, Le) * w
+            if see_through == 0 or lights.dome_visible != 0:
+                alpha = 1.0
+            alive = 0
         else:
+            # Beer-Lambert: absorbed along the way through a solid
+            if sigma[0] > 0.0 or sigma[1] > 0.0 or sigma[2] > 0.0:
+                beta = wp.cw_mul(beta, wp.vec3(wp.exp(-sigma[0] * hit.t), wp.exp(-sigma[1] * hit.t),
+                                               wp.exp(-sigma[2] * hit.t)))
             sp = surface_at(geo, hit.inst, hit.tri, hit.b1, hit.b2, origin, rd, hit.t, s)
-            opacity = mats.opacity[sp.material]
-            albedo = mats.diffuse[sp.material]
-            if layer == 0:
-                depth = wp.dot(sp.p - cam_origin, fwd)
-                normal = sp.ns
-                albedo_aov = albedo
-            Ls = mats.emission[sp.material]
-            if opacity > 0.0:
-                direct, n = direct_lighting(geo, mats, lights, light_count, sp, albedo, s, seed, pixel, index)
-                Ls += direct
-                rays += n
-            L += Ls * (throughput * opacity)
-            alpha += throughput * opacity
-            throughput *= 1.0 - opacity
-            # continue behind a partially opaque surface
-            origin = offset_origin(sp.p, rd)
-            remaining = remaining - hit.t
-        layer += 1
-
-    sample = wp.vec4(L[0], L[1], L[2], wp.min(alpha, 1.0))
-    if not (finite3(L)):
-        sample = wp.vec4(0.0, 0.0, 0.0, wp.min(alpha, 1.0))
+            ms = eval_material(mats, tex, sp.material, sp.uv)
+            ns = shading_normal(sp, ms)
+            thin = int(1)
+            if geo.mesh_closed[geo.inst_mesh[hit.inst]] != 0:
+                thin = 0
+            params = surface_params(ms, thin)
+            wo = -rd
+            lobes = bsdf_setup(params, ns, sp.ng, wo, sp.front)  # once per hit: eval, pdf and sample share it
+            if bounce == 0:
+                depth_aov = wp.dot(sp.p - cam_origin, fwd)
+                normal_aov = ns
+                albedo_aov = bsdf_albedo_hint(params)
+            # emission seen along the path
+            Le = ms.emissive_color
+            if Le[0] > 0.0 or Le[1] > 0.0 or Le[2] > 0.0:
+                w = float(1.0)
+                li = lights.inst_light[hit.inst]
+                if prev_delta == 0 and li >= 0:
+                    pdf_l = lights.select_pdf[li] * mesh_light_pdf(lights, geo, li, hit.inst, hit.tri, origin,
+                                                                     sp.p, s)
+                    w = power_heuristic(prev_pdf, pdf_l)
+                L += wp.cw_mul(beta, Le) * w
+            if bounce >= settings.max_depth:
+                alive = 0
+                alpha = 1.0  # the path ends on a surface: it covers the pixel
+            else:
+                dim = wp.uint32(DIM_LIGHT_BASE + bounce * DIMS_PER_BOUNCE)
+                # --- next-event estimation: one light by power, one point on it, one shadow ray
+                if lights.count > 0:
+                    li, p_sel = choose_light(lights, sample_1d(seed, pixel, index, dim))
+                    origin_l = offset_origin(sp.p, sp.ng)
+                    wi, dist, Le_l, pdf_l, delta = sample_light(lights, geo, mats, tex, li, origin_l, ns, s,
+                                                                sample_1d(seed, pixel, index, dim + wp.uint32(1)),
+                                                                sample_2d(seed, pixel, index, dim + wp.uint32(1)))
+                    if pdf_l > 0.0 and (Le_l[0] > 0.0 or Le_l[1] > 0.0 or Le_l[2] > 0.0):
+                        f = lobes_eval(lobes, wi)
+                        if f[0] > 0.0 or f[1] > 0.0 or f[2] > 0.0:
+                            # shadow rays start on the side of the surface the light is on
+                            o_sh = origin_l
+                            if wp.dot(wi, sp.ng) < 0.0:
+                                o_sh = offset_origin(sp.p, -sp.ng)
+                            rays += 1
+                            tr = transmittance(geo, mats, tex, o_sh, wi, dist * (1.0 - 1.0e-4), s)
+                            if tr > 0.0:
+                                w = float(1.0)
+                                if not delta:
+                                    w = power_heuristic(p_sel * pdf_l, lobes_pdf(lobes, wi))
+                                cos_i = wp.abs(wp.dot(ns, wi))
+                                L += wp.cw_mul(wp.cw_mul(beta, f), Le_l) * (cos_i * tr * w / (p_sel * pdf_l))
+                # --- the BSDF's own direction continues the path
+                wi, weight, pdf, flags = lobes_sample(lobes, sample_1d(seed, pixel, index, dim + wp.uint32(3)),
+                                                      sample_2d(seed, pixel, index, dim + wp.uint32(4)))
+                if pdf <= 0.0 or not finite3(weight) or (weight[0] <= 0.0 and weight[1] <= 0.0 and weight[2] <= 0.0):
+                    alive = 0
+                    alpha = 1.0
+                else:
+                    beta = wp.cw_mul(beta, weight)
+                    prev_delta = flags & FLAG_DELTA
+                    prev_pdf = pdf
+                    prev_n = ns
+                    passthrough = (flags & FLAG_TRANSMISSION) != 0 and thin != 0 and (flags & FLAG_DELTA) != 0
+                    if not passthrough:
+                        see_through = 0
+                    if (flags & FLAG_TRANSMISSION) != 0:
+                        origin = offset_origin(sp.p, -sp.ng)
+                        if thin == 0:  # into or out of a solid
+                            if sp.front != 0:
+                                sigma = ms.absorption
+                            else:
+                                sigma = wp.vec3(0.0)
+                    else:
+                        origin = offset_origin(sp.p, sp.ng)
+                    rd = wi
+                    t_far = float(BIG)
+                    bounce += 1
+                    # Russian roulette once the path has carried light a few bounces
+                    if bounce >= RR_START:
+                        q = wp.max(0.05, 1.0 - wp.max(wp.max(beta[0], beta[1]), beta[2]))
+                        if sample_1d(seed, pixel, index, dim + wp.uint32(6)) < q:
+                            alive = 0
+                            alpha = 1.0
+                        else:
+                            beta = beta / (1.0 - q)
+    if settings.clamp > 0.0:
+        L = wp.vec3(wp.min(L[0], settings.clamp), wp.min(L[1], settings.clamp), wp.min(L[2], settings.clamp))
+    sample = wp.vec4(L[0], L[1], L[2], alpha)
+    if not finite3(L):
+        sample = wp.vec4(0.0, 0.0, 0.0, alpha)
         wp.atomic_add(counters, 1, wp.int64(1))
     buf.film[tid] = film_u
     buf.rgba[tid] = sample
-    buf.depth[tid] = depth
-    buf.normal[tid] = normal
+    buf.depth[tid] = depth_aov
+    buf.normal[tid] = normal_aov
     buf.albedo[tid] = albedo_aov
     wp.atomic_add(counters, 0, wp.int64(rays))

@@ -1,26 +1,502 @@
-"""Materials as the kernels see them: one row per material, indexed by the triangle's material id."""
+"""Materials as the kernels see them: one row per material, indexed by the triangle's material id.
+
+``eval_material(mats, tex, mat_id, uv)`` evaluates every UsdPreviewSurface input of a material at a hit's
+texture coordinates and returns a ``MaterialSample``. Each input is either a constant or a *texture binding*
+(a UsdUVTexture, its UsdTransform2d and UsdPrimvarReader_float2 flattened into one row):
+
+    st'   = M st + t                      (UsdTransform2d; st = the hit's uv, or a constant st)
+    rgba  = lookup(texture, st') * scale + bias      (fallback, unscaled, where there is no texture/tile)
+    value = rgba.rgb or rgba.r/g/b/a      (the connected output; a scalar broadcast to a colour input)
+
+Layout: inputs of material m live at ``m * NUM_INPUTS + slot`` (slots ``IN_*`` below) in ``value`` (the constant,
+scalars in x) and ``binding`` (a texture-binding row, or -1). Binding rows hold the texture (an index into
+``textures.Textures``, -1 for a missing file), output channel, wrap modes, scale, bias, fallback, the uv source
+and the 2x3 uv transform.
+
+``diffuse``, ``emission`` and ``opacity`` stay as constant per-material arrays for code that does not evaluate
+textures (light power, the constant-shading integrator): for a textured input they hold the texture's mean.
+
+``eval_opacity`` and ``eval_emission`` are the cheap parts of ``eval_material`` for shadow rays through cut-outs
+and for points sampled on emissive meshes. Beer-Lambert: ``MaterialSample.absorption`` is sigma_a per scene unit,
+``beer_lambert(sigma_a, d)`` the transmittance after d inside.
+
+Normal maps: tangents are dP/du per triangle with the uv handedness in w (``triangle_tangent`` in Warp from the
+corners and their uvs, ``triangle_tangents`` / ``mesh_tangents`` in NumPy, ``tangent_to_world`` for an
+object-space one); ``apply_normal_map`` turns a tangent-space normal into a world shading normal.
+"""
 from __future__ import annotations
 
 import numpy as np
 import warp as wp
 
-from .scene import Material
+from .scene import Material, Mesh, Texture
+from .textures import OUTPUT_RGB, OUTPUTS, WRAP_MODES, Textures, texture_fetch, upload_textures
+
+# UsdPreviewSurface input slots
+IN_DIFFUSE = 0
+IN_EMISSIVE = 1
+IN_SPECULAR = 2
+IN_METALLIC = 3
+IN_ROUGHNESS = 4
+IN_CLEARCOAT = 5
+IN_CLEARCOAT_ROUGHNESS = 6
+IN_OPACITY = 7
+IN_OPACITY_THRESHOLD = 8
+IN_IOR = 9
+IN_NORMAL = 10
+IN_OCCLUSION = 11
+NUM_INPUTS = 12
+
+# UsdPreviewSurface input name -> (slot, Material field)
+INPUT_SLOTS = {
+    "diffuseColor": (IN_DIFFUSE, "diffuse_color"),
+    "emissiveColor": (IN_EMISSIVE, "emissive_color"),
+    "specularColor": (IN_SPECULAR, "specular_color"),
+    "metallic": (IN_METALLIC, "metallic"),
+    "roughness": (IN_ROUGHNESS, "roughness"),
+    "clearcoat": (IN_CLEARCOAT, "clearcoat"),
+    "clearcoatRoughness": (IN_CLEARCOAT_ROUGHNESS, "clearcoat_roughness"),
+    "opacity": (IN_OPACITY, "opacity"),
+    "opacityThreshold": (IN_OPACITY_THRESHOLD, "opacity_threshold"),
+    "ior": (IN_IOR, "ior"),
+    "normal": (IN_NORMAL, "normal"),
+    "occlusion": (IN_OCCLUSION, "occlusion"),
+}
 
 
 @wp.struct
 class Materials:
+    # --- constant summaries (textured inputs: the texture's mean), for code that does not evaluate textures
     diffuse: wp.array(dtype=wp.vec3)  # albedo, linear RGB in [0, 1]
     emission: wp.array(dtype=wp.vec3)  # emitted radiance (both faces)
     opacity: wp.array(dtype=wp.float32)  # 1 = opaque; light passes through with weight 1 - opacity
+    # --- every UsdPreviewSurface input, [m * NUM_INPUTS + slot]
+    value: wp.array(dtype=wp.vec3)  # the constant (scalars in x)
+    binding: wp.array(dtype=wp.int32)  # texture-binding row, or -1 for the constant
+    use_specular_workflow: wp.array(dtype=wp.int32)  # per material
+    absorption_cd: wp.array(dtype=wp.vec4)  # per material: transmittance colour (rgb) after distance (w)
+    absorption: wp.array(dtype=wp.vec3)  # per material: absorption coefficient sigma_a per scene unit (0: none)
+    # --- texture bindings
+    b_texture: wp.array(dtype=wp.int32)  # texture index in Textures, -1: missing file (fallback)
+    b_output: wp.array(dtype=wp.int32)  # textures.OUTPUT_*
+    b_wrap: wp.array(dtype=wp.vec2i)  # textures.WRAP_* for s and t
+    b_scale: wp.array(dtype=wp.vec4)
+    b_bias: wp.array(dtype=wp.vec4)
+    b_fallback: wp.array(dtype=wp.vec4)
+    b_const_st: wp.array(dtype=wp.int32)  # 1: st is b_st (no primvar reader); 0: the hit's uv
+    b_st: wp.array(dtype=wp.vec2)  # constant st, or the primvar reader's fallback when the hit has no uv
+    b_xf: wp.array(dtype=wp.vec4)  # UsdTransform2d 2x2 matrix, row-major (m00, m01, m10, m11)
+    b_xt: wp.array(dtype=wp.vec2)  # UsdTransform2d translation
+
+
+@wp.struct
+class MaterialSample:
+    """Every UsdPreviewSurface input of a material evaluated at one hit (clamped to its valid range)."""
+
+    diffuse_color: wp.vec3  # [0, 1]
+    emissive_color: wp.vec3  # >= 0, radiance
+    specular_color: wp.vec3  # [0, 1] (specular workflow)
+    use_specular_workflow: int
+    metallic: float  # [0, 1] (metallic workflow)
+    roughness: float  # [0, 1]
+    clearcoat: float  # [0, 1]
+    clearcoat_roughness: float  # [0, 1]
+    opacity: float  # [0, 1], after opacityThreshold (then exactly 0 or 1)
+    ior: float
+    normal_ts: wp.vec3  # unit tangent-space normal; (0, 0, 1) without a normal map
+    has_normal_map: int  # 1: normal_ts is not (0, 0, 1) by construction (textured or authored)
+    occlusion: float  # imported, not used by the renderer
+    absorption_color: wp.vec3  # Beer-Lambert: transmittance after absorption_distance inside (white: none)
+    absorption_distance: float  # scene units
+    absorption: wp.vec3  # coefficient sigma_a per scene unit: T(d) = exp(-sigma_a d) = color^(d / distance)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Evaluation
+
+
+@wp.func
+def binding_rgba(mats: Materials, tex: Textures, b: int, uv: wp.vec2):
+    """The RGBA a texture binding delivers at the hit's uv (non-finite uv: the primvar reader's fallback)."""
+    st = uv
+    if mats.b_const_st[b] != 0 or not (wp.isfinite(uv[0]) and wp.isfinite(uv[1])):
+        st = mats.b_st[b]
+    m = mats.b_xf[b]
+    tr = mats.b_xt[b]
+    s = m[0] * st[0] + m[1] * st[1] + tr[0]
+    t = m[2] * st[0] + m[3] * st[1] + tr[1]
+    w = mats.b_wrap[b]
+    c, ok = texture_fetch(tex, mats.b_texture[b], s, t, w[0], w[1])
+    if not ok:
+        return mats.b_fallback[b]
+    return wp.cw_mul(c, mats.b_scale[b]) + mats.b_bias[b]
+
+
+@wp.func
+def select_color(c: wp.vec4, output: int):
+    if output == OUTPUT_RGB:
+        return wp.vec3(c[0], c[1], c[2])
+    return wp.vec3(c[output])
+
+
+@wp.func
+def select_scalar(c: wp.vec4, output: int):
+    if output == OUTPUT_RGB:
+        return c[0]
+    return c[output]
+
+
+@wp.func
+def input_color(mats: Materials, tex: Textures, mat: int, slot: int, uv: wp.vec2):
+    """A colour (or vector) input of material ``mat`` at uv."""
+    i = mat * NUM_INPUTS + slot
+    b = mats.binding[i]
+    if b < 0:
+        return mats.value[i]
+    return select_color(binding_rgba(mats, tex, b, uv), mats.b_output[b])
+
+
+@wp.func
+def input_scalar(mats: Materials, tex: Textures, mat: int, slot: int, uv: wp.vec2):
+    """A float input of material ``mat`` at uv."""
+    i = mat * NUM_INPUTS + slot
+    b = mats.binding[i]
+    if b < 0:
+        return mats.value[i][0]
+    return select_scalar(binding_rgba(mats, tex, b, uv), mats.b_output[b])
+
+
+@wp.func
+def clamp01(x: float):
+    return wp.clamp(x, 0.0, 1.0)
+
+
+@wp.func
+def clamp01_3(c: wp.vec3):
+    return wp.vec3(wp.clamp(c[0], 0.0, 1.0), wp.clamp(c[1], 0.0, 1.0), wp.clamp(c[2], 0.0, 1.0))
+
+
+@wp.func
+def eval_opacity(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2):
+    """Just the opacity of ``eval_material`` (after opacityThreshold): for shadow rays through cut-outs."""
+    opacity = clamp01(input_scalar(mats, tex, mat_id, IN_OPACITY, uv))
+    threshold = input_scalar(mats, tex, mat_id, IN_OPACITY_THRESHOLD, uv)
+    if threshold > 0.0:
+        if opacity >= threshold:
+            opacity = 1.0
+        else:
+            opacity = 0.0
+    return opacity
+
+
+@wp.func
+def eval_emission(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2):
+    """Just the emissive colour of ``eval_material``: for points sampled on emissive meshes."""
+    e = input_color(mats, tex, mat_id, IN_EMISSIVE, uv)
+    return wp.vec3(wp.max(e[0], 0.0), wp.max(e[1], 0.0), wp.max(e[2], 0.0))
+
+
+@wp.func
+def eval_material(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2):
+    """All UsdPreviewSurface inputs of material ``mat_id`` at texture coordinates ``uv``.
+
+    ``uv`` is the hit's interpolated primvar (st); pass a non-finite uv (e.g. ``wp.vec2(wp.nan, wp.nan)``) for
+    a mesh without texture coordinates, which gives each primvar reader's fallback.
+    """
+    ms = MaterialSample()
+    ms.diffuse_color = clamp01_3(input_color(mats, tex, mat_id, IN_DIFFUSE, uv))
+    ms.emissive_color = eval_emission(mats, tex, mat_id, uv)
+    ms.specular_color = clamp01_3(input_color(mats, tex, mat_id, IN_SPECULAR, uv))
+    ms.use_specular_workflow = mats.use_specular_workflow[mat_id]
+    ms.metallic = clamp01(input_scalar(mats, tex, mat_id, IN_METALLIC, uv))
+    ms.roughness = clamp01(input_scalar(mats, tex, mat_id, IN_ROUGHNESS, uv))
+    ms.clearcoat = clamp01(input_scalar(mats, tex, mat_id, IN_CLEARCOAT, uv))
+    ms.clearcoat_roughness = clamp01(input_scalar(mats, tex, mat_id, IN_CLEARCOAT_ROUGHNESS, uv))
+    ms.opacity = eval_opacity(mats, tex, mat_id, uv)
+    ms.ior = wp.max(input_scalar(mats, tex, mat_id, IN_IOR, uv), 1.0e-3)
+    n = input_color(mats, tex, mat_id, IN_NORMAL, uv)
+    ln = wp.length(n)
+    ms.normal_ts = wp.vec3(0.0, 0.0, 1.0)
+    ms.has_normal_map = 0
+    i = mat_id * NUM_INPUTS + IN_NORMAL
+    if ln > 1.0e-6 and wp.isfinite(ln):
+        ms.normal_ts = n / ln
+        if mats.binding[i] >= 0 or n[0] != 0.0 or n[1] != 0.0 or n[2] != 1.0:
+            ms.has_normal_map = 1
+    ms.occlusion = clamp01(input_scalar(mats, tex, mat_id, IN_OCCLUSION, uv))
+    a = mats.absorption_cd[mat_id]
+    ms.absorption_color = wp.vec3(a[0], a[1], a[2])
+    ms.absorption_distance = a[3]
+    ms.absorption = mats.absorption[mat_id]
+    return ms
+
+
+@wp.func
+def beer_lambert(sigma_a: wp.vec3, distance: float):
+    """Transmittance exp(-sigma_a d) after ``distance`` scene units inside a medium."""
+    return wp.vec3(wp.exp(-sigma_a[0] * distance), wp.exp(-sigma_a[1] * distance), wp.exp(-sigma_a[2] * distance))
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Normal maps
+
+
+@wp.func
+def tangent_to_world(o2w: wp.mat44, tangent: wp.vec4):
+    """An object-space tangent (xyz, handedness w) in world space: the direction transforms by the linear part;
+    a mirroring transform (negative determinant) flips the handedness."""
+    t = wp.transform_vector(o2w, wp.vec3(tangent[0], tangent[1], tangent[2]))
+    m = wp.mat33(o2w[0, 0], o2w[0, 1], o2w[0, 2], o2w[1, 0], o2w[1, 1], o2w[1, 2], o2w[2, 0], o2w[2, 1], o2w[2, 2])
+    w = tangent[3]
+    if wp.determinant(m) < 0.0:
+        w = -w
+    return wp.vec4(t[0], t[1], t[2], w)
+
+
+@wp.func
+def apply_normal_map(ns: wp.vec3, tangent: wp.vec4, normal_ts: wp.vec3):
+    """World shading normal from a tangent-space normal.
+
+    ``ns``: the unit shading normal on the FRONT side of the surface (the side its winding faces, before any
+    two-sided flip toward the viewer; flip the result instead). ``tangent``: world tangent dP/du with handedness
+    in w (``tangent_to_world``). The tangent is made orthogonal to ns (Gram-Schmidt), the bitangent is
+    w * cross(ns, t), and the result is normalize(x t + y b + z ns). Without a usable tangent (w == 0 or
+    parallel to ns) ``ns`` is returned unchanged.
+    """
+    if tangent[3] == 0.0:
+        return ns
+    t = wp.vec3(tangent[0], tangent[1], tangent[2])
+    t = t - ns * wp.dot(ns, t)
+    lt = wp.length(t)
+    if lt < 1.0e-8:
+        return ns
+    t = t / lt
+    b = wp.cross(ns, t)
+    if tangent[3] < 0.0:
+        b = -b
+    n = t * normal_ts[0] + b * normal_ts[1] + ns * normal_ts[2]
+    ln = wp.length(n)
+    if ln < 1.0e-8 or not wp.isfinite(ln):
+        return ns
+    return n / ln
+
+
+@wp.func
+def apply_normal_map(ns: wp.vec3, tangent: wp.vec3, normal_ts: wp.vec3):
+    """Overload for a tangent without handedness (taken as +1: right for uvs that are not mirrored)."""
+    return apply_normal_map(ns, wp.vec4(tangent[0], tangent[1], tangent[2], 1.0), normal_ts)
+
+
+@wp.func
+def triangle_tangent(p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, uv0: wp.vec2, uv1: wp.vec2, uv2: wp.vec2):
+    """Warp twin of ``triangle_tangents`` for one triangle: unit dP/du and handedness w (0 if degenerate).
+
+    Given world-space corners it yields the world tangent directly (handedness relative to the world winding
+    normal cross(p1 - p0, p2 - p0), which is the "front" ``apply_normal_map`` expects).
+    """
+    e1 = p1 - p0
+    e2 = p2 - p0
+    d1 = uv1 - uv0
+    d2 = uv2 - uv0
+    r = d1[0] * d2[1] - d2[0] * d1[1]
+    if wp.abs(r) <= 1.0e-20:
+        return wp.vec4(0.0)
+    dpdu = (e1 * d2[1] - e2 * d1[1]) / r
+    dpdv = (e2 * d1[0] - e1 * d2[0]) / r
+    lt = wp.length(dpdu)
+    h = wp.dot(wp.cross(wp.cross(e1, e2), dpdu), dpdv)
+    if lt <= 0.0 or h == 0.0 or not wp.isfinite(lt):
+        return wp.vec4(0.0)
+    t = dpdu / lt
+    return wp.vec4(t[0], t[1], t[2], wp.sign(h))
+
+
+def triangle_tangents(points: np.ndarray, triangles: np.ndarray, uvs: np.ndarray | None) -> np.ndarray:
+    """Per-triangle tangents (T, 4) float32: unit dP/du in xyz, handedness in w.
+
+    With e1 = p1 - p0, e2 = p2 - p0 and the uv differences d1, d2: dP/du = (e1 d2.v - e2 d1.v) / r,
+    dP/dv = (e2 d1.u - e1 d2.u) / r, r = d1.u d2.v - d2.u d1.v. w = sign(dot(cross(n, dP/du), dP/dv)) with n the
+    winding normal cross(e1, e2): +1 for uvs laid out like x, y about a +z front, -1 for mirrored uvs. Triangles
+    without uvs or with degenerate ones get (0, 0, 0, 0).
+    """
+    tris = np.asarray(triangles, np.int64)
+    out = np.zeros((len(tris), 4), np.float32)
+    if uvs is None or len(tris) == 0:
+        return out
+    p = np.asarray(points, np.float64).reshape(-1, 3)[tris]  # (T, 3, 3)
+    uv = np.asarray(uvs, np.float64).reshape(-1, 3, 2)
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    d1, d2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    r = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = np.where(np.abs(r) > 1e-20, 1.0 / r, 0.0)[:, None]
+        dpdu = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) * inv
+        dpdv = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) * inv
+        n = np.cross(e1, e2)
+        lt = np.linalg.norm(dpdu, axis=1, keepdims=True)
+        t = dpdu / np.where(lt > 0, lt, 1.0)
+        w = np.sign(np.einsum("ij,ij->i", np.cross(n, dpdu), dpdv))
+    ok = (np.abs(r) > 1e-20) & (lt[:, 0] > 0) & (w != 0) & np.all(np.isfinite(t), axis=1)
+    out[ok, :3] = t[ok]
+    out[ok, 3] = w[ok]
+    return out
+
+
+def mesh_tangents(mesh: Mesh) -> np.ndarray:
+    """``mesh.tangents`` if set, else computed from its first point key and uvs (T, 4) float32."""
+    if mesh.tangents is not None:
+        return np.asarray(mesh.tangents, np.float32)
+    return triangle_tangents(mesh.points[0], mesh.triangles, mesh.uvs)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Upload
+
+
+def collect_textures(materials: list[Material]) -> list[Texture]:
+    """The distinct textures materials use, in a fixed order (texture t of the kernels is element t)."""
+    seen: dict[int, int] = {}
+    out: list[Texture] = []
+    for mat in materials:
+        for name in INPUT_SLOTS:
+            ti = mat.textures.get(name)
+            if ti is not None and ti.texture is not None and id(ti.texture) not in seen:
+                seen[id(ti.texture)] = len(out)
+                out.append(ti.texture)
+    return out
+
+
+def upload_material_textures(materials: list[Material], device: str = "cpu", warn=None) -> Textures:
+    """The texture atlas for ``upload_materials(materials)``."""
+    return upload_textures(collect_textures(materials), device, warn=warn)
+
+
+def _vec3(v, default) -> np.ndarray:
+    a = np.asarray(v if v is not None else default, np.float64).reshape(-1)
+    if a.size == 1:
+        a = np.repeat(a, 3)
+    a = a[:3] if a.size >= 3 else np.asarray(default, np.float64)
+    return np.where(np.isfinite(a), a, np.asarray(default, np.float64))
+
+
+def _constant_opacity(mat: Material) -> float:
+    op = float(np.clip(np.nan_to_num(mat.opacity, nan=1.0), 0.0, 1.0))
+    if mat.opacity_threshold > 0 and "opacity" not in mat.textures and "opacityThreshold" not in mat.textures:
+        op = 1.0 if op >= mat.opacity_threshold else 0.0
+    return op
 
 
 def upload_materials(materials: list[Material], device: str = "cpu") -> Materials:
+    """Every material's inputs and texture bindings for the kernels (textures: ``upload_material_textures``)."""
     mats = materials or [Material(name="default")]
+    tex_index = {id(t): i for i, t in enumerate(collect_textures(mats))}
+    n = len(mats)
+    value = np.zeros((n, NUM_INPUTS, 3), np.float32)
+    binding = np.full((n, NUM_INPUTS), -1, np.int32)
+    rows: list = []
+    defaults = Material(name="defaults")
+    for i, mat in enumerate(mats):
+        for name, (slot, field_name) in INPUT_SLOTS.items():
+            value[i, slot] = _vec3(getattr(mat, field_name), getattr(defaults, field_name))
+            ti = mat.textures.get(name)
+            if ti is not None:
+                binding[i, slot] = len(rows)
+                rows.append(ti)
+    value[:, IN_IOR, 0] = np.where(value[:, IN_IOR, 0] > 0, value[:, IN_IOR, 0], 1.5)
+
+    absorb = np.array([list(_vec3(m.absorption_color, (1.0, 1.0, 1.0))) + [m.absorption_distance] for m in mats],
+                      np.float64)
+    dist = np.where(np.isfinite(absorb[:, 3]) & (absorb[:, 3] > 0), absorb[:, 3], 1.0)
+    color = np.clip(absorb[:, :3], 1e-6, 1.0)
+    absorb[:, :3], absorb[:, 3] = color, dist
+    sigma = np.maximum(-np.log(color) / dist[:, None], 0.0)
+
     m = Materials()
-    diffuse = np.clip(np.array([x.diffuse_color for x in mats], np.float32), 0.0, 1.0)
-    emission = np.maximum(np.array([x.emissive_color for x in mats], np.float32), 0.0)
-    opacity = np.clip(np.array([x.opacity for x in mats], np.float32), 0.0, 1.0)
-    m.diffuse = wp.array(np.nan_to_num(diffuse), dtype=wp.vec3, device=device)
-    m.emission = wp.array(np.nan_to_num(emission), dtype=wp.vec3, device=device)
-    m.opacity = wp.array(np.nan_to_num(opacity, nan=1.0), dtype=wp.float32, device=device)
+    f32 = lambda a, dt: wp.array(np.ascontiguousarray(np.asarray(a, np.float32)), dtype=dt, device=device)  # noqa
+    diffuse = np.clip([_vec3(x.diffuse_color, (0.18,) * 3) for x in mats], 0.0, 1.0)
+    emission = np.maximum([_vec3(x.emissive_color, (0.0,) * 3) for x in mats], 0.0)
+    m.diffuse = f32(diffuse, wp.vec3)
+    m.emission = f32(emission, wp.vec3)
+    m.opacity = f32([_constant_opacity(x) for x in mats], wp.float32)
+    m.value = f32(value.reshape(-1, 3), wp.vec3)
+    m.binding = wp.array(binding.reshape(-1), dtype=wp.int32, device=device)
+    m.use_specular_workflow = wp.array(np.array([int(bool(x.use_specular_workflow)) for x in mats], np.int32),
+                                       dtype=wp.int32, device=device)
+    m.absorption_cd = f32(absorb, wp.vec4)
+    m.absorption = f32(sigma, wp.vec3)
+
+    rows_or_dummy = rows or [None]
+    tex_ids, outs, wraps, scales, biases, fallbacks, const_st, sts, xfs, xts = ([] for _ in range(10))
+    for ti in rows_or_dummy:
+        if ti is None:
+            tex_ids.append(-1), outs.append(OUTPUT_RGB), wraps.append((2, 2)), scales.append((1, 1, 1, 1))
+            biases.append((0, 0, 0, 0)), fallbacks.append((0, 0, 0, 1)), const_st.append(1), sts.append((0, 0))
+            xfs.append((1, 0, 0, 1)), xts.append((0, 0))
+            continue
+        tex_ids.append(tex_index[id(ti.texture)] if ti.texture is not None else -1)
+        outs.append(OUTPUTS.get(ti.output, OUTPUT_RGB))
+        wraps.append((WRAP_MODES.get(ti.wrap_s, 2), WRAP_MODES.get(ti.wrap_t, 2)))
+        scales.append(ti.scale)
+        biases.append(ti.bias)
+        fallbacks.append(ti.fallback)
+        const_st.append(int(ti.uv_primvar is None))
+        sts.append(ti.st)
+        xfs.append(ti.uv_matrix)
+        xts.append(ti.uv_translation)
+    m.b_texture = wp.array(np.array(tex_ids, np.int32), dtype=wp.int32, device=device)
+    m.b_output = wp.array(np.array(outs, np.int32), dtype=wp.int32, device=device)
+    m.b_wrap = wp.array(np.array(wraps, np.int32), dtype=wp.vec2i, device=device)
+    m.b_scale = f32(np.nan_to_num(scales), wp.vec4)
+    m.b_bias = f32(np.nan_to_num(biases), wp.vec4)
+    m.b_fallback = f32(np.nan_to_num(fallbacks), wp.vec4)
+    m.b_const_st = wp.array(np.array(const_st, np.int32), dtype=wp.int32, device=device)
+    m.b_st = f32(np.nan_to_num(sts), wp.vec2)
+    m.b_xf = f32(np.nan_to_num(xfs), wp.vec4)
+    m.b_xt = f32(np.nan_to_num(xts), wp.vec2)
     return m
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Host-side evaluation (tests, tools)
+
+
+@wp.kernel
+def eval_material_kernel(mats: Materials, tex: Textures, mat_ids: wp.array(dtype=wp.int32),
+                         uvs: wp.array(dtype=wp.vec2), out: wp.array(dtype=MaterialSample)):
+    i = wp.tid()
+    out[i] = eval_material(mats, tex, mat_ids[i], uvs[i])
+
+
+@wp.kernel
+def triangle_tangent_kernel(p: wp.array(dtype=wp.vec3), uv: wp.array(dtype=wp.vec2), out: wp.array(dtype=wp.vec4)):
+    i = wp.tid()
+    out[i] = triangle_tangent(p[3 * i], p[3 * i + 1], p[3 * i + 2], uv[3 * i], uv[3 * i + 1], uv[3 * i + 2])
+
+
+@wp.kernel
+def apply_normal_map3_kernel(ns: wp.array(dtype=wp.vec3), tangents: wp.array(dtype=wp.vec3),
+                             normal_ts: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
+    i = wp.tid()
+    out[i] = apply_normal_map(ns[i], tangents[i], normal_ts[i])
+
+
+@wp.kernel
+def apply_normal_map_kernel(ns: wp.array(dtype=wp.vec3), tangents: wp.array(dtype=wp.vec4),
+                            normal_ts: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
+    i = wp.tid()
+    out[i] = apply_normal_map(ns[i], tangents[i], normal_ts[i])
+
+
+_SAMPLE_FIELDS = [name for name in MaterialSample.vars]
+
+
+def evaluate_materials(mats: Materials, tex: Textures, mat_ids, uvs, device: str = "cpu") -> dict[str, np.ndarray]:
+    """``eval_material`` at N (material id, uv) pairs; returns {MaterialSample field: (N, ...) array}."""
+    ids = np.ascontiguousarray(np.asarray(mat_ids, np.int32).reshape(-1))
+    uv = np.ascontiguousarray(np.asarray(uvs, np.float32).reshape(-1, 2))
+    out = wp.empty(len(ids), dtype=MaterialSample, device=device)
+    wp.launch(eval_material_kernel, dim=len(ids),
+              inputs=[mats, tex, wp.array(ids, dtype=wp.int32, device=device),
+                      wp.array(uv, dtype=wp.vec2, device=device), out], device=device)
+    rec = out.numpy()
+    return {name: np.asarray(rec[name]) for name in _SAMPLE_FIELDS}

@@ -11,6 +11,7 @@ into tiles and calls it from its workers.
 """
 from __future__ import annotations
 
+import math
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -27,11 +28,13 @@ from .flatten import flatten_still_instances
 from .geometry import GeometryStats, upload_geometry
 from .integrator import TIME_FILTERS, trace_wave_kernel
 from .lights import upload_lights
-from .materials import upload_materials
+from .integrator import PathSettings
+from .materials import upload_material_textures, upload_materials
 from .motion import matrix_at
 from .scene import Scene
 
 AOV_NAMES = ("depth", "normal", "albedo")
+MAX_DEPTH = 64
 MAX_SPP = 1 << 16
 MAX_PIXELS = 16384 * 16384
 
@@ -48,6 +51,8 @@ class RenderOptions:
     time_filter: str = "box"  # shutter weighting: box, triangle, strobe (the instant of the frame)
     dof: bool = True
     aovs: tuple[str, ...] = ()
+    max_depth: int = 8  # bounces after the camera ray; 1 = direct lighting only
+    clamp: float = 0.0  # maximum radiance of a sample per channel, 0 = off (fireflies are never cut silently)
 
     def validate(self) -> "RenderOptions":
         if self.filter not in film.FILTERS:
@@ -61,6 +66,10 @@ class RenderOptions:
         for name, v in (("width", self.width), ("height", self.height)):
             if v is not None and not 1 <= v <= 16384:
                 raise SettingsError(f"{name} must be between 1 and 16384, got {v}")
+        if not 0 <= self.max_depth <= MAX_DEPTH:
+            raise SettingsError(f"max_depth must be between 0 and {MAX_DEPTH}, got {self.max_depth}")
+        if not (self.clamp >= 0.0 and math.isfinite(self.clamp)):
+            raise SettingsError(f"clamp must be a finite number >= 0, got {self.clamp}")
         for a in self.aovs:
             if a not in AOV_NAMES:
                 raise SettingsError(f"unknown AOV {a!r} (choose from {', '.join(AOV_NAMES)})")
@@ -106,6 +115,7 @@ class PreparedScene:
     pixel_aspect: float
     geometry: object
     materials: object
+    textures: object
     lights: object
     light_count: int
     camera: CameraSetup
@@ -155,12 +165,14 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> Prepar
     dof = options.dof and not scene.render_settings.disable_depth_of_field
     flat = flatten_still_instances(scene)
     geometry, stats = upload_geometry(flat, device)
+    warnings = list(scene.warnings)
+    textures = upload_material_textures(flat.materials, device, warn=warnings.append)
     materials = upload_materials(flat.materials, device)
     lights, light_count = upload_lights(flat, device)
     cam = setup_camera(scene.camera, width, height, pixel_aspect=par, dof=dof, device=device)
     return PreparedScene(scene=scene, options=options, width=width, height=height, pixel_aspect=par,
-                         geometry=geometry, materials=materials, lights=lights, light_count=light_count,
-                         camera=cam, stats=stats, device=device, warnings=list(scene.warnings))
+                         geometry=geometry, materials=materials, textures=textures, lights=lights,
+                         light_count=light_count, camera=cam, stats=stats, device=device, warnings=warnings)
 
 
 def render_tile(prep: PreparedScene, tile: Tile,
@@ -185,14 +197,18 @@ def render_tile(prep: PreparedScene, tile: Tile,
     buf = film.new_sample_buffer(rw * rh * max_wave, dev)
     acc = film.new_tile_accum(tile.width * tile.height, dev)
     counters = wp.zeros(2, dtype=wp.int64, device=dev)  # rays traced, non-finite samples zeroed
-    time_filter = TIME_FILTERS[opts.time_filter]
+    settings = PathSettings()
+    settings.max_depth = int(opts.max_depth)
+    settings.clamp = float(opts.clamp)
+    settings.time_filter = TIME_FILTERS[opts.time_filter]
+    settings.frame_s = frame_shutter_time(prep.scene)
+    settings.seed = wp.uint32(opts.seed)
     total = tile.width * tile.height * opts.spp
     for start, end in waves:
         wave = end - start
         wp.launch(trace_wave_kernel, dim=rw * rh * wave, device=dev,
-                  inputs=[prep.geometry, prep.materials, prep.lights, prep.light_count, prep.camera.params, buf,
-                          counters, wp.uint32(opts.seed), rx0, ry0, rw, start, wave, time_filter,
-                          frame_shutter_time(prep.scene)])
+                  inputs=[prep.geometry, prep.materials, prep.textures, prep.lights, prep.camera.params, buf,
+                          counters, settings, rx0, ry0, rw, start, wave])
         wp.launch(film.gather_kernel, dim=tile.width * tile.height, device=dev,
                   inputs=[buf, acc, wave, rx0, ry0, rw, rh, tile.x0, tile.y0, tile.width, kind,
                           float(film.FILTER_RADIUS[kind]), margin])

@@ -89,6 +89,10 @@ class Mesh:
     normals: np.ndarray | None = None  # (T, 3, 3) float32 per-corner object-space shading normals, or None
     uvs: np.ndarray | None = None  # (T, 3, 2) float32 per-corner st, or None
     double_sided: bool = True
+    # (T, 4) float32 per-triangle object-space tangent dP/du (unit xyz) and handedness w = +-1 (bitangent =
+    # w * cross(n, t)); w = 0 where uvs are missing or degenerate. None: computed from points key 0 and uvs when
+    # uploaded (``materials.mesh_tangents``).
+    tangents: np.ndarray | None = None
 
     @property
     def deforming(self) -> bool:
@@ -108,9 +112,52 @@ class Instance:
     visible_to: float = 1.0
 
 
+@dataclass(eq=False)
+class Texture:
+    """An image file loaded for lookups: one image, or the tiles of a UDIM set.
+
+    Texels are linear (sRGB-encoded files are decoded when loaded), float32, (H, W, C) with C in 1..4 channels
+    as in the file (1: grey, 2: grey + alpha, 3: RGB, 4: RGBA), and **row 0 is the bottom of the image**, so
+    texel (i, j) has its centre at st = ((i + 0.5) / W, (j + 0.5) / H): the UsdUVTexture convention of ``st``
+    with its origin at the bottom-left. Compared by identity; one object per distinct (file, colour space).
+    """
+
+    name: str  # resolved file path (the ``<UDIM>`` pattern for a tile set), for messages
+    images: list[np.ndarray]  # (H, W, C) float32 per image / tile
+    udims: list[int] | None = None  # UDIM tile number (1001 + u + 10 v) per image; None: a single image
+    colorspace: str = "raw"  # how the file was decoded: "sRGB" or "raw"
+
+    @property
+    def nbytes(self) -> int:
+        return int(sum(im.nbytes for im in self.images))
+
+
+@dataclass
+class TextureInput:
+    """A UsdPreviewSurface input connected to a UsdUVTexture (through UsdTransform2d / UsdPrimvarReader_float2).
+
+    value(st) = output(lookup(texture, M st + t) * scale + bias), or ``fallback`` (unscaled) where there is no
+    texture (missing file, missing UDIM tile). ``output`` picks channels of the RGBA lookup: "r", "g", "b", "a"
+    or "rgb" (a scalar feeding a colour input is replicated; "rgb" feeding a scalar input gives r).
+    """
+
+    texture: Texture | None  # None: the file is missing or unreadable -> fallback everywhere
+    output: str = "rgb"
+    scale: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
+    bias: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    fallback: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
+    wrap_s: str = "repeat"  # "black", "clamp", "repeat" or "mirror" (useMetadata already resolved)
+    wrap_t: str = "repeat"
+    uv_primvar: str | None = "st"  # primvar read by the UsdPrimvarReader_float2; None: the constant ``st``
+    st: tuple[float, float] = (0.0, 0.0)  # constant st, or the primvar reader's fallback where a mesh has no uvs
+    # UsdTransform2d (composed if chained): st' = uv_matrix @ st + uv_translation; uv_matrix is row-major 2x2
+    uv_matrix: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 1.0)
+    uv_translation: tuple[float, float] = (0.0, 0.0)
+
+
 @dataclass
 class Material:
-    """Constant-input surface description (UsdPreviewSurface subset; issue 3 extends it)."""
+    """A UsdPreviewSurface (2.5): every input as a constant, some driven by textures (``textures``)."""
 
     name: str
     diffuse_color: tuple[float, float, float] = (0.18, 0.18, 0.18)
@@ -122,6 +169,19 @@ class Material:
     metallic: float = 0.0
     roughness: float = 0.5
     ior: float = 1.5
+    # --- the rest of UsdPreviewSurface 2.5 (issue 3)
+    clearcoat: float = 0.0
+    clearcoat_roughness: float = 0.01
+    opacity_threshold: float = 0.0  # > 0: cut-out; opacity < threshold -> 0, else 1
+    normal: tuple[float, float, float] = (0.0, 0.0, 1.0)  # tangent-space normal (constant; a map in textures)
+    occlusion: float = 1.0  # imported, not used by the renderer
+    # Beer-Lambert absorption inside closed solids (extension attributes, see ``usd_materials``): light that
+    # travels ``absorption_distance`` scene units inside keeps ``absorption_color`` of itself. White: none.
+    absorption_color: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    absorption_distance: float = 1.0
+    # Inputs driven by textures, by UsdPreviewSurface input name ("diffuseColor", "roughness", "normal", ...).
+    # The constant field of a textured input holds the texture's mean value (what constant-only code uses).
+    textures: dict[str, TextureInput] = field(default_factory=dict)
 
 
 @dataclass
@@ -133,7 +193,7 @@ class Light:
     sphere: ``radius`` about the origin (0 = point light);
     cylinder: ``length`` along local X, ``radius``;
     distant: emits along local -Z, ``angle`` = apex angle in degrees (0 = a delta direction);
-    dome: constant radiance from every direction (``texture`` in issue 3);
+    dome: radiance from every direction: constant, or a lat-long ``texture``;
     mesh: emissive geometry, ``instance`` index, sampled by triangle area.
 
     ``radiance`` is the final emitted radiance (intensity * 2^exposure * color * blackbody, already divided by
@@ -153,6 +213,13 @@ class Light:
     instance: int = -1  # LIGHT_MESH only
     triangles: tuple[int, int] | None = None  # LIGHT_MESH: the emitting triangle range of the mesh (None: all)
     visible_to_camera: bool = True  # dome lights seen by camera rays
+    # LIGHT_DOME with a lat-long texture: (H, W, 3) float32 linear emitted radiance (already multiplied by
+    # intensity, 2^exposure, color and blackbody), row 0 = the top of the image. Texel centre (u, v) =
+    # ((col + 0.5) / W, (row + 0.5) / H) is the dome-local direction ``textures.latlong_to_direction(u, v)``
+    # (OpenEXR lat-long: v = 0 is +Y, u = 0.5 is +Z, u = 0.25 is +X); ``transform`` carries dome-local to world
+    # (including DomeLight_1's poleAxis turn). ``radiance`` then holds the texture's mean over the sphere.
+    texture: np.ndarray | None = None
+    texture_name: str = ""  # resolved file, for messages
 
 
 @dataclass

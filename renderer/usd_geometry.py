@@ -346,6 +346,35 @@ def read_mesh(prim, shutter: Shutter, warn) -> GeomData | None:
     )
 
 
+def read_named_uvs(prim, name: str, frame: float, warn) -> np.ndarray | None:
+    """Per-corner values (T, 3, 2) float32 of the float2 primvar ``name`` of a Mesh, on the triangles ``read_mesh``
+    makes (same triangulation and winding); None if the prim is not a Mesh or the primvar is absent or mis-sized.
+
+    For materials whose UsdPrimvarReader_float2 names a primvar other than the one ``read_mesh`` picks (``st``,
+    else the first texCoord2f primvar).
+    """
+    if not prim.IsA(UsdGeom.Mesh):
+        return None
+    mesh = UsdGeom.Mesh(prim)
+    counts = mesh.GetFaceVertexCountsAttr().Get(frame)
+    fvi = mesh.GetFaceVertexIndicesAttr().Get(frame)
+    pts = mesh.GetPointsAttr().Get(frame)
+    hit = _primvar(prim, name, frame, warn)
+    if hit is None or counts is None or fvi is None or pts is None or len(counts) == 0:
+        return None
+    counts, fvi = np.asarray(counts, np.int64), np.asarray(fvi, np.int64)
+    base = np.asarray(pts, np.float32).reshape(-1, 3)
+    if int(counts.sum()) != len(fvi) or fvi.min() < 0 or fvi.max() >= len(base):
+        return None
+    corners, tri_faces = triangulate(counts, fvi, base)
+    if mesh.GetOrientationAttr().Get(frame) == UsdGeom.Tokens.leftHanded:
+        corners = corners[:, [0, 2, 1]]
+    uvs = expand_primvar(hit[0], hit[1], corners, tri_faces, fvi, len(counts), len(base))
+    if uvs is None or uvs.shape[-1] != 2:
+        return None
+    return np.ascontiguousarray(uvs, np.float32)
+
+
 # ---------------------------------------------------------------------------------------------------------------
 # Implicit primitives, tessellated as surfaces of revolution about +Z, then turned to their axis
 

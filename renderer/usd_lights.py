@@ -5,6 +5,15 @@ the light's world-space surface area at the frame when ``normalize`` is on (rect
 DistantLight ``radiance`` holds the irradiance-like value intensity * 2^exposure * color (the renderer converts).
 Both the current ``inputs:`` attribute names and the legacy names without the prefix are read. Light parameters
 are taken at the frame; the light's transform moves over the shutter like any prim's.
+
+DomeLight textures (``inputs:texture:file``, OpenEXR/HDR/any OpenImageIO format, resolved relative to the
+authoring layer) become ``Light.texture``: linear radiance (the image times intensity * 2^exposure * color *
+blackbody), rows top to bottom, in the OpenEXR lat-long layout UsdLux specifies (``textures.latlong_to_direction``:
+top row +Y, image centre +Z, u = 0.25 +X, in the dome's frame). ``texture:format`` automatic and latlong are
+lat-long; other formats warn and light with the image's mean. A DomeLight_1 whose ``poleAxis`` is Z, or "scene"
+on a Z-up stage, is turned +90 degrees about X before its own transform (USD's OrientToStageUpAxis rotation), so
+its pole is +Z; a plain DomeLight always has its pole on local +Y. ``Light.radiance`` of a textured dome is the
+texture's mean over the sphere.
 """
 from __future__ import annotations
 
@@ -12,7 +21,11 @@ import numpy as np
 from pxr import UsdGeom, UsdLux
 
 from . import scene as sc
+from .textures import ImageError, latlong_mean
 from .usd_motion import TransformSampler, motion_transform
+
+# Row-vector matrix of a +90 degree turn about X: the dome's +Y pole to +Z (UsdLuxDomeLight.OrientToStageUpAxis).
+_POLE_Z_ROW = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
 
 DEFAULT_LIGHT_IRRADIANCE = float(np.pi)
 DEFAULT_LIGHT_ANGLE = 0.53
@@ -72,6 +85,8 @@ def read_light(prim, sampler: TransformSampler, warn) -> sc.Light | None:
     if bool(get("enableColorTemperature", False)):
         radiance = radiance * np.asarray(UsdLux.BlackbodyTemperatureAsRgb(float(get("colorTemperature", 6500.0))))
     times, rows = sampler.motion(prim)
+    if kind == sc.LIGHT_DOME and dome_pole_is_z(prim):
+        rows = _POLE_Z_ROW[None] @ np.asarray(rows, np.float64)
     light = sc.Light(kind=kind, name=path, radiance=(0.0, 0.0, 0.0),
                      transform=motion_transform(sampler.shutter.normalise(times), rows))
     frame_row = sampler.world(prim, [frame])[0]
@@ -93,9 +108,7 @@ def read_light(prim, sampler: TransformSampler, warn) -> sc.Light | None:
     elif kind == sc.LIGHT_DISTANT:
         light.angle = float(get("angle", 0.53))
     elif kind == sc.LIGHT_DOME:
-        tex = get("texture:file", None)
-        if tex is not None and str(getattr(tex, "path", tex)).strip():
-            warn("DomeLight textures are not supported yet: those domes use their constant color", path)
+        radiance = _dome_texture(prim, light, radiance, frame, warn)
     if prim.HasAPI(UsdLux.ShapingAPI) or prim.HasAPI(UsdLux.ShadowAPI):
         warn("light shaping/shadow controls (spot cones, IES profiles, shadow colour) ignored", path)
     if bool(get("normalize", False)) and area > 0.0:
@@ -105,6 +118,62 @@ def read_light(prim, sampler: TransformSampler, warn) -> sc.Light | None:
         return None
     light.radiance = tuple(float(x) for x in radiance)
     return light
+
+
+def dome_pole_is_z(prim) -> bool:
+    """Does the dome's top pole start on +Z? DomeLight_1 with poleAxis "Z", or "scene" on a Z-up stage."""
+    if prim.GetTypeName() != "DomeLight_1":
+        return False
+    attr = prim.GetAttribute("poleAxis")
+    pole = str(attr.Get()) if attr and attr.Get() is not None else "scene"
+    if pole == "scene":
+        return str(UsdGeom.GetStageUpAxis(prim.GetStage())) == "Z"
+    return pole == "Z"
+
+
+def _dome_texture(prim, light: sc.Light, radiance: np.ndarray, frame: float, warn) -> np.ndarray:
+    """Load a dome's lat-long texture into ``light.texture`` (scaled by ``radiance``); returns the radiance the
+    light reports (the texture's mean, or ``radiance`` unchanged without a usable texture)."""
+    from .usd_materials import read_asset_image, resolve_asset
+
+    path = str(prim.GetPath())
+    attr = None
+    for name in ("inputs:texture:file", "texture:file"):
+        a = prim.GetAttribute(name)
+        if a and a.HasAuthoredValue():
+            attr = a
+            break
+    value = attr.Get(frame) if attr is not None else None
+    if value is None or not str(getattr(value, "path", value) or "").strip():
+        return radiance
+    fmt = str(_value(prim, "texture:format", frame, "automatic"))
+    resolved, tiles = resolve_asset(attr, value)
+    if tiles is not None:
+        warn("UDIM dome textures ignored: those domes use their constant color", path)
+        return radiance
+    try:
+        loaded = read_asset_image(resolved, "auto", keep_top_down=True)
+    except (ImageError, OSError, RuntimeError) as e:
+        warn("DomeLight textures missing or unreadable: those domes use their constant color",
+             f"{resolved} ({' '.join(str(e).split())[:160]}; {path})")
+        return radiance
+    img = loaded.top_down
+    c = img.shape[-1]
+    rgb = np.repeat(img[..., :1], 3, -1) if c < 3 else img[..., :3]
+    rgb = (rgb.astype(np.float64) * np.asarray(radiance, np.float64)).astype(np.float32)
+    if loaded.downsampled:
+        warn("large textures downsampled to at most 4096 texels a side", f"{resolved} {loaded.original_size}")
+    mean = latlong_mean(rgb)
+    if fmt not in ("automatic", "latlong"):
+        warn("DomeLight texture formats other than latlong: those domes use the image's mean color",
+             f"{path} ({fmt})")
+        return mean
+    h, w = rgb.shape[:2]
+    if fmt == "automatic" and w != 2 * h:
+        warn("DomeLight textures (format automatic) that are not 2:1 are read as latlong", f"{path} ({w}x{h})")
+    light.texture = np.ascontiguousarray(rgb)
+    light.texture_name = resolved
+    return mean
 
 
 def default_light(camera_row: np.ndarray | None, up_axis: str) -> sc.Light:

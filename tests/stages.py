@@ -17,10 +17,14 @@ def new_stage(path, meters_per_unit=1.0, tcps=24.0):
     return stage
 
 
-def material(stage, name, diffuse=(0.0, 0.0, 0.0), emissive=(0.0, 0.0, 0.0), opacity=1.0):
+def material(stage, name, diffuse=(0.0, 0.0, 0.0), emissive=(0.0, 0.0, 0.0), opacity=1.0, lambertian=True):
+    """A UsdPreviewSurface; ``lambertian``: specular workflow with black specular, a pure diffuse surface."""
     mat = UsdShade.Material.Define(stage, f"/World/Looks/{name}")
     sh = UsdShade.Shader.Define(stage, f"/World/Looks/{name}/Surface")
     sh.CreateIdAttr("UsdPreviewSurface")
+    if lambertian:
+        sh.CreateInput("useSpecularWorkflow", Sdf.ValueTypeNames.Int).Set(1)
+        sh.CreateInput("specularColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(0, 0, 0))
     sh.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*diffuse))
     sh.CreateInput("emissiveColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*emissive))
     sh.CreateInput("opacity", Sdf.ValueTypeNames.Float).Set(float(opacity))
@@ -92,3 +96,28 @@ def disk_fraction(x, radius):
     (x > 0: the centre is on the kept side). The profile of a step edge blurred by a uniform disk."""
     x = np.clip(np.asarray(x, np.float64) / radius, -1.0, 1.0)
     return 1.0 - (np.arccos(x) - x * np.sqrt(1.0 - x * x)) / np.pi
+
+
+def sphere(stage, path, radius=1.0, center=(0, 0, 0), mat=None):
+    s = UsdGeom.Sphere.Define(stage, path)
+    s.CreateRadiusAttr(radius)
+    UsdGeom.Xformable(s).AddTranslateOp().Set(Gf.Vec3d(*center))
+    if mat is not None:
+        UsdShade.MaterialBindingAPI.Apply(s.GetPrim()).Bind(mat)
+    return s
+
+
+def preview_surface(stage, name, **inputs):
+    """A UsdPreviewSurface with the given inputs (floats, ints or 3-tuples)."""
+    mat = UsdShade.Material.Define(stage, f"/World/Looks/{name}")
+    sh = UsdShade.Shader.Define(stage, f"/World/Looks/{name}/Surface")
+    sh.CreateIdAttr("UsdPreviewSurface")
+    for key, value in inputs.items():
+        if isinstance(value, tuple):
+            sh.CreateInput(key, Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*value))
+        elif isinstance(value, int):
+            sh.CreateInput(key, Sdf.ValueTypeNames.Int).Set(value)
+        else:
+            sh.CreateInput(key, Sdf.ValueTypeNames.Float).Set(float(value))
+    mat.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
+    return mat

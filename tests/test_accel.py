@@ -4,7 +4,10 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from renderer.accel import Geometry, intersect_closest, transmittance
+from renderer.accel import Geometry, intersect_closest
+from renderer.materials import Materials, upload_material_textures, upload_materials
+from renderer.shadow import transmittance
+from renderer.textures import Textures
 from renderer.accel_build import build_bvh
 from renderer.geometry import instance_key_bounds, upload_geometry
 from renderer.motion import make_transform, matrix_at
@@ -12,7 +15,7 @@ from renderer.scene import Camera, Instance, Material, Mesh, MotionTransform, Sc
 
 
 @wp.kernel
-def probe_kernel(geo: Geometry, opacity: wp.array(dtype=wp.float32), ro: wp.array(dtype=wp.vec3),
+def probe_kernel(geo: Geometry, mats: Materials, tex: Textures, ro: wp.array(dtype=wp.vec3),
                  rd: wp.array(dtype=wp.vec3), times: wp.array(dtype=wp.float32), t_out: wp.array(dtype=wp.float32),
                  inst_out: wp.array(dtype=wp.int32), tri_out: wp.array(dtype=wp.int32),
                  tr_out: wp.array(dtype=wp.float32)):
@@ -21,7 +24,7 @@ def probe_kernel(geo: Geometry, opacity: wp.array(dtype=wp.float32), ro: wp.arra
     t_out[i] = h.t
     inst_out[i] = h.inst
     tri_out[i] = h.tri
-    tr_out[i] = transmittance(geo, opacity, ro[i], rd[i], 1.0e30, times[i])
+    tr_out[i] = transmittance(geo, mats, tex, ro[i], rd[i], 1.0e30, times[i])
 
 
 def rot_y(deg, t=(0, 0, 0)):
@@ -103,8 +106,9 @@ def test_closest_hit_matches_brute_force_at_random_times():
     times = rng.uniform(0, 1, n)
     outs = [wp.zeros(n, dtype=wp.float32), wp.zeros(n, dtype=wp.int32), wp.zeros(n, dtype=wp.int32),
             wp.zeros(n, dtype=wp.float32)]
-    opacity = wp.array(np.array([0.5], np.float32), dtype=wp.float32)
-    wp.launch(probe_kernel, dim=n, inputs=[geo, opacity, wp.array(ro, dtype=wp.vec3), wp.array(rd, dtype=wp.vec3),
+    mats = upload_materials(scene.materials)
+    tex = upload_material_textures(scene.materials)
+    wp.launch(probe_kernel, dim=n, inputs=[geo, mats, tex, wp.array(ro, dtype=wp.vec3), wp.array(rd, dtype=wp.vec3),
                                            wp.array(times, dtype=wp.float32)] + outs)
     t, inst, tri, tr = (o.numpy() for o in outs)
     hits = 0

@@ -1,0 +1,304 @@
+"""Sampling lights (the paper's light-area dimension) and the pdfs multiple importance sampling needs.
+
+``sample_light`` places light ``li`` at the sample's time and picks a point on it from two uniform numbers
+(area, spherical-rectangle or cone sampling of ``sampling``), returning the solid-angle pdf. The same pdf is
+given by ``area_light_hit`` / ``infinite_light_eval`` / ``mesh_light_pdf`` for a direction found by BSDF
+sampling, so both strategies can be weighted by the power heuristic.
+"""
+from __future__ import annotations
+
+import warp as wp
+
+from .accel import BIG, Geometry, instance_object_to_world, instance_visible, mesh_keys_at, triangle_points
+from .envmap import env_pdf, env_radiance, env_sample
+from .lights import Lights
+from .materials import Materials, eval_emission
+from .shadow import hit_uv
+from .textures import Textures
+from .motion_kernels import keys_matrix
+from .sampling import (cylinder_light_pdf, disk_light_pdf, rect_pdf, sample_cylinder_light, sample_disk_light,
+                       sample_rect, sample_sphere_light, sample_triangle_light, sphere_light_pdf,
+                       square_to_cosine_hemisphere, square_to_uniform_cone, square_to_uniform_triangle, to_world)
+from .scene import (LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_DOME, LIGHT_MESH, LIGHT_RECT,
+                    LIGHT_SPHERE)
+
+DISTANT_DIST = 1.0e30  # shadow-ray length toward lights at infinity (scene units)
+
+
+@wp.func
+def choose_light(lights: Lights, u: float):
+    """A light index chosen by power from one uniform number, and its probability."""
+    lo = int(0)
+    hi = lights.count - 1
+    while lo < hi:  # first entry with cdf > u
+        mid = (lo + hi) // 2
+        if lights.select_cdf[mid] > u:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo, lights.select_pdf[lo]
+
+
+@wp.func
+def pick_triangle(lights: Lights, li: int, u: float):
+    """A mesh light's triangle (index within its mesh) chosen by emitted power, and that probability."""
+    off = lights.cdf_off[li]
+    n = lights.tri_count[li]
+    lo = int(0)
+    hi = n - 1
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if lights.cdf[off + mid] > u:
+            hi = mid
+        else:
+            lo = mid + 1
+    prev = float(0.0)
+    if lo > 0:
+        prev = lights.cdf[off + lo - 1]
+    return lights.tri_base[li] + lo, lights.cdf[off + lo] - prev
+
+
+@wp.func
+def triangle_probability(lights: Lights, li: int, tri_in_mesh: int):
+    k = tri_in_mesh - lights.tri_base[li]
+    if k < 0 or k >= lights.tri_count[li]:
+        return 0.0
+    off = lights.cdf_off[li]
+    prev = float(0.0)
+    if k > 0:
+        prev = lights.cdf[off + k - 1]
+    return lights.cdf[off + k] - prev
+
+
+@wp.func
+def light_matrix(lights: Lights, li: int, s: float):
+    if lights.xf_count[li] > 1:
+        return keys_matrix(lights.keys, lights.xf_off[li], lights.xf_count[li], s)
+    return lights.xf_still[li]
+
+
+@wp.func
+def rect_frame(lights: Lights, li: int, s: float):
+    """World corner, edge vectors and emitting normal of a rect light at time s."""
+    m = light_matrix(lights, li, s)
+    size = lights.size[li]
+    ex = wp.transform_vector(m, wp.vec3(size[0], 0.0, 0.0))
+    ey = wp.transform_vector(m, wp.vec3(0.0, size[1], 0.0))
+    corner = wp.transform_point(m, wp.vec3(-0.5 * size[0], -0.5 * size[1], 0.0))
+    return corner, ex, ey, -wp.normalize(wp.cross(ex, ey))
+
+
+@wp.func
+def disk_frame(lights: Lights, li: int, s: float):
+    m = light_matrix(lights, li, s)
+    ex = wp.transform_vector(m, wp.vec3(1.0, 0.0, 0.0))
+    ey = wp.transform_vector(m, wp.vec3(0.0, 1.0, 0.0))
+    return wp.transform_point(m, wp.vec3(0.0)), -wp.normalize(wp.cross(ex, ey)), lights.size[li][2] * wp.length(ex)
+
+
+@wp.func
+def sphere_frame(lights: Lights, li: int, s: float):
+    m = light_matrix(lights, li, s)
+    return wp.transform_point(m, wp.vec3(0.0)), lights.size[li][2] * wp.length(
+        wp.transform_vector(m, wp.vec3(1.0, 0.0, 0.0)))
+
+
+@wp.func
+def cylinder_frame(lights: Lights, li: int, s: float):
+    m = light_matrix(lights, li, s)
+    ax = wp.transform_vector(m, wp.vec3(1.0, 0.0, 0.0))
+    ry = wp.length(wp.transform_vector(m, wp.vec3(0.0, 1.0, 0.0)))
+    size = lights.size[li]
+    return wp.transform_point(m, wp.vec3(0.0)), wp.normalize(ax), size[0] * wp.length(ax), size[2] * ry
+
+
+@wp.func
+def distant_axis(lights: Lights, li: int, s: float):
+    """Unit direction toward a distant light."""
+    return wp.normalize(wp.transform_vector(light_matrix(lights, li, s), wp.vec3(0.0, 0.0, 1.0)))
+
+
+@wp.func
+def sample_light(lights: Lights, geo: Geometry, mats: Materials, tex: Textures, li: int, p: wp.vec3,
+                 n: wp.vec3, s: float, u_pick: float, u: wp.vec2):
+    """Sample light ``li`` from point p (shading normal n) at time s.
+
+    Returns (wi, dist, Le, pdf, delta): unit direction to the light, distance for the shadow ray, emitted
+    radiance along -wi, and the solid-angle pdf (not including the light's selection probability). For
+    delta lights (point, distant of angle 0) pdf is 1 and Le already is the irradiance-like term
+    (intensity / dist^2, or irradiance), and delta is True: no multiple importance weight applies.
+    """
+    kind = lights.kind[li]
+    Le = lights.radiance[li]
+    zero = wp.vec3(0.0)
+    if kind == LIGHT_RECT:
+        corner, ex, ey, front = rect_frame(lights, li, s)
+        g = sample_rect(p, corner, ex, ey, u)
+        if g.pdf > 0.0 and wp.dot(g.dir, front) < 0.0:
+            return g.dir, g.dist, Le, g.pdf, False
+        return zero, 0.0, zero, 0.0, False
+    if kind == LIGHT_DISK:
+        c, front, r = disk_frame(lights, li, s)
+        g = sample_disk_light(p, c, front, r, u)
+        if g.pdf > 0.0 and wp.dot(g.dir, front) < 0.0:
+            return g.dir, g.dist, Le, g.pdf, False
+        return zero, 0.0, zero, 0.0, False
+    if kind == LIGHT_SPHERE:
+        c, r = sphere_frame(lights, li, s)
+        if r <= 0.0:  # point light: radiance holds the intensity
+            d = c - p
+            dist = wp.length(d)
+            if dist <= 0.0:
+                return zero, 0.0, zero, 0.0, True
+            return d / dist, dist, Le / (dist * dist), 1.0, True
+        g = sample_sphere_light(p, c, r, u)
+        if g.pdf > 0.0:
+            return g.dir, g.dist, Le, g.pdf, False
+        return zero, 0.0, zero, 0.0, False
+    if kind == LIGHT_CYLINDER:
+        c, axis, length, r = cylinder_frame(lights, li, s)
+        g = sample_cylinder_light(p, c, axis, length, r, u)
+        if g.pdf > 0.0 and wp.dot(g.dir, g.normal) < 0.0:
+            return g.dir, g.dist, Le, g.pdf, False
+        return zero, 0.0, zero, 0.0, False
+    if kind == LIGHT_DISTANT:
+        to_light = distant_axis(lights, li, s)
+        cos_max = lights.size[li][0]
+        if cos_max >= 1.0:
+            return to_light, DISTANT_DIST, Le, 1.0, True
+        wi = to_world(square_to_uniform_cone(u, cos_max), to_light)
+        return wi, DISTANT_DIST, Le, 1.0 / (2.0 * wp.pi * (1.0 - cos_max)), False
+    if kind == LIGHT_DOME:
+        if lights.size[li][0] > 0.0:
+            d, pdf, L = env_sample(lights.env, u)
+            return d, DISTANT_DIST, wp.cw_mul(Le, L), pdf, False
+        wi = to_world(square_to_cosine_hemisphere(u), n)
+        cos_n = wp.dot(wi, n)
+        if cos_n <= 0.0:
+            return zero, 0.0, zero, 0.0, False
+        return wi, DISTANT_DIST, Le, cos_n / wp.pi, False
+    # emissive mesh: a triangle by power, a point on it by area
+    inst = lights.instance[li]
+    if not instance_visible(geo, inst, s):
+        return zero, 0.0, zero, 0.0, False
+    tri, p_tri = pick_triangle(lights, li, u_pick)
+    mesh = geo.inst_mesh[inst]
+    k0, k1, ku = mesh_keys_at(geo, mesh, s)
+    p0, p1, p2 = triangle_points(geo, mesh, tri, k0, k1, ku)
+    o2w = instance_object_to_world(geo, inst, s)
+    g = sample_triangle_light(p, wp.transform_point(o2w, p0), wp.transform_point(o2w, p1),
+                              wp.transform_point(o2w, p2), u)
+    if g.pdf > 0.0:
+        # the emission where the point landed (emissive textures): its barycentrics are the warp's
+        b = square_to_uniform_triangle(u)
+        tg = geo.mesh_tri_off[mesh] + tri
+        uv = hit_uv(geo, mesh, tg, b[1], 1.0 - b[0] - b[1])
+        return g.dir, g.dist, eval_emission(mats, tex, geo.tri_material[tg], uv), g.pdf * p_tri, False
+    return zero, 0.0, zero, 0.0, False
+
+
+@wp.func
+def plane_hit(ro: wp.vec3, rd: wp.vec3, point: wp.vec3, normal: wp.vec3):
+    denom = wp.dot(rd, normal)
+    if denom == 0.0:
+        return float(BIG)
+    return wp.dot(point - ro, normal) / denom
+
+
+@wp.func
+def area_light_hit(lights: Lights, li: int, ro: wp.vec3, rd: wp.vec3, tmax: float, s: float):
+    """Does the ray (ro, rd) reach UsdLux area light li before tmax? Returns (t, Le, pdf of sampling rd).
+
+    UsdLux lights are not in the BVH: BSDF-sampled rays test them here, so mirrors and glass show them and
+    multiple importance sampling can weight the two ways of finding them. t = BIG when missed.
+    """
+    kind = lights.kind[li]
+    zero = wp.vec3(0.0)
+    if kind == LIGHT_RECT:
+        corner, ex, ey, front = rect_frame(lights, li, s)
+        t = plane_hit(ro, rd, corner, front)
+        if t > 0.0 and t < tmax and wp.dot(rd, front) < 0.0:
+            pdf = rect_pdf(ro, rd, corner, ex, ey)
+            if pdf > 0.0:
+                return t, lights.radiance[li], pdf
+    elif kind == LIGHT_DISK:
+        c, front, r = disk_frame(lights, li, s)
+        t = plane_hit(ro, rd, c, front)
+        if t > 0.0 and t < tmax and wp.dot(rd, front) < 0.0:
+            pdf = disk_light_pdf(ro, rd, c, front, r)
+            if pdf > 0.0:
+                return t, lights.radiance[li], pdf
+    elif kind == LIGHT_SPHERE:
+        c, r = sphere_frame(lights, li, s)
+        if r > 0.0:
+            oc = ro - c
+            b = wp.dot(oc, rd)
+            disc = b * b - (wp.dot(oc, oc) - r * r)
+            if disc > 0.0:
+                t = -b - wp.sqrt(disc)
+                if t <= 0.0:
+                    t = -b + wp.sqrt(disc)
+                if t > 0.0 and t < tmax:
+                    pdf = sphere_light_pdf(ro, rd, c, r)
+                    if pdf > 0.0:
+                        return t, lights.radiance[li], pdf
+    elif kind == LIGHT_CYLINDER:
+        c, axis, length, r = cylinder_frame(lights, li, s)
+        o = ro - c
+        o_perp = o - wp.dot(o, axis) * axis
+        d_perp = rd - wp.dot(rd, axis) * axis
+        a = wp.dot(d_perp, d_perp)
+        if a > 0.0:
+            t_mid = -wp.dot(o_perp, d_perp) / a
+            q = o_perp + t_mid * d_perp
+            disc = a * (r * r - wp.dot(q, q))
+            if disc > 0.0:
+                t = t_mid - wp.sqrt(disc) / a  # only the outside emits: the near wall, seen from outside
+                if t > 0.0 and t < tmax and wp.abs(wp.dot(o + t * rd, axis)) <= 0.5 * length:
+                    pdf = cylinder_light_pdf(ro, rd, c, axis, length, r)
+                    if pdf > 0.0:
+                        return t, lights.radiance[li], pdf
+    return float(BIG), zero, 0.0
+
+
+@wp.func
+def infinite_light_eval(lights: Lights, li: int, d: wp.vec3, n_prev: wp.vec3, s: float):
+    """Radiance from infinite light li along a ray leaving the scene in direction d, and the pdf of sampling d.
+
+    ``n_prev`` is the shading normal at the ray's origin (constant domes are sampled about it).
+    """
+    kind = lights.kind[li]
+    if kind == LIGHT_DOME:
+        if lights.size[li][0] > 0.0:
+            return wp.cw_mul(lights.radiance[li], env_radiance(lights.env, d)), env_pdf(lights.env, d)
+        return lights.radiance[li], wp.max(wp.dot(d, n_prev), 0.0) / wp.pi
+    if kind == LIGHT_DISTANT:
+        cos_max = lights.size[li][0]
+        if cos_max < 1.0 and wp.dot(d, distant_axis(lights, li, s)) >= cos_max:
+            return lights.radiance[li], 1.0 / (2.0 * wp.pi * (1.0 - cos_max))
+    return wp.vec3(0.0), 0.0
+
+
+@wp.func
+def mesh_light_pdf(lights: Lights, geo: Geometry, li: int, inst: int, tri_global: int, ref: wp.vec3,
+                   hit: wp.vec3, s: float):
+    """Solid-angle pdf with which ``sample_light`` would have chosen point ``hit`` on an emissive triangle."""
+    mesh = geo.inst_mesh[inst]
+    tri = tri_global - geo.mesh_tri_off[mesh]
+    p_tri = triangle_probability(lights, li, tri)
+    if p_tri <= 0.0:
+        return 0.0
+    k0, k1, ku = mesh_keys_at(geo, mesh, s)
+    p0, p1, p2 = triangle_points(geo, mesh, tri, k0, k1, ku)
+    o2w = instance_object_to_world(geo, inst, s)
+    w0 = wp.transform_point(o2w, p0)
+    nrm = wp.cross(wp.transform_point(o2w, p1) - w0, wp.transform_point(o2w, p2) - w0)
+    area2 = wp.length(nrm)
+    d = hit - ref
+    dist2 = wp.dot(d, d)
+    if area2 <= 0.0 or dist2 <= 0.0:
+        return 0.0
+    cos_l = wp.abs(wp.dot(nrm, d)) / (area2 * wp.sqrt(dist2))
+    if cos_l <= 0.0:
+        return 0.0
+    return p_tri * dist2 / (cos_l * 0.5 * area2)

@@ -1,0 +1,100 @@
+"""Shadow rays: how much light gets through a segment at the sample's time.
+
+Every surface crossed multiplies the light by (1 - opacity) at the crossing point (textured opacity and
+opacityThreshold cut-outs included), the paper's transparency (section 5). The order of crossings does not
+matter for a product, so this is an any-hit walk of the same time-keyed hierarchy as ``accel``'s closest-hit
+walk, stopping as soon as the segment is fully blocked.
+"""
+from __future__ import annotations
+
+import warp as wp
+
+from .accel import BIG, Geometry, box_entry, instance_visible, instance_world_to_object, mesh_keys_at, \
+    node_box, safe_inverse, stack_t, tlas_keys_at, triangle_hit, triangle_points
+from .materials import Materials, eval_opacity
+from .textures import Textures
+
+
+@wp.func
+def hit_uv(geo: Geometry, m: int, tri: int, b1: float, b2: float):
+    """Interpolated st of a hit, or NaN where the mesh has none (primvar readers then use their fallback)."""
+    if geo.mesh_has_uvs[m] == 0:
+        return wp.vec2(wp.nan, wp.nan)
+    return geo.uvs[3 * tri] * (1.0 - b1 - b2) + geo.uvs[3 * tri + 1] * b1 + geo.uvs[3 * tri + 2] * b2
+
+
+@wp.func
+def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro: wp.vec3, rd: wp.vec3,
+                       tmax: float, s: float, trans: float):
+    """Multiply ``trans`` by (1 - opacity) of every triangle of mesh m crossed before tmax; stops at 0."""
+    k0, k1, u = mesh_keys_at(geo, m, s)
+    nk = geo.mesh_nkeys[m]
+    noff = geo.mesh_node_off[m]
+    boff = geo.mesh_bound_off[m]
+    poff = geo.mesh_prim_off[m]
+    inv_d = safe_inverse(rd)
+    stack = stack_t()
+    stack[0] = 0
+    sp = int(1)
+    tr = trans
+    while sp > 0 and tr > 0.0:
+        sp -= 1
+        n = stack[sp]
+        a = geo.blas_a[noff + n]
+        b = geo.blas_b[noff + n]
+        if a < 0:
+            first = -(a + 1)
+            for i in range(b):
+                lt = geo.blas_prim[poff + first + i]
+                p0, p1, p2 = triangle_points(geo, m, lt, k0, k1, u)
+                t, b1, b2 = triangle_hit(p0, p1, p2, ro, rd, tmax)
+                if t < BIG:
+                    tri = geo.mesh_tri_off[m] + lt
+                    opacity = eval_opacity(mats, tex, geo.tri_material[tri], hit_uv(geo, m, tri, b1, b2))
+                    tr = tr * (1.0 - opacity)
+        else:
+            lo_a, hi_a = node_box(geo.blas_lo, geo.blas_hi, boff + a * nk, k0, k1, u)
+            if box_entry(lo_a, hi_a, ro, inv_d, tmax) < BIG:
+                stack[sp] = a
+                sp += 1
+            lo_b, hi_b = node_box(geo.blas_lo, geo.blas_hi, boff + b * nk, k0, k1, u)
+            if box_entry(lo_b, hi_b, ro, inv_d, tmax) < BIG:
+                stack[sp] = b
+                sp += 1
+    return tr
+
+
+@wp.func
+def transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd: wp.vec3, tmax: float,
+                  s: float):
+    """Fraction of light passing along the segment ro + t rd, t in (0, tmax), at time s."""
+    k0, k1, u = tlas_keys_at(geo, s)
+    nk = geo.tlas_nkeys
+    inv_d = safe_inverse(rd)
+    stack = stack_t()
+    stack[0] = 0
+    sp = int(1)
+    tr = float(1.0)
+    while sp > 0 and tr > 0.0:
+        sp -= 1
+        n = stack[sp]
+        a = geo.tlas_a[n]
+        b = geo.tlas_b[n]
+        if a < 0:
+            first = -(a + 1)
+            for i in range(b):
+                inst = geo.tlas_prim[first + i]
+                if instance_visible(geo, inst, s) and tr > 0.0:
+                    w2o = instance_world_to_object(geo, inst, s)
+                    tr = blas_transmittance(geo, mats, tex, geo.inst_mesh[inst], wp.transform_point(w2o, ro),
+                                            wp.transform_vector(w2o, rd), tmax, s, tr)
+        else:
+            lo_a, hi_a = node_box(geo.tlas_lo, geo.tlas_hi, a * nk, k0, k1, u)
+            if box_entry(lo_a, hi_a, ro, inv_d, tmax) < BIG:
+                stack[sp] = a
+                sp += 1
+            lo_b, hi_b = node_box(geo.tlas_lo, geo.tlas_hi, b * nk, k0, k1, u)
+            if box_entry(lo_b, hi_b, ro, inv_d, tmax) < BIG:
+                stack[sp] = b
+                sp += 1
+    return tr
