@@ -1,6 +1,13 @@
 #!/usr/bin/env python3
 """Author the example scenes with usd-core: ``python examples/make_examples.py`` rewrites examples/*.usda.
 
+gloss.usda -- after the paper's figure 7: a ball and a block standing on a glossy table, lit by two rectangular
+area lights. The table's reflections blur with distance from the objects and sharpen where they touch it, and so do
+the penumbrae (sections 2.1 and 4 of the paper).
+
+translucent.usda -- a frosted (rough dielectric) glass panel in front of a row of block letters: what is behind
+the panel blurs more the farther it is from the panel (section 2.2, translucency), next to a clear panel.
+
 demo.usda -- every dimension of distributed ray tracing in one frame: three spheres on a floor, the near one
 flying through the shutter (motion blur), the far one out of focus (depth of field, f/2.8 focused on the middle
 sphere), a rectangular area light (penumbrae) and a dim sky (dome). Metres, Y up, 24 fps, shutter 0.5 frame.
@@ -93,6 +100,153 @@ def demo(path):
     stage.GetRootLayer().Save()
 
 
+def new_stage(path, start=1.0):
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    stage.SetTimeCodesPerSecond(24)
+    stage.SetFramesPerSecond(24)
+    stage.SetStartTimeCode(start)
+    stage.SetEndTimeCode(start)
+    stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, "/World").GetPrim())
+    return stage
+
+
+def surface(stage, name, **inputs):
+    mat = UsdShade.Material.Define(stage, f"/World/Looks/{name}")
+    sh = UsdShade.Shader.Define(stage, f"/World/Looks/{name}/Surface")
+    sh.CreateIdAttr("UsdPreviewSurface")
+    for key, value in inputs.items():
+        if isinstance(value, tuple):
+            sh.CreateInput(key, Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*value))
+        elif isinstance(value, int):
+            sh.CreateInput(key, Sdf.ValueTypeNames.Int).Set(value)
+        else:
+            sh.CreateInput(key, Sdf.ValueTypeNames.Float).Set(float(value))
+    mat.CreateSurfaceOutput().ConnectToSource(sh.ConnectableAPI(), "surface")
+    return mat
+
+
+def box(stage, path, size, center, mat):
+    cube = UsdGeom.Cube.Define(stage, path)
+    cube.CreateSizeAttr(1.0)
+    xf = UsdGeom.Xformable(cube)
+    xf.AddTranslateOp().Set(Gf.Vec3d(*center))
+    xf.AddScaleOp().Set(Gf.Vec3f(*size))
+    bind(cube, mat)
+    return cube
+
+
+def rect_light(stage, path, width, height, intensity, translate, rotate):
+    light = UsdLux.RectLight.Define(stage, path)
+    light.CreateWidthAttr(width)
+    light.CreateHeightAttr(height)
+    light.CreateIntensityAttr(intensity)
+    xf = UsdGeom.Xformable(light)
+    xf.AddTranslateOp().Set(Gf.Vec3d(*translate))
+    xf.AddRotateXYZOp().Set(Gf.Vec3f(*rotate))
+    return light
+
+
+def look_at_camera(stage, eye, target, fstop=0.0, resolution=(640, 360)):
+    cam = UsdGeom.Camera.Define(stage, "/World/Camera")
+    m = Gf.Matrix4d().SetLookAt(Gf.Vec3d(*eye), Gf.Vec3d(*target), Gf.Vec3d(0, 1, 0)).GetInverse()
+    cam.AddTransformOp().Set(m)
+    cam.CreateFocalLengthAttr(0.5)
+    cam.CreateHorizontalApertureAttr(0.36)
+    cam.CreateVerticalApertureAttr(0.36 * resolution[1] / resolution[0])
+    cam.CreateFStopAttr(fstop)
+    cam.CreateFocusDistanceAttr(float((Gf.Vec3d(*eye) - Gf.Vec3d(*target)).GetLength()))
+    cam.CreateClippingRangeAttr(Gf.Vec2f(0.05, 1000.0))
+    from pxr import UsdRender
+
+    rs = UsdRender.Settings.Define(stage, "/Render/Settings")
+    rs.CreateResolutionAttr(Gf.Vec2i(*resolution))
+    rs.CreateCameraRelationship().SetTargets([cam.GetPath()]) if hasattr(rs, "CreateCameraRelationship") \
+        else rs.CreateCameraRel().SetTargets([cam.GetPath()])
+    stage.SetMetadata("renderSettingsPrimPath", "/Render/Settings")
+    return cam
+
+
+def gloss(path):
+    stage = new_stage(path)
+    table = surface(stage, "Table", diffuseColor=(0.05, 0.05, 0.06), roughness=0.25, metallic=0.0,
+                    specularColor=(0.6, 0.6, 0.6), useSpecularWorkflow=1)
+    box(stage, "/World/Table", (6.0, 0.1, 4.0), (0, -0.05, 0), table)
+    ball = UsdGeom.Sphere.Define(stage, "/World/Ball")
+    ball.CreateRadiusAttr(0.35)
+    UsdGeom.Xformable(ball).AddTranslateOp().Set(Gf.Vec3d(-0.5, 0.35, 0.2))
+    bind(ball, surface(stage, "Ivory", diffuseColor=(0.85, 0.8, 0.7), roughness=0.3))
+    box(stage, "/World/Block", (0.5, 0.8, 0.5), (0.6, 0.4, -0.3), surface(stage, "Red", diffuseColor=(0.7, 0.1, 0.08),
+                                                                           roughness=0.5))
+    rect_light(stage, "/World/KeyLight", 1.2, 0.6, 18.0, (-1.5, 2.5, 1.5), (-55.0, -40.0, 0.0))
+    rect_light(stage, "/World/FillLight", 0.8, 0.8, 9.0, (2.0, 2.0, 1.0), (-50.0, 60.0, 0.0))
+    look_at_camera(stage, (0.0, 1.3, 4.4), (0.0, 0.3, 0.0))
+    stage.GetRootLayer().Save()
+
+
+# A 5x7 pixel font for the few letters the translucency demo writes (rows top to bottom, '#' = filled).
+FONT = {
+    "D": ["####.", "#...#", "#...#", "#...#", "#...#", "#...#", "####."],
+    "R": ["####.", "#...#", "#...#", "####.", "#.#..", "#..#.", "#...#"],
+    "T": ["#####", "..#..", "..#..", "..#..", "..#..", "..#..", "..#.."],
+    "1": ["..#..", ".##..", "..#..", "..#..", "..#..", "..#..", ".###."],
+    "9": [".###.", "#...#", "#...#", ".####", "....#", "...#.", ".##.."],
+    "8": [".###.", "#...#", "#...#", ".###.", "#...#", "#...#", ".###."],
+    "4": ["...#.", "..##.", ".#.#.", "#..#.", "#####", "...#.", "...#."],
+}
+
+
+def block_text(stage, path, text, origin, pixel, depth, mat):
+    """Letters as a mesh of boxes, one per filled font pixel, in the z = origin[2] plane."""
+    pts, counts, idx = [], [], []
+    x0 = origin[0]
+    for ch in text:
+        rows = FONT.get(ch)
+        if rows is None:
+            x0 += 3 * pixel
+            continue
+        for r, row in enumerate(rows):
+            for c, on in enumerate(row):
+                if on != "#":
+                    continue
+                x, y = x0 + c * pixel, origin[1] + (6 - r) * pixel
+                base = len(pts)
+                for dz in (0.0, -depth):
+                    pts += [(x, y, origin[2] + dz), (x + pixel, y, origin[2] + dz),
+                            (x + pixel, y + pixel, origin[2] + dz), (x, y + pixel, origin[2] + dz)]
+                for f in ((0, 1, 2, 3), (5, 4, 7, 6), (1, 5, 6, 2), (4, 0, 3, 7), (3, 2, 6, 7), (4, 5, 1, 0)):
+                    counts.append(4)
+                    idx += [base + i for i in f]
+        x0 += 6 * pixel
+    mesh = UsdGeom.Mesh.Define(stage, path)
+    mesh.CreatePointsAttr(pts)
+    mesh.CreateFaceVertexCountsAttr(counts)
+    mesh.CreateFaceVertexIndicesAttr(idx)
+    mesh.CreateSubdivisionSchemeAttr("none")
+    bind(mesh, mat)
+    return mesh
+
+
+def translucent(path):
+    stage = new_stage(path)
+    wall = surface(stage, "Wall", diffuseColor=(0.8, 0.78, 0.72), useSpecularWorkflow=1, specularColor=(0, 0, 0))
+    box(stage, "/World/Wall", (8.0, 4.0, 0.1), (0, 1.5, -1.3), wall)
+    box(stage, "/World/Floor", (8.0, 0.1, 4.0), (0, -0.55, 0.8), wall)
+    ink = surface(stage, "Ink", diffuseColor=(0.05, 0.12, 0.5), roughness=0.6)
+    block_text(stage, "/World/Text", "DRT 1984", (-1.2, 0.05, -0.6), 0.05, 0.05, ink)
+    frosted = surface(stage, "Frosted", diffuseColor=(1.0, 1.0, 1.0), opacity=0.0, ior=1.5, roughness=0.3)
+    clear = surface(stage, "Clear", diffuseColor=(1.0, 1.0, 1.0), opacity=0.0, ior=1.5, roughness=0.0)
+    box(stage, "/World/FrostedPanel", (1.1, 0.7, 0.04), (-0.62, 0.25, -0.2), frosted)
+    box(stage, "/World/ClearPanel", (1.1, 0.7, 0.04), (0.62, 0.25, -0.2), clear)
+    rect_light(stage, "/World/Light", 3.0, 1.5, 6.0, (0.0, 2.5, 2.5), (-40.0, 0.0, 0.0))
+    dome = UsdLux.DomeLight.Define(stage, "/World/Sky")
+    dome.CreateIntensityAttr(0.3)
+    look_at_camera(stage, (0.0, 0.3, 2.8), (0.0, 0.22, -0.6))
+    stage.GetRootLayer().Save()
+
+
 if __name__ == "__main__":
-    demo(HERE / "demo.usda")
-    print("wrote", HERE / "demo.usda")
+    for name, make in (("demo", demo), ("gloss", gloss), ("translucent", translucent)):
+        make(HERE / f"{name}.usda")
+        print("wrote", HERE / f"{name}.usda")

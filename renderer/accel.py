@@ -55,7 +55,7 @@ class Geometry:
     mesh_has_normals: wp.array(dtype=wp.int32)
     uvs: wp.array(dtype=wp.vec2)  # 3 per global triangle when mesh_has_uvs
     mesh_has_uvs: wp.array(dtype=wp.int32)
-    mesh_closed: wp.array(dtype=wp.int32)  # 1: the mesh bounds a solid (every edge shared by two triangles)
+    tri_solid: wp.array(dtype=wp.int32)  # per global triangle, 1: part of a closed surface (refracts, absorbs)
     # --- top level
     tlas_a: wp.array(dtype=wp.int32)
     tlas_b: wp.array(dtype=wp.int32)

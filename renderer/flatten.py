@@ -12,6 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from .geometry_util import is_closed
 from .motion import matrix_at
 from .scene import LIGHT_MESH, Instance, Mesh, MotionTransform, Scene
 
@@ -39,7 +40,7 @@ def flatten_still_instances(scene: Scene) -> Scene:
     if len(merge) <= 1:
         return scene
 
-    points, tris, mats, normals, uvs = [], [], [], [], []
+    points, tris, mats, normals, uvs, solid = [], [], [], [], [], []
     ranges = {}  # old instance -> (first, end) triangle of the merged mesh
     has_normals = any(scene.meshes[scene.instances[i].mesh].normals is not None for i in merge)
     has_uvs = any(scene.meshes[scene.instances[i].mesh].uvs is not None for i in merge)
@@ -53,6 +54,8 @@ def flatten_still_instances(scene: Scene) -> Scene:
         tris.append(mesh.triangles + nvert)
         mats.append(mesh.material_ids)
         t = len(mesh.triangles)
+        solid.append(mesh.solid if mesh.solid is not None else
+                     np.full(t, is_closed(mesh.triangles, mesh.points[0])))
         if has_normals:
             if mesh.normals is not None:
                 nm = np.linalg.inv(m[:3, :3]).T  # normals transform by the inverse transpose
@@ -74,6 +77,7 @@ def flatten_still_instances(scene: Scene) -> Scene:
         material_ids=np.concatenate(mats).astype(np.int32),
         normals=np.concatenate(normals) if has_normals else None,
         uvs=np.concatenate(uvs) if has_uvs else None,
+        solid=np.concatenate(solid).astype(bool),
     )
     meshes = list(scene.meshes) + [merged]
     instances = [Instance(len(meshes) - 1, MotionTransform.static(np.eye(4)), name="<merged>")]

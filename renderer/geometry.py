@@ -13,6 +13,7 @@ import warp as wp
 
 from .accel import Geometry
 from .accel_build import Bvh, build_bvh
+from .geometry_util import is_closed
 from .motion import matrix_at
 from .motion_kernels import upload_keys
 from .scene import Instance, Mesh, MotionTransform, Scene
@@ -33,25 +34,6 @@ class GeometryStats:
     tlas_keys: int
     build_seconds: float
     nbytes: int
-
-
-def is_closed(triangles: np.ndarray, points: np.ndarray | None = None) -> bool:
-    """Does a triangle mesh bound a solid? Every undirected edge is shared by exactly two triangles.
-
-    Vertices at the same position are welded first (meshes split at UV seams are still solids). Closed meshes
-    refract and absorb (a glass ball); open ones are thin (a window pane, a leaf).
-    """
-    if len(triangles) == 0:
-        return False
-    if points is not None:  # weld on a grid of 1e-5 of the extent: seam copies differ by rounding
-        pts = np.asarray(points, np.float64).reshape(-1, 3)
-        cell = max(float(np.ptp(pts, axis=0).max()), 1e-30) * 1e-5
-        _, weld = np.unique(np.round(pts / cell), axis=0, return_inverse=True)
-        triangles = weld.reshape(-1)[triangles]
-    e = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]])
-    e = np.sort(e, axis=1)
-    _, counts = np.unique(e[:, 0].astype(np.int64) << 32 | e[:, 1].astype(np.int64), return_counts=True)
-    return bool(np.all(counts == 2))
 
 
 def _mesh_prim_bounds(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
@@ -194,7 +176,9 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     uv_cat = cat(uvs, (1, 2), np.float32)
     g.uvs = wp.array(uv_cat if len(uv_cat) else np.zeros((1, 2), np.float32), dtype=wp.vec2, device=device)
     g.mesh_has_uvs = _i32([int(m.uvs is not None) for m in scene.meshes] or [0], device)
-    g.mesh_closed = _i32([int(is_closed(m.triangles, m.points[0])) for m in scene.meshes] or [0], device)
+    solid = [m.solid if m.solid is not None else np.full(len(m.triangles), is_closed(m.triangles, m.points[0]))
+             for m in scene.meshes]
+    g.tri_solid = _i32(cat(solid, (1,), np.int32), device)
 
     # --- top level over instances, boxes on a uniform grid of time keys
     nk = _tlas_key_count(scene)

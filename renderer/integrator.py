@@ -262,9 +262,7 @@ def trace_wave_kernel(
             sp = surface_at(geo, hit.inst, hit.tri, hit.b1, hit.b2, origin, rd, hit.t, s)
             ms = eval_material(mats, tex, sp.material, sp.uv)
             ns = shading_normal(sp, ms)
-            thin = int(1)
-            if geo.mesh_closed[geo.inst_mesh[hit.inst]] != 0:
-                thin = 0
+            thin = 1 - geo.tri_solid[hit.tri]  # open surfaces are thin sheets, closed ones bound solids
             params = surface_params(ms, thin)
             wo = -rd
             lobes = bsdf_setup(params, ns, sp.ng, wo, sp.front)  # once per hit: eval, pdf and sample share it

@@ -89,6 +89,9 @@ class Mesh:
     normals: np.ndarray | None = None  # (T, 3, 3) float32 per-corner object-space shading normals, or None
     uvs: np.ndarray | None = None  # (T, 3, 2) float32 per-corner st, or None
     double_sided: bool = True
+    # (T,) bool: the triangle is part of a closed surface (a solid that refracts and absorbs); None: derived
+    # from the whole mesh (``geometry_util.is_closed``). Set when meshes are merged (``flatten``).
+    solid: np.ndarray | None = None
     # (T, 4) float32 per-triangle object-space tangent dP/du (unit xyz) and handedness w = +-1 (bitangent =
     # w * cross(n, t)); w = 0 where uvs are missing or degenerate. None: computed from points key 0 and uvs when
     # uploaded (``materials.mesh_tangents``).

@@ -1,0 +1,32 @@
+"""``/healthz`` (never needs a token: load balancers call it) and ``/metrics`` (Prometheus text)."""
+from __future__ import annotations
+
+from fastapi import APIRouter
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import PlainTextResponse
+
+from schemas import Health
+
+from .. import metrics
+from .deps import Authorized, RuntimeDep
+
+router = APIRouter(tags=["health"])
+
+
+@router.get("/healthz", response_model=Health)
+async def healthz(runtime: RuntimeDep):
+    """200 while the service runs; ``workers``/``threads`` say what the cluster has right now."""
+    workers = await run_in_threadpool(runtime.engine.workers)
+    threads = await run_in_threadpool(runtime.engine.threads)
+    return Health(status="ok", workers=workers, threads=threads)
+
+
+@router.get("/metrics", response_class=PlainTextResponse, dependencies=[Authorized])
+def get_metrics(runtime: RuntimeDep):
+    """Jobs by state, queue depth, tiles in flight and pending, tiles/s, task failures, cluster size."""
+    sch = runtime.scheduler
+    text = metrics.render(runtime.store.counts_by_state(), tiles_completed=sch.tiles_completed,
+                          tiles_failed=sch.tiles_failed, tiles_per_second=sch.tiles_per_second(),
+                          tiles_in_flight=sch.in_flight(), tiles_pending=sch.pending_tiles(),
+                          workers=runtime.engine.workers(), threads=runtime.engine.threads())
+    return PlainTextResponse(text, media_type="text/plain; version=0.0.4; charset=utf-8")

@@ -1,0 +1,136 @@
+"""``/v1/jobs``: submit, read, list, cancel, delete; frame EXRs and previews.
+
+Status codes: 202 + ``Location`` on create (also when an Idempotency-Key replays it), 404 unknown job or frame,
+409 illegal state change or frame not ready, 413 upload too large, 422 invalid input. Detail strings are in
+``service.errors``.
+"""
+from __future__ import annotations
+
+import functools
+from typing import Annotated
+
+import anyio
+from fastapi import APIRouter, File, Form, Header, Query, Request, Response, UploadFile
+from fastapi.responses import FileResponse, JSONResponse
+
+from schemas import ErrorBody, JobList, JobPublic, JobState
+
+from .. import errors, jobs as sm, preview
+from ..checkpoints import JobFiles, tile_grid
+from ..db import JobActive, JobNotFound, JobRow, decode_cursor, encode_cursor
+from ..errors import ApiError
+from ..views import find_frame, job_public, job_url
+from .deps import Authorized, InspectorDep, RuntimeDep, SettingsDep, StoreDep, SubmitterDep
+
+router = APIRouter(prefix="/jobs", tags=["jobs"], dependencies=[Authorized],
+                   responses={401: {"model": ErrorBody}, 404: {"model": ErrorBody}})
+
+
+def _job(store, job_id: str) -> JobRow:
+    try:
+        return store.get_job(job_id)
+    except JobNotFound:
+        raise ApiError(404, errors.JOB_NOT_FOUND) from None
+
+
+@router.post("", status_code=202, response_model=JobPublic,
+             responses={409: {"model": ErrorBody}, 413: {"model": ErrorBody}, 422: {"model": ErrorBody}})
+async def create_job(
+    request: Request,
+    submitter: SubmitterDep,
+    inspector: InspectorDep,
+    scene: Annotated[UploadFile, File(description="a .usda, .usdc, .usd or .usdz file")],
+    settings: Annotated[str, Form(description="JSON: schemas.JobCreate")] = "{}",
+    idempotency_key: Annotated[str | None, Header(alias="Idempotency-Key", min_length=1, max_length=255)] = None,
+):
+    """Queue a render of an uploaded USD scene. Retrying with the same ``Idempotency-Key`` returns the same job."""
+    row, _created = await anyio.to_thread.run_sync(
+        functools.partial(submitter.submit, scene.file, scene.filename, settings, idempotency_key, inspector),
+        limiter=request.app.state.submit_limiter)
+    body = job_public(row).model_dump(mode="json")
+    return JSONResponse(body, status_code=202, headers={"Location": job_url(row.id)})
+
+
+@router.get("", response_model=JobList, responses={422: {"model": ErrorBody}})
+def list_jobs(
+    store: StoreDep,
+    state: JobState | None = None,
+    limit: Annotated[int, Query(ge=1, le=500)] = 50,
+    cursor: str | None = None,
+):
+    """Jobs, newest first, optionally of one state; follow ``next_cursor`` for more."""
+    before = None
+    if cursor:
+        try:
+            before = decode_cursor(cursor)
+        except ValueError:
+            raise ApiError(422, errors.BAD_CURSOR) from None
+    rows, next_seq = store.list_jobs(state, limit, before)
+    return JobList(items=[job_public(r) for r in rows],
+                   next_cursor=encode_cursor(next_seq) if next_seq is not None else None)
+
+
+@router.get("/{job_id}", response_model=JobPublic)
+def get_job(store: StoreDep, job_id: str):
+    return job_public(_job(store, job_id))
+
+
+@router.post("/{job_id}/cancel", response_model=JobPublic, responses={409: {"model": ErrorBody}})
+def cancel_job(runtime: RuntimeDep, job_id: str):
+    """Cancel a queued or running job: no new tiles start, queued ones are dropped, running ones stop."""
+    try:
+        row = runtime.store.transition(job_id, sm.CANCELED)
+    except JobNotFound:
+        raise ApiError(404, errors.JOB_NOT_FOUND) from None
+    except sm.IllegalTransition as e:
+        raise ApiError(409, errors.cannot_cancel(e.current.value)) from None
+    JobFiles(runtime.settings.data_dir, job_id).stop()  # running tiles stop at their next sample wave
+    runtime.scheduler.wake()
+    return job_public(row)
+
+
+@router.delete("/{job_id}", status_code=204, responses={409: {"model": ErrorBody}})
+def delete_job(runtime: RuntimeDep, job_id: str):
+    """Delete a finished job with its files (and its scene, if no other job uses it)."""
+    try:
+        row = runtime.store.delete_job(job_id)
+    except JobNotFound:
+        raise ApiError(404, errors.JOB_NOT_FOUND) from None
+    except JobActive as e:
+        raise ApiError(409, errors.cannot_delete(e.state.value)) from None
+    JobFiles(runtime.settings.data_dir, job_id).remove()
+    runtime.scenes.collect(row.scene_sha256, runtime.store.scene_in_use)
+    return Response(status_code=204)
+
+
+@router.get("/{job_id}/frames/{frame}.exr", response_class=FileResponse,
+            responses={200: {"content": {"image/x-exr": {}}}, 409: {"model": ErrorBody}})
+def get_frame(store: StoreDep, settings: SettingsDep, job_id: str, frame: str):
+    """The frame's EXR, once it is rendered (409 before)."""
+    row = _job(store, job_id)
+    f = find_frame(row, frame)
+    if f is None:
+        raise ApiError(404, errors.FRAME_NOT_FOUND)
+    path = JobFiles(settings.data_dir, job_id).frame(f.idx)
+    if not f.done or not path.is_file():
+        raise ApiError(409, errors.FRAME_NOT_READY)
+    return FileResponse(path, media_type="image/x-exr", filename=f"{job_id}_{frame}.exr")
+
+
+@router.get("/{job_id}/frames/{frame}/preview.png", response_class=Response,
+            responses={200: {"content": {"image/png": {}}}})
+def get_preview(store: StoreDep, settings: SettingsDep, job_id: str, frame: str):
+    """A tone-mapped PNG of the frame: the finished tiles while it renders, the EXR once it is done."""
+    row = _job(store, job_id)
+    f = find_frame(row, frame)
+    if f is None:
+        raise ApiError(404, errors.FRAME_NOT_FOUND)
+    files = JobFiles(settings.data_dir, job_id)
+    exr = files.frame(f.idx)
+    if f.done and exr.is_file():
+        data = preview.from_exr(exr)
+    else:
+        boxes = tile_grid(row.width, row.height, row.tile_size)
+        data = preview.from_tiles([(files.tile(f.idx, i), b) for i, b in enumerate(boxes)], row.width, row.height,
+                                  row.exposure_scale)
+    return Response(data, media_type="image/png", headers={"Cache-Control": "no-store"})

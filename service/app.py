@@ -1,0 +1,129 @@
+"""``create_app(settings)``: the FastAPI application, its lifespan (database, Dask, scheduler) and error format.
+
+Every error answers ``{"detail": "<one line>"}``: ``ApiError`` from the service, FastAPI's own validation errors
+flattened to ``"<field>: <message>"``, and an oversized body cut off early with 413 (the ``Content-Length`` is
+checked before anything is read, the bytes are counted as they arrive).
+"""
+from __future__ import annotations
+
+import json
+import logging
+from contextlib import asynccontextmanager
+
+import anyio
+from fastapi import Depends, FastAPI, HTTPException, Request
+from fastapi.concurrency import run_in_threadpool
+from fastapi.exceptions import RequestValidationError
+from fastapi.openapi.docs import get_swagger_ui_html
+from fastapi.responses import JSONResponse
+
+from .api import health, jobs
+from .api.deps import require_token
+from .errors import ApiError
+from .runtime import Runtime
+from .settings import ServiceSettings
+from .uploads import UploadTooLarge
+
+log = logging.getLogger("drt.service")
+
+MULTIPART_OVERHEAD = 1 << 20
+SUBMISSION_THREADS = 8  # room for the settings field and part headers next to the largest scene
+
+
+class _BodyTooLarge(HTTPException):
+    pass
+
+
+class BodyLimit:
+    """ASGI middleware: refuse request bodies over ``limit`` bytes with 413 before they fill the disk."""
+
+    def __init__(self, app, limit: int, detail: str):
+        self.app = app
+        self.limit = limit
+        self.detail = detail
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        length = dict(scope.get("headers") or []).get(b"content-length")
+        if length is not None and length.isdigit() and int(length) > self.limit:
+            return await self._reject(send)
+        seen = 0
+
+        async def counted():
+            nonlocal seen
+            message = await receive()
+            if message["type"] == "http.request":
+                seen += len(message.get("body", b""))
+                if seen > self.limit:
+                    # An HTTPException passes through FastAPI's body parsing to the exception handlers.
+                    raise _BodyTooLarge(413, self.detail)
+            return message
+
+        await self.app(scope, counted, send)
+
+    async def _reject(self, send):
+        body = json.dumps({"detail": self.detail}).encode()
+        await send({"type": "http.response.start", "status": 413,
+                    "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode()),
+                                (b"connection", b"close")]})
+        await send({"type": "http.response.body", "body": body})
+
+
+def _validation_detail(exc: RequestValidationError) -> str:
+    parts = []
+    for err in exc.errors():
+        loc = [str(x) for x in err.get("loc", ()) if x not in ("body", "query", "path", "header")]
+        parts.append(f"{'.'.join(loc)}: {err.get('msg', 'invalid')}" if loc else str(err.get("msg", "invalid")))
+    return "; ".join(parts) or "invalid request"
+
+
+def create_app(settings: ServiceSettings | None = None) -> FastAPI:
+    settings = settings or ServiceSettings()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):
+        # Starting Dask blocks (worker processes start): keep it off the event loop.
+        app.state.runtime = await run_in_threadpool(Runtime.start, settings)
+        # Submissions wait for a worker to load their scene; they get threads of their own, so that a burst of
+        # them never holds every thread of the pool that status requests need.
+        app.state.submit_limiter = anyio.CapacityLimiter(SUBMISSION_THREADS)
+        try:
+            yield
+        finally:
+            await run_in_threadpool(app.state.runtime.close)
+
+    protected_docs = settings.api_token is not None
+    app = FastAPI(
+        title="drt render service",
+        version="1",
+        summary="Distributed ray tracing (Cook, Porter, Carpenter 1984): USD in, OpenEXR out.",
+        lifespan=lifespan,
+        docs_url=None if protected_docs else "/docs",
+        openapi_url=None if protected_docs else "/openapi.json",
+        redoc_url=None,
+    )
+    app.state.settings = settings
+
+    if protected_docs:  # "every endpoint but /healthz" needs the token, the API description included
+        @app.get("/openapi.json", include_in_schema=False, dependencies=[Depends(require_token)])
+        def openapi_json():
+            return JSONResponse(app.openapi())
+
+        @app.get("/docs", include_in_schema=False, dependencies=[Depends(require_token)])
+        def docs():
+            return get_swagger_ui_html(openapi_url="/openapi.json", title=app.title)
+
+    @app.exception_handler(ApiError)
+    async def _api_error(_request: Request, exc: ApiError):
+        return JSONResponse({"detail": exc.detail}, status_code=exc.status, headers=exc.headers)
+
+    @app.exception_handler(RequestValidationError)
+    async def _invalid(_request: Request, exc: RequestValidationError):
+        return JSONResponse({"detail": _validation_detail(exc)}, status_code=422)
+
+    app.add_middleware(BodyLimit, limit=settings.max_upload_bytes + MULTIPART_OVERHEAD,
+                       detail=str(UploadTooLarge(settings.max_upload_bytes)))
+    app.include_router(health.router)
+    app.include_router(jobs.router, prefix="/v1")
+    return app

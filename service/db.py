@@ -1,0 +1,363 @@
+"""The job store: SQLite through SQLAlchemy 2 (WAL mode), the only place job state lives.
+
+Tables: ``jobs`` (one row per job), ``frames`` (one per frame of a job), ``tiles`` (one per tile that was
+attempted: attempts, done, seconds: the checkpoint record), ``idempotency`` (Idempotency-Key -> job).
+
+Concurrency: the API's threads and the scheduler's thread share one engine. Every state change is a single
+conditional ``UPDATE`` (``WHERE state IN (...)``) so a claim or a transition is atomic, and write transactions
+start with ``BEGIN IMMEDIATE`` so that two writers never deadlock upgrading a read lock (SQLite's
+``busy_timeout`` then simply queues them).
+"""
+from __future__ import annotations
+
+import base64
+import json
+import time
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+
+from sqlalchemy import (BigInteger, Boolean, Float, ForeignKey, Integer, String, Text, create_engine, delete, event,
+                        func, select, update)
+from sqlalchemy.dialects.sqlite import insert as sqlite_insert
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column, relationship
+
+from schemas import JobState
+
+from . import jobs as sm
+
+
+class Base(DeclarativeBase):
+    pass
+
+
+class JobRow(Base):
+    __tablename__ = "jobs"
+
+    seq: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)  # FIFO order and list cursor
+    id: Mapped[str] = mapped_column(String(32), unique=True, index=True)
+    state: Mapped[str] = mapped_column(String(16), index=True)
+    priority: Mapped[int] = mapped_column(Integer)
+    settings_json: Mapped[str] = mapped_column(Text)
+    scene_sha256: Mapped[str] = mapped_column(String(64), index=True)
+    scene_name: Mapped[str] = mapped_column(String(255))
+    scene_bytes: Mapped[int] = mapped_column(BigInteger)
+    width: Mapped[int] = mapped_column(Integer)
+    height: Mapped[int] = mapped_column(Integer)
+    tile_size: Mapped[int] = mapped_column(Integer)
+    tiles_per_frame: Mapped[int] = mapped_column(Integer)
+    tiles_total: Mapped[int] = mapped_column(Integer)
+    tiles_done: Mapped[int] = mapped_column(Integer, default=0)
+    samples_done: Mapped[int] = mapped_column(BigInteger, default=0)
+    exposure_scale: Mapped[float] = mapped_column(Float, default=1.0)
+    warnings_json: Mapped[str] = mapped_column(Text, default="[]")
+    error: Mapped[str | None] = mapped_column(Text, nullable=True)
+    created_at: Mapped[float] = mapped_column(Float)
+    updated_at: Mapped[float] = mapped_column(Float)
+    started_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+    finished_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+
+    frames: Mapped[list["FrameRow"]] = relationship(back_populates="job", cascade="all, delete-orphan",
+                                                    order_by="FrameRow.idx", lazy="selectin",
+                                                    passive_deletes=True)
+
+    @property
+    def job_state(self) -> JobState:
+        return JobState(self.state)
+
+    @property
+    def warnings(self) -> list[str]:
+        return json.loads(self.warnings_json)
+
+
+class FrameRow(Base):
+    __tablename__ = "frames"
+
+    job_id: Mapped[str] = mapped_column(ForeignKey("jobs.id", ondelete="CASCADE"), primary_key=True)
+    idx: Mapped[int] = mapped_column(Integer, primary_key=True)
+    time: Mapped[float] = mapped_column(Float)
+    tiles_done: Mapped[int] = mapped_column(Integer, default=0)
+    done: Mapped[bool] = mapped_column(Boolean, default=False)
+
+    job: Mapped[JobRow] = relationship(back_populates="frames")
+
+
+class TileRow(Base):
+    __tablename__ = "tiles"
+
+    job_id: Mapped[str] = mapped_column(ForeignKey("jobs.id", ondelete="CASCADE"), primary_key=True)
+    frame_idx: Mapped[int] = mapped_column(Integer, primary_key=True)
+    tile_idx: Mapped[int] = mapped_column(Integer, primary_key=True)
+    attempts: Mapped[int] = mapped_column(Integer, default=0)
+    done: Mapped[bool] = mapped_column(Boolean, default=False)
+    seconds: Mapped[float | None] = mapped_column(Float, nullable=True)
+    error: Mapped[str | None] = mapped_column(Text, nullable=True)
+
+
+class IdempotencyRow(Base):
+    __tablename__ = "idempotency"
+
+    key: Mapped[str] = mapped_column(String(255), primary_key=True)
+    request_hash: Mapped[str] = mapped_column(String(64))
+    job_id: Mapped[str | None] = mapped_column(ForeignKey("jobs.id", ondelete="CASCADE"), nullable=True)
+    created_at: Mapped[float] = mapped_column(Float)
+
+
+class JobNotFound(Exception):
+    pass
+
+
+class JobActive(Exception):
+    """The job is queued or running (it must be canceled before it can be deleted)."""
+
+    def __init__(self, state: JobState):
+        super().__init__(state.value)
+        self.state = state
+
+
+@dataclass(frozen=True)
+class JobHead:
+    id: str
+    state: JobState
+    priority: int
+
+
+@dataclass(frozen=True)
+class Claim:
+    """Outcome of claiming an Idempotency-Key: ``new`` (go ahead), ``existing`` (replay ``job_id``),
+    ``conflict`` (same key, different request) or ``busy`` (the first request is still being processed)."""
+
+    outcome: str
+    job_id: str | None = None
+
+
+def encode_cursor(seq: int) -> str:
+    return base64.urlsafe_b64encode(f"seq:{seq}".encode()).decode().rstrip("=")
+
+
+def decode_cursor(cursor: str) -> int:
+    """The job sequence number in a cursor; ValueError if it is not one of ours."""
+    try:
+        text = base64.urlsafe_b64decode(cursor + "=" * (-len(cursor) % 4)).decode()
+    except Exception:  # noqa: BLE001 - any garbage is the same client error
+        raise ValueError("invalid cursor") from None
+    if not text.startswith("seq:") or not text[4:].isdigit():
+        raise ValueError("invalid cursor")
+    return int(text[4:])
+
+
+class Store:
+    def __init__(self, path: Path):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.engine = create_engine(f"sqlite:///{path}", connect_args={"check_same_thread": False, "timeout": 60})
+
+        @event.listens_for(self.engine, "connect")
+        def _connect(dbapi_conn, _record):
+            dbapi_conn.isolation_level = None  # SQLAlchemy emits BEGIN itself (below), pysqlite must not
+            cur = dbapi_conn.cursor()
+            for pragma in ("journal_mode=WAL", "synchronous=NORMAL", "foreign_keys=ON", "busy_timeout=60000"):
+                cur.execute(f"PRAGMA {pragma}")
+            cur.close()
+
+        @event.listens_for(self.engine, "begin")
+        def _begin(conn):
+            conn.exec_driver_sql("BEGIN IMMEDIATE" if conn.get_execution_options().get("drt_write") else "BEGIN")
+
+        self._writer = self.engine.execution_options(drt_write=True)
+        Base.metadata.create_all(self.engine)
+        # Claims left by requests that were in flight when the service stopped can never complete.
+        with self._write() as s:
+            s.execute(delete(IdempotencyRow).where(IdempotencyRow.job_id.is_(None)))
+
+    def close(self) -> None:
+        self.engine.dispose()
+
+    def _read(self) -> Session:
+        return Session(self.engine, expire_on_commit=False)
+
+    def _write(self) -> Session:
+        return Session(self._writer, expire_on_commit=False)
+
+    # -- jobs ---------------------------------------------------------------------------------------------------
+    def create_job(self, *, job_id: str, priority: int, settings_json: str, scene_sha256: str, scene_name: str,
+                   scene_bytes: int, width: int, height: int, tile_size: int, tiles_per_frame: int,
+                   frame_times: list[float], exposure_scale: float, warnings: list[str],
+                   idempotency_key: str | None = None) -> JobRow:
+        now = time.time()
+        row = JobRow(id=job_id, state=sm.QUEUED.value, priority=priority, settings_json=settings_json,
+                     scene_sha256=scene_sha256, scene_name=scene_name, scene_bytes=scene_bytes, width=width,
+                     height=height, tile_size=tile_size, tiles_per_frame=tiles_per_frame,
+                     tiles_total=tiles_per_frame * len(frame_times), tiles_done=0, samples_done=0,
+                     exposure_scale=exposure_scale, warnings_json=json.dumps(warnings), created_at=now,
+                     updated_at=now)
+        row.frames = [FrameRow(idx=i, time=t, tiles_done=0, done=False) for i, t in enumerate(frame_times)]
+        with self._write() as s, s.begin():
+            s.add(row)
+            s.flush()
+            if idempotency_key is not None:
+                s.execute(update(IdempotencyRow).where(IdempotencyRow.key == idempotency_key)
+                          .values(job_id=job_id))
+        return self.get_job(job_id)
+
+    def get_job(self, job_id: str) -> JobRow:
+        with self._read() as s:
+            row = s.scalar(select(JobRow).where(JobRow.id == job_id))
+        if row is None:
+            raise JobNotFound(job_id)
+        return row
+
+    def list_jobs(self, state: JobState | None, limit: int, before_seq: int | None) -> tuple[list[JobRow], int | None]:
+        """Newest first. Returns (rows, seq to continue before, or None on the last page)."""
+        q = select(JobRow).order_by(JobRow.seq.desc()).limit(limit + 1)
+        if state is not None:
+            q = q.where(JobRow.state == state.value)
+        if before_seq is not None:
+            q = q.where(JobRow.seq < before_seq)
+        with self._read() as s:
+            rows = list(s.scalars(q))
+        more = len(rows) > limit
+        rows = rows[:limit]
+        return rows, (rows[-1].seq if more and rows else None)
+
+    def transition(self, job_id: str, target: JobState, *, error: str | None = None) -> JobRow:
+        """Move a job to ``target`` atomically; IllegalTransition if its current state does not allow it."""
+        now = time.time()
+        values: dict = {"state": target.value, "updated_at": now}
+        if target == sm.RUNNING:
+            values["started_at"] = func.coalesce(JobRow.started_at, now)
+        if target in sm.TERMINAL:
+            values["finished_at"] = now
+        if error is not None:
+            values["error"] = error
+        with self._write() as s, s.begin():
+            res = s.execute(update(JobRow).where(JobRow.id == job_id,
+                                                 JobRow.state.in_([x.value for x in sm.sources(target)]))
+                            .values(**values))
+            if res.rowcount == 0:
+                current = s.scalar(select(JobRow.state).where(JobRow.id == job_id))
+                if current is None:
+                    raise JobNotFound(job_id)
+                raise sm.IllegalTransition(job_id, JobState(current), target)
+        return self.get_job(job_id)
+
+    def delete_job(self, job_id: str) -> JobRow:
+        """Delete a finished job (cascading to frames, tiles and idempotency keys); JobActive if it is not."""
+        with self._write() as s, s.begin():
+            row = s.scalar(select(JobRow).where(JobRow.id == job_id))
+            if row is None:
+                raise JobNotFound(job_id)
+            if row.job_state not in sm.TERMINAL:
+                raise JobActive(row.job_state)
+            s.execute(delete(JobRow).where(JobRow.id == job_id))
+        return row
+
+    def scene_in_use(self, sha256: str) -> bool:
+        with self._read() as s:
+            return s.scalar(select(func.count()).select_from(JobRow).where(JobRow.scene_sha256 == sha256)) > 0
+
+    def active_jobs(self) -> list[JobHead]:
+        """Queued and running jobs in scheduling order: priority (high first), then first-in first-out."""
+        with self._read() as s:
+            rows = s.execute(select(JobRow.id, JobRow.state, JobRow.priority)
+                             .where(JobRow.state.in_([x.value for x in sm.ACTIVE]))
+                             .order_by(JobRow.priority.desc(), JobRow.seq.asc()))
+            return [JobHead(i, JobState(st), p) for i, st, p in rows]
+
+    def job_states(self, job_ids: list[str]) -> dict[str, JobState]:
+        with self._read() as s:
+            return {i: JobState(st) for i, st in s.execute(select(JobRow.id, JobRow.state)
+                                                           .where(JobRow.id.in_(job_ids)))}
+
+    def counts_by_state(self) -> dict[JobState, int]:
+        counts = {st: 0 for st in JobState}
+        with self._read() as s:
+            for st, n in s.execute(select(JobRow.state, func.count()).group_by(JobRow.state)):
+                counts[JobState(st)] = n
+        return counts
+
+    # -- tiles and frames (the scheduler's records) ---------------------------------------------------------------
+    def tile_attempt(self, job_id: str, frame_idx: int, tile_idx: int, error: str | None = None) -> int:
+        """Count one more attempt at a tile; returns the number of attempts so far."""
+        stmt = sqlite_insert(TileRow).values(job_id=job_id, frame_idx=frame_idx, tile_idx=tile_idx, attempts=1,
+                                             done=False, error=error)
+        stmt = stmt.on_conflict_do_update(index_elements=["job_id", "frame_idx", "tile_idx"],
+                                          set_={"attempts": TileRow.attempts + 1, "error": error})
+        with self._write() as s, s.begin():
+            s.execute(stmt)
+            return s.scalar(select(TileRow.attempts).where(TileRow.job_id == job_id, TileRow.frame_idx == frame_idx,
+                                                           TileRow.tile_idx == tile_idx))
+
+    def tile_done(self, job_id: str, frame_idx: int, tile_idx: int, samples: int, seconds: float) -> bool:
+        """Record a checkpointed tile of a running job. False (nothing recorded) if the job is no longer running
+        or the tile was already recorded."""
+        with self._write() as s, s.begin():
+            already = s.scalar(select(TileRow.done).where(TileRow.job_id == job_id, TileRow.frame_idx == frame_idx,
+                                                          TileRow.tile_idx == tile_idx))
+            if already:
+                return False
+            res = s.execute(update(JobRow).where(JobRow.id == job_id, JobRow.state == sm.RUNNING.value)
+                            .values(tiles_done=JobRow.tiles_done + 1, samples_done=JobRow.samples_done + samples,
+                                    updated_at=time.time()))
+            if res.rowcount == 0:
+                return False
+            s.execute(sqlite_insert(TileRow).values(job_id=job_id, frame_idx=frame_idx, tile_idx=tile_idx,
+                                                    attempts=1, done=True, seconds=seconds)
+                      .on_conflict_do_update(index_elements=["job_id", "frame_idx", "tile_idx"],
+                                             set_={"done": True, "seconds": seconds, "error": None}))
+            s.execute(update(FrameRow).where(FrameRow.job_id == job_id, FrameRow.idx == frame_idx)
+                      .values(tiles_done=FrameRow.tiles_done + 1))
+        return True
+
+    def done_tiles(self, job_id: str) -> dict[int, set[int]]:
+        out: dict[int, set[int]] = defaultdict(set)
+        with self._read() as s:
+            for f, t in s.execute(select(TileRow.frame_idx, TileRow.tile_idx)
+                                  .where(TileRow.job_id == job_id, TileRow.done.is_(True))):
+                out[f].add(t)
+        return out
+
+    def forget_tiles(self, job_id: str, frame_idx: int, tile_idxs: set[int]) -> None:
+        """Un-record tiles whose checkpoint files are missing (they will be rendered again)."""
+        if not tile_idxs:
+            return
+        with self._write() as s, s.begin():
+            res = s.execute(update(TileRow).where(TileRow.job_id == job_id, TileRow.frame_idx == frame_idx,
+                                                  TileRow.tile_idx.in_(tile_idxs), TileRow.done.is_(True))
+                            .values(done=False))
+            n = res.rowcount
+            s.execute(update(FrameRow).where(FrameRow.job_id == job_id, FrameRow.idx == frame_idx)
+                      .values(tiles_done=FrameRow.tiles_done - n))
+            s.execute(update(JobRow).where(JobRow.id == job_id).values(tiles_done=JobRow.tiles_done - n))
+
+    def frame_done(self, job_id: str, frame_idx: int) -> None:
+        with self._write() as s, s.begin():
+            s.execute(update(FrameRow).where(FrameRow.job_id == job_id, FrameRow.idx == frame_idx).values(done=True))
+            s.execute(update(JobRow).where(JobRow.id == job_id).values(updated_at=time.time()))
+
+    # -- idempotency -------------------------------------------------------------------------------------------
+    def claim_key(self, key: str, request_hash: str) -> Claim:
+        for _ in range(3):  # the holder of the key may release it between our insert and our read
+            with self._write() as s:
+                try:
+                    with s.begin():
+                        s.add(IdempotencyRow(key=key, request_hash=request_hash, job_id=None,
+                                             created_at=time.time()))
+                    return Claim("new")
+                except IntegrityError:
+                    pass
+            with self._read() as s:
+                row = s.get(IdempotencyRow, key)
+            if row is None:
+                continue
+            if row.request_hash != request_hash:
+                return Claim("conflict", row.job_id)
+            if row.job_id is None:
+                return Claim("busy")
+            return Claim("existing", row.job_id)
+        return Claim("busy")
+
+    def release_key(self, key: str) -> None:
+        """Forget a claim whose request failed (so that a corrected retry may use the key)."""
+        with self._write() as s, s.begin():
+            s.execute(delete(IdempotencyRow).where(IdempotencyRow.key == key, IdempotencyRow.job_id.is_(None)))

@@ -1,0 +1,48 @@
+"""Everything a running service holds, built in the app's lifespan and closed with it (no module globals)."""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+from .db import Store
+from .engine import Engine
+from .scheduler import Scheduler
+from .settings import ServiceSettings
+from .submission import DaskInspector, Inspector, Submitter
+from .uploads import SceneStore
+
+log = logging.getLogger("drt.service")
+
+
+@dataclass
+class Runtime:
+    settings: ServiceSettings
+    store: Store
+    scenes: SceneStore
+    engine: Engine
+    scheduler: Scheduler
+    submitter: Submitter
+    inspector: Inspector
+
+    @classmethod
+    def start(cls, settings: ServiceSettings) -> "Runtime":
+        settings.data_dir.mkdir(parents=True, exist_ok=True)
+        store = Store(settings.db_path)
+        scenes = SceneStore(settings.data_dir / "scenes", settings.max_upload_bytes)
+        engine = Engine(settings)
+        try:
+            engine.start()
+        except BaseException:
+            store.close()
+            raise
+        scheduler = Scheduler(settings, store, engine, scenes)
+        submitter = Submitter(settings, store, scenes, on_created=scheduler.wake)
+        scheduler.start()
+        log.info("drt service ready (data in %s)", settings.data_dir)
+        return cls(settings=settings, store=store, scenes=scenes, engine=engine, scheduler=scheduler,
+                   submitter=submitter, inspector=DaskInspector(engine, settings.inspect_timeout))
+
+    def close(self) -> None:
+        self.scheduler.stop()
+        self.engine.close()
+        self.store.close()

@@ -1,0 +1,368 @@
+"""The scheduler: one thread that turns queued jobs into tile tasks on Dask and finished tiles into frames.
+
+Each turn it reads the active jobs from the database (priority, then first-in first-out), keeps at most
+``max_in_flight`` tasks submitted (default: twice the cluster's worker threads), so that a new high-priority job
+or a cancellation takes effect within about one tile's time, and waits for a task to finish or a wake-up.
+
+* A finished tile is checkpointed (atomically) on disk, then recorded in the database. When all tiles of a frame
+  are recorded, a worker assembles them and writes the frame's EXR; the frame is marked done and its tile
+  checkpoints are removed. The job succeeds when every frame is done.
+* A job that left the active states (canceled, failed) has its queued tasks cancelled and late results dropped.
+* A task that raises (including a worker that died three times running it, Dask's ``KilledWorker``) is submitted
+  again up to ``tile_retries`` times, one database record per attempt, then the job fails with the message.
+  A renderer error (bad scene or settings) fails the job at once: trying again would give the same answer.
+* On start, jobs found ``running`` resume: tiles whose checkpoints are on disk are not rendered again.
+
+All job state lives in the database; the plans held here are a cache of it, rebuilt after a restart.
+"""
+from __future__ import annotations
+
+import collections
+import logging
+import queue
+import threading
+import time
+import uuid
+from dataclasses import dataclass, field
+
+from sqlalchemy.exc import IntegrityError
+
+from schemas import JobCreate, JobState
+
+from . import jobs as sm
+from .checkpoints import JobFiles, TileBox, save_tile, tile_grid
+from .db import JobNotFound, Store
+from .engine import Engine
+from .settings import ServiceSettings
+from .spec import RenderSpec
+from .uploads import SceneStore
+from .worker import FrameTask, TileTask, finish_frame_task, render_tile_task
+
+log = logging.getLogger("drt.scheduler")
+
+FINISH = -1  # the "tile index" of a frame's assembly task in attempt records
+
+
+@dataclass
+class FramePlan:
+    idx: int
+    time: float
+    queue: collections.deque  # tile indices still to submit
+    done: set[int]
+    inflight: set[int] = field(default_factory=set)
+    finishing: bool = False
+    finished: bool = False
+
+
+@dataclass
+class JobPlan:
+    job_id: str
+    state: JobState
+    priority: int
+    spec: RenderSpec
+    width: int
+    height: int
+    spp: int
+    boxes: list[TileBox]
+    frames: list[FramePlan]
+    files: JobFiles
+
+    def next_work(self) -> tuple[FramePlan, int] | None:
+        """(frame, tile index) to submit next, or (frame, FINISH) to assemble a frame, or None."""
+        for f in self.frames:
+            if f.finished or f.finishing:
+                continue
+            if f.queue:
+                return f, f.queue.popleft()
+            if len(f.done) == len(self.boxes) and not f.inflight:
+                return f, FINISH
+        return None
+
+
+@dataclass
+class InFlight:
+    job_id: str
+    frame_idx: int
+    tile_idx: int
+    future: object
+    submitted: float
+
+
+class Scheduler:
+    def __init__(self, settings: ServiceSettings, store: Store, engine: Engine, scenes: SceneStore):
+        self.settings = settings
+        self.store = store
+        self.engine = engine
+        self.scenes = scenes
+        self._events: queue.Queue = queue.Queue()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._plans: dict[str, JobPlan] = {}
+        self._order: list[JobPlan] = []
+        self._inflight: dict[str, InFlight] = {}
+        self._tile_times: collections.deque = collections.deque(maxlen=4096)
+        self.tiles_completed = 0
+        self.tiles_failed = 0
+
+    # -- lifecycle -------------------------------------------------------------------------------------------
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._run, name="drt-scheduler", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._events.put(("wake", None))
+        if self._thread is not None:
+            self._thread.join(timeout=30)
+
+    def wake(self) -> None:
+        """Look at the database now (a job was created or canceled)."""
+        self._events.put(("wake", None))
+
+    # -- numbers for /metrics --------------------------------------------------------------------------------
+    def in_flight(self) -> int:
+        return len(self._inflight)
+
+    def tiles_per_second(self, window: float = 60.0) -> float:
+        now = time.monotonic()
+        recent = [t for t in list(self._tile_times) if now - t <= window]
+        if not recent:
+            return 0.0
+        return len(recent) / max(min(window, now - recent[0]), 1.0)
+
+    def pending_tiles(self) -> int:
+        return sum(len(f.queue) for p in list(self._plans.values()) for f in p.frames)
+
+    # -- the loop ----------------------------------------------------------------------------------------------
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                self._sync()
+                self._fill()
+                self._wait_and_handle()
+            except Exception:  # noqa: BLE001 - the loop must outlive any one bad turn (database busy, etc.)
+                log.exception("scheduler turn failed; retrying")
+                self._stop.wait(1.0)
+
+    def _wait_and_handle(self) -> None:
+        try:
+            event = self._events.get(timeout=self.settings.poll_interval)
+        except queue.Empty:
+            return
+        while True:
+            kind, key = event
+            if kind == "done":
+                self._on_done(key)
+            if self._stop.is_set():
+                return
+            try:
+                event = self._events.get_nowait()
+            except queue.Empty:
+                return
+
+    def _sync(self) -> None:
+        heads = self.store.active_jobs()
+        active = {row.id for row in heads}
+        for job_id in [j for j in self._plans if j not in active]:
+            self._drop(job_id)
+        order = []
+        for row in heads:
+            plan = self._plans.get(row.id)
+            if plan is None:
+                try:
+                    plan = self._load(self.store.get_job(row.id))
+                except JobNotFound:
+                    continue
+                except Exception as e:  # noqa: BLE001 - one unplannable job must not stall the others
+                    log.exception("cannot plan job %s", row.id)
+                    self._fail(row.id, f"the job cannot be planned: {type(e).__name__}: {e}")
+                    continue
+                if plan is None:
+                    continue
+                self._plans[row.id] = plan
+            plan.state = row.state
+            plan.priority = row.priority
+            order.append(plan)
+        self._order = order
+
+    def _capacity(self) -> int:
+        return self.settings.max_in_flight or 2 * max(1, self.engine.threads())
+
+    def _fill(self) -> None:
+        cap = self._capacity()
+        for plan in list(self._order):
+            if all(f.finished for f in plan.frames):  # e.g. stopped between its last frame and its success
+                self._succeed(plan)
+                continue
+            while len(self._inflight) < cap:
+                work = plan.next_work()
+                if work is None:
+                    break
+                frame, tile_idx = work
+                if plan.state == sm.QUEUED and not self._claim(plan):
+                    break  # canceled meanwhile: the plan is dropped
+                self._submit(plan, frame, tile_idx)
+            if len(self._inflight) >= cap:
+                return
+
+    def _claim(self, plan: JobPlan) -> bool:
+        try:
+            self.store.transition(plan.job_id, sm.RUNNING)
+        except (sm.IllegalTransition, JobNotFound):
+            self._drop(plan.job_id)
+            return False
+        plan.state = sm.RUNNING
+        return True
+
+    def _submit(self, plan: JobPlan, frame: FramePlan, tile_idx: int) -> None:
+        s = self.settings
+        if tile_idx == FINISH:
+            task = FrameTask(spec=plan.spec, frame=frame.time, output=str(plan.files.frame(frame.idx)),
+                             tiles=tuple((str(plan.files.tile(frame.idx, t)), plan.boxes[t])
+                                         for t in range(len(plan.boxes))), cache_size=s.scene_cache_size)
+            fn, kind, priority = finish_frame_task, "frame", plan.priority + 1
+        else:
+            task = TileTask(spec=plan.spec, frame=frame.time, tile=plan.boxes[tile_idx], width=plan.width,
+                            height=plan.height, cache_size=s.scene_cache_size,
+                            stop_flag=str(plan.files.stop_flag))
+            fn, kind, priority = render_tile_task, "tile", plan.priority
+        key = f"drt-{kind}-{plan.job_id}-{frame.idx}-{tile_idx}-{uuid.uuid4().hex[:8]}"
+        try:
+            future = self.engine.submit(fn, task, key=key, priority=priority)
+        except BaseException:
+            if tile_idx != FINISH:
+                frame.queue.appendleft(tile_idx)  # not submitted: it stays to do (the cluster may be back later)
+            raise
+        if tile_idx == FINISH:
+            frame.finishing = True
+        else:
+            frame.inflight.add(tile_idx)
+        self._inflight[key] = InFlight(plan.job_id, frame.idx, tile_idx, future, time.monotonic())
+        future.add_done_callback(lambda fut, key=key: self._events.put(("done", key)))
+
+    # -- results -----------------------------------------------------------------------------------------------
+    def _on_done(self, key: str) -> None:
+        rec = self._inflight.pop(key, None)
+        plan = self._plans.get(rec.job_id) if rec is not None else None
+        if rec is None or plan is None:
+            return  # the job was dropped (canceled, failed) while this task ran
+        try:
+            self._handle(plan, rec)
+        except IntegrityError:  # the job's rows vanished under us: it was canceled and deleted meanwhile
+            self._drop(plan.job_id)
+
+    def _handle(self, plan: JobPlan, rec: InFlight) -> None:
+        frame = plan.frames[rec.frame_idx]
+        fut = rec.future
+        if fut.status == "finished":
+            try:
+                result = fut.result()
+            except Exception as e:  # noqa: BLE001 - fetching the result can fail if its worker just died
+                self._failed_attempt(plan, frame, rec.tile_idx, f"{type(e).__name__}: {e}")
+                return
+            if result.get("stopped"):
+                return  # the job was canceled or failed while this tile ran; the plan is being dropped
+            if "error" in result:
+                self._fail(plan.job_id, result["error"])
+            elif rec.tile_idx == FINISH:
+                self._frame_written(plan, frame)
+            else:
+                self._tile_rendered(plan, frame, rec.tile_idx, result)
+        elif fut.status == "error":
+            exc = fut.exception()
+            self._failed_attempt(plan, frame, rec.tile_idx, f"{type(exc).__name__}: {exc}")
+        else:  # cancelled or lost without our asking (scheduler restart): render it again
+            self._failed_attempt(plan, frame, rec.tile_idx, f"task {fut.status}")
+
+    def _tile_rendered(self, plan: JobPlan, frame: FramePlan, tile_idx: int, result: dict) -> None:
+        frame.inflight.discard(tile_idx)
+        try:
+            save_tile(plan.files.tile(frame.idx, tile_idx), result["arrays"])
+        except FileNotFoundError:  # the job's files are gone: it was deleted
+            self._drop(plan.job_id)
+            return
+        x0, y0, x1, y1 = plan.boxes[tile_idx]
+        samples = (x1 - x0) * (y1 - y0) * plan.spp
+        if self.store.tile_done(plan.job_id, frame.idx, tile_idx, samples, float(result.get("seconds", 0.0))):
+            frame.done.add(tile_idx)
+            self.tiles_completed += 1
+            self._tile_times.append(time.monotonic())
+
+    def _frame_written(self, plan: JobPlan, frame: FramePlan) -> None:
+        frame.finishing = False
+        frame.finished = True
+        self.store.frame_done(plan.job_id, frame.idx)
+        plan.files.remove_tiles(frame.idx)
+        if all(f.finished for f in plan.frames):
+            self._succeed(plan)
+
+    def _succeed(self, plan: JobPlan) -> None:
+        try:
+            if plan.state == sm.QUEUED:
+                self.store.transition(plan.job_id, sm.RUNNING)
+            self.store.transition(plan.job_id, sm.SUCCEEDED)
+        except (sm.IllegalTransition, JobNotFound):
+            pass  # canceled at the last moment: the user's word stands
+        self._drop(plan.job_id)
+
+    def _failed_attempt(self, plan: JobPlan, frame: FramePlan, tile_idx: int, message: str) -> None:
+        self.tiles_failed += 1
+        message = " ".join(message.split())
+        attempts = self.store.tile_attempt(plan.job_id, frame.idx, tile_idx, error=message)
+        what = f"frame {frame.time:g} assembly" if tile_idx == FINISH else f"tile {tile_idx} of frame {frame.time:g}"
+        if attempts <= self.settings.tile_retries:
+            log.warning("%s of job %s failed (attempt %d), retrying: %s", what, plan.job_id, attempts, message)
+            if tile_idx == FINISH:
+                frame.finishing = False
+            else:
+                frame.inflight.discard(tile_idx)
+                frame.queue.appendleft(tile_idx)
+            return
+        self._fail(plan.job_id, f"{what} failed after {attempts} attempts: {message}")
+
+    def _fail(self, job_id: str, message: str) -> None:
+        log.warning("job %s failed: %s", job_id, message)
+        try:
+            self.store.transition(job_id, sm.FAILED, error=message)
+        except (sm.IllegalTransition, JobNotFound):
+            pass
+        else:
+            JobFiles(self.settings.data_dir, job_id).stop()  # its other running tiles need not finish
+        self._drop(job_id)
+
+    def _drop(self, job_id: str) -> None:
+        """Forget a job that is no longer active: cancel its tasks still queued on Dask."""
+        self._plans.pop(job_id, None)
+        self._order = [p for p in self._order if p.job_id != job_id]
+        doomed = [k for k, rec in self._inflight.items() if rec.job_id == job_id]
+        futures = [self._inflight.pop(k).future for k in doomed]
+        if futures:
+            try:
+                self.engine.client.cancel(futures)
+            except Exception:  # noqa: BLE001 - best effort: their results are ignored anyway
+                log.debug("cancelling futures failed", exc_info=True)
+
+    # -- plans ---------------------------------------------------------------------------------------------------
+    def _load(self, row) -> JobPlan | None:
+        """Build a job's plan from the database and its checkpoints (the resume path after a restart)."""
+        settings = JobCreate.model_validate_json(row.settings_json)
+        path = self.scenes.path(row.scene_sha256, row.scene_name)
+        if not path.is_file():
+            self._fail(row.id, "the job's scene is missing from the data directory")
+            return None
+        files = JobFiles(self.settings.data_dir, row.id)
+        files.create(len(row.frames))
+        boxes = tile_grid(row.width, row.height, row.tile_size)
+        recorded = self.store.done_tiles(row.id)
+        frames = []
+        for fr in row.frames:
+            done = set() if fr.done else {t for t in recorded.get(fr.idx, set()) if files.tile(fr.idx, t).is_file()}
+            if not fr.done:
+                self.store.forget_tiles(row.id, fr.idx, recorded.get(fr.idx, set()) - done)
+            todo = collections.deque(t for t in range(len(boxes)) if t not in done and not fr.done)
+            frames.append(FramePlan(idx=fr.idx, time=fr.time, queue=todo, done=done, finished=fr.done))
+        if row.job_state == sm.RUNNING:
+            log.info("resuming job %s: %d of %d tiles checkpointed", row.id, row.tiles_done, row.tiles_total)
+        return JobPlan(job_id=row.id, state=row.job_state, priority=row.priority,
+                       spec=RenderSpec.from_settings(settings, str(path), row.scene_sha256), width=row.width,
+                       height=row.height, spp=settings.spp, boxes=boxes, frames=frames, files=files)

@@ -1,0 +1,56 @@
+"""Service settings from environment variables with the prefix ``DRT_`` (pydantic-settings).
+
+``create_app(settings)`` takes a ``ServiceSettings``; ``drt serve`` builds one from the environment and its flags.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from pydantic import Field, SecretStr, field_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+
+def default_cores() -> int:
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+
+
+class ServiceSettings(BaseSettings):
+    model_config = SettingsConfigDict(env_prefix="DRT_", extra="ignore")
+
+    data_dir: Path = Field(Path("drt-data"), description="database, uploaded scenes, checkpoints and results")
+    scheduler_address: str | None = Field(
+        None, description="an external `dask scheduler` (tcp://host:8786); unset: start a LocalCluster")
+    workers: int = Field(1, ge=1, le=256, description="LocalCluster worker processes")
+    threads_per_worker: int = Field(0, ge=0, le=256, description="threads per LocalCluster worker (0: all cores)")
+    processes: bool = Field(True, description="LocalCluster workers as processes (false: threads in the service)")
+    api_token: SecretStr | None = Field(None, description="bearer token required by every endpoint but /healthz")
+    max_upload_bytes: int = Field(256 * 2**20, ge=1, description="largest scene upload (413 above)")
+    max_usdz_unpacked_bytes: int = Field(1 * 2**30, ge=1, description="largest total size of a .usdz's entries")
+    max_usdz_entries: int = Field(10_000, ge=1)
+    max_frames: int = Field(10_000, ge=1, description="frames per job")
+    max_tiles: int = Field(200_000, ge=1, description="tiles per job (frames x tiles per frame)")
+    max_in_flight: int = Field(0, ge=0, description="tiles submitted to Dask at once (0: twice the worker threads)")
+    tile_retries: int = Field(2, ge=0, le=20, description="extra attempts for a tile whose task failed")
+    inspect_timeout: float = Field(120.0, gt=0, description="seconds to load a scene when a job is submitted")
+    scene_cache_size: int = Field(2, ge=1, le=64, description="prepared scenes kept per worker process")
+    poll_interval: float = Field(0.5, gt=0, description="scheduler wake-up interval, seconds")
+
+    @field_validator("data_dir")
+    @classmethod
+    def _absolute(cls, v: Path) -> Path:
+        # Tasks carry paths into the data directory to worker processes, whose working directory may differ.
+        return v.expanduser().absolute()
+
+    @field_validator("api_token", "scheduler_address", mode="before")
+    @classmethod
+    def _empty_is_unset(cls, v):
+        # `DRT_API_TOKEN=` (as compose files write an unset variable) means no token, not the empty token.
+        return None if isinstance(v, str) and not v.strip() else v
+
+    def local_threads(self) -> int:
+        return self.threads_per_worker or max(1, default_cores() // self.workers)
+
+    @property
+    def db_path(self) -> Path:
+        return self.data_dir / "drt.sqlite3"

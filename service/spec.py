@@ -1,0 +1,86 @@
+"""From the wire settings (``schemas.JobCreate``) to the renderer's own calls, the way ``drt render`` maps its flags.
+
+A ``RenderSpec`` is what a Dask task needs to know about a job: plain, frozen and hashable, so it pickles cheaply
+and keys the worker's scene cache. It never holds pydantic objects (workers need not import the wire format).
+
+Mapping (the same as ``renderer.cli.cmd_render``): ``time_filter == "strobe"`` or ``motion_blur == false`` loads the
+scene still (``motion_blur=False``); ``shutter`` overrides the camera's shutter; the rest go to ``RenderOptions``.
+Camera overrides (no ``drt render`` flag) replace fields of the loaded ``Camera``: ``focal_length`` is given in the
+camera's USD units (tenths of a scene unit), ``focus_distance`` in scene units, ``f_stop`` unitless.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+from schemas import JobCreate
+
+# USD camera lengths (focalLength, apertures) are in tenths of a scene unit; the renderer's Camera is in scene units.
+USD_LENS_UNITS_PER_SCENE_UNIT = 10.0
+
+
+@dataclass(frozen=True)
+class RenderSpec:
+    scene_path: str  # the stored upload (inside the data directory)
+    scene_sha256: str
+    camera: str | None = None
+    shutter: tuple[float, float] | None = None
+    motion_blur: bool = True
+    focal_length: float | None = None  # USD units (tenths of a scene unit)
+    f_stop: float | None = None
+    focus_distance: float | None = None  # scene units
+    width: int | None = None
+    height: int | None = None
+    spp: int = 16
+    seed: int = 0
+    filter: str = "gaussian"
+    time_filter: str = "box"
+    dof: bool = True
+    aovs: tuple[str, ...] = ()
+    max_depth: int = 8
+    clamp: float = 0.0
+    half: bool = False
+
+    @classmethod
+    def from_settings(cls, settings: JobCreate, scene_path: str, scene_sha256: str) -> "RenderSpec":
+        return cls(scene_path=scene_path, scene_sha256=scene_sha256, camera=settings.camera,
+                   shutter=tuple(settings.shutter) if settings.shutter else None,
+                   motion_blur=settings.motion_blur, focal_length=settings.focal_length, f_stop=settings.f_stop,
+                   focus_distance=settings.focus_distance, width=settings.width, height=settings.height,
+                   spp=settings.spp, seed=settings.seed, filter=settings.filter, time_filter=settings.time_filter,
+                   dof=settings.dof, aovs=tuple(settings.aovs), max_depth=settings.max_depth, clamp=settings.clamp,
+                   half=settings.half)
+
+    def cache_key(self, frame: float | None) -> tuple:
+        """What a prepared scene depends on (not the file's path: the same content is the same scene)."""
+        d = dataclasses.asdict(self)
+        d.pop("scene_path")
+        d.pop("half")  # only changes how the EXR is stored
+        return (frame, tuple(sorted(d.items())))
+
+    def options(self):
+        from renderer.render import RenderOptions
+
+        return RenderOptions(width=self.width, height=self.height, spp=self.spp, seed=self.seed, filter=self.filter,
+                             time_filter=self.time_filter, dof=self.dof, aovs=self.aovs, max_depth=self.max_depth,
+                             clamp=self.clamp)
+
+    def load(self, frame: float | None):
+        """Load one frame as the renderer's Scene, with the camera overrides applied."""
+        from renderer.usd_scene import load_scene
+
+        scene = load_scene(self.scene_path, frame, camera_path=self.camera, shutter=self.shutter,
+                           motion_blur=self.motion_blur and self.time_filter != "strobe")
+        return self.override_camera(scene)
+
+    def override_camera(self, scene):
+        changes = {}
+        if self.focal_length is not None:
+            changes["focal_length"] = self.focal_length / USD_LENS_UNITS_PER_SCENE_UNIT
+        if self.f_stop is not None:
+            changes["f_stop"] = self.f_stop
+        if self.focus_distance is not None:
+            changes["focus_distance"] = self.focus_distance
+        if not changes:
+            return scene
+        return dataclasses.replace(scene, camera=dataclasses.replace(scene.camera, **changes))

@@ -1,0 +1,175 @@
+"""Creating a job from an upload: settings, size, Idempotency-Key, scene safety and inspection, then the queue.
+
+Order matters, cheapest and most certain first: settings JSON (422) and the file's extension (422); the upload is
+streamed to disk with a byte limit (413) and hashed; the Idempotency-Key is claimed (a replay returns the first
+job; the same key with a different request is 422; while the first request is still running, 409); a ``.usdz``'s
+entries are checked; a worker checks every asset path, composes the stage and loads the first frame (422 with the
+renderer's message); job limits (frames, tiles) are checked (422); only then is the job queued.
+
+Idempotency: the request's identity is the scene's content hash, its file name and the canonical settings JSON. A
+key is remembered with its job until the job is deleted.
+"""
+from __future__ import annotations
+
+import hashlib
+import logging
+from pathlib import Path
+from typing import BinaryIO, Protocol
+
+from pydantic import ValidationError
+
+from schemas import JobCreate
+from schemas.settings import FRAMES_TAGS
+
+from . import errors
+from .checkpoints import tile_count
+from .db import JobRow, Store
+from .engine import Engine
+from .errors import ApiError
+from .settings import ServiceSettings
+from .spec import RenderSpec
+from .uploads import SceneStore, StoredScene, UploadError, check_usdz, new_job_id, safe_name, scene_extension
+from .worker import InspectTask, inspect_task
+
+log = logging.getLogger("drt.submission")
+
+
+def settings_error(e: ValidationError) -> str:
+    """pydantic's errors as one line naming each field: ``invalid settings: spp: Input should be ...``."""
+    parts = []
+    for err in e.errors(include_url=False):
+        loc = ".".join(str(x) for i, x in enumerate(err["loc"])  # the union's tags are not field names
+                       if not (i == 1 and err["loc"][0] == "frames" and x in FRAMES_TAGS))
+        msg = err["msg"].removeprefix("Value error, ")
+        parts.append(f"{loc}: {msg}" if loc else msg)
+    return "invalid settings: " + "; ".join(parts)
+
+
+def parse_settings(text: str) -> JobCreate:
+    try:
+        return JobCreate.model_validate_json(text or "{}")
+    except ValidationError as e:
+        raise ApiError(422, settings_error(e)) from None
+
+
+class Inspector(Protocol):
+    def __call__(self, stored: StoredScene, settings: JobCreate) -> dict: ...
+
+
+class DaskInspector:
+    """Inspects an upload on a worker: pxr parses untrusted bytes there, not in the API process."""
+
+    def __init__(self, engine: Engine, timeout: float):
+        self.engine = engine
+        self.timeout = timeout
+
+    def __call__(self, stored: StoredScene, settings: JobCreate) -> dict:
+        from distributed import TimeoutError as DaskTimeout
+        from distributed.scheduler import KilledWorker
+
+        frames = settings.frame_times()
+        task = InspectTask(spec=RenderSpec.from_settings(settings, str(stored.path), stored.sha256),
+                           frames=tuple(frames) if frames else None)
+        # Highest priority: a user is waiting on this answer, while tiles can wait a moment.
+        fut = self.engine.submit(inspect_task, task, key=f"drt-inspect-{new_job_id()}", priority=1_000_000)
+        try:
+            return fut.result(timeout=self.timeout)
+        except (TimeoutError, DaskTimeout):
+            self._abandon(fut)
+            raise ApiError(422, f"the scene took longer than {self.timeout:g} s to load") from None
+        except KilledWorker:
+            raise ApiError(422, "loading the scene crashed a worker") from None
+        except Exception as e:  # noqa: BLE001 - the cluster itself failed us, not the input
+            log.warning("inspection failed: %s: %s", type(e).__name__, e)
+            raise ApiError(503, errors.CLUSTER_UNAVAILABLE) from None
+
+    def _abandon(self, fut) -> None:
+        """A task cannot be interrupted, so a scene that loads forever would hold a worker thread forever: restart
+        the worker process running it (its other tasks are rescheduled by Dask; tiles are pure)."""
+        try:
+            busy = [w for w, keys in self.engine.client.processing().items() if fut.key in keys]
+            fut.cancel()
+            if busy and self.engine.restartable():
+                log.warning("restarting worker(s) %s stuck loading a scene", busy)
+                self.engine.client.restart_workers(workers=busy, raise_for_error=False)
+        except Exception:  # noqa: BLE001 - best effort; the request is answered either way
+            log.warning("could not restart the worker stuck on %s", fut.key, exc_info=True)
+
+
+class Submitter:
+    def __init__(self, settings: ServiceSettings, store: Store, scenes: SceneStore, on_created=lambda: None):
+        self.settings = settings
+        self.store = store
+        self.scenes = scenes
+        self.on_created = on_created
+
+    def submit(self, upload: BinaryIO, filename: str | None, settings_text: str, idempotency_key: str | None,
+               inspector: Inspector) -> tuple[JobRow, bool]:
+        """Returns (job, created): created is False when an Idempotency-Key replays an earlier request."""
+        settings = parse_settings(settings_text)
+        try:
+            ext = scene_extension(filename)
+        except UploadError as e:
+            raise ApiError(e.status, str(e)) from None
+        frames = settings.frame_times()
+        if frames is not None and len(frames) > self.settings.max_frames:
+            raise ApiError(422, f"too many frames: {len(frames)} (the limit is {self.settings.max_frames})")
+        try:
+            tmp, sha, size = self.scenes.receive(upload)
+        except UploadError as e:
+            raise ApiError(e.status, str(e)) from None
+        name = safe_name(filename or "", ext)
+        try:
+            claimed = False
+            if idempotency_key is not None:
+                request_hash = hashlib.sha256(f"{sha}\n{name}\n{settings.model_dump_json()}".encode()).hexdigest()
+                claim = self.store.claim_key(idempotency_key, request_hash)
+                if claim.outcome == "existing":
+                    return self.store.get_job(claim.job_id), False
+                if claim.outcome == "conflict":
+                    raise ApiError(422, errors.IDEMPOTENCY_MISMATCH)
+                if claim.outcome == "busy":
+                    raise ApiError(409, errors.IDEMPOTENCY_BUSY)
+                claimed = True
+            try:
+                job = self._create(tmp, sha, name, size, ext, settings, idempotency_key, inspector)
+            except BaseException:
+                if claimed:
+                    self.store.release_key(idempotency_key)
+                raise
+        finally:
+            tmp.unlink(missing_ok=True)
+        self.on_created()
+        return job, True
+
+    def _create(self, tmp: Path, sha: str, name: str, size: int, ext: str, settings: JobCreate,
+                idempotency_key: str | None, inspector: Inspector) -> JobRow:
+        s = self.settings
+        created = False
+        try:
+            with self.scenes.pinned(tmp, sha, name, size) as stored:
+                try:
+                    if ext == ".usdz":
+                        check_usdz(stored.path, s.max_usdz_unpacked_bytes, s.max_usdz_entries)
+                except UploadError as e:
+                    raise ApiError(e.status, str(e)) from None
+                info = inspector(stored, settings)
+                if "error" in info:
+                    raise ApiError(422, info["error"])
+                width, height, frames = int(info["width"]), int(info["height"]), list(info["frames"])
+                per_frame = tile_count(width, height, settings.tile)
+                if per_frame * len(frames) > s.max_tiles:
+                    raise ApiError(422, f"the job has {per_frame * len(frames)} tiles; the limit is {s.max_tiles} "
+                                        f"(use a larger tile size or fewer frames)")
+                job_id = new_job_id()  # (its files' directories are made when the scheduler first plans it)
+                job = self.store.create_job(
+                    job_id=job_id, priority=settings.priority, settings_json=settings.model_dump_json(),
+                    scene_sha256=sha, scene_name=name, scene_bytes=size, width=width, height=height,
+                    tile_size=settings.tile, tiles_per_frame=per_frame, frame_times=frames,
+                    exposure_scale=float(info.get("exposure_scale", 1.0)), warnings=list(info.get("warnings", [])),
+                    idempotency_key=idempotency_key)
+                created = True
+                return job
+        finally:
+            if not created:  # a rejected upload leaves nothing behind unless a job uses the same content
+                self.scenes.collect(sha, self.store.scene_in_use)

@@ -1,0 +1,274 @@
+"""Uploaded scenes: stored by content hash, and checked so that nothing outside an upload is ever read.
+
+Storage: ``<data>/scenes/<sha256>/<file name>``; one directory per content, removed when no job uses it.
+
+Safety (untrusted input), in this order, before any stage is composed for rendering:
+
+1. ``check_usdz`` (plain ``zipfile``, no pxr): every entry name stays inside the package (no absolute names, no
+   ``..``, no backslashes or drive letters), entries are stored uncompressed as USDZ requires (so no zip bombs),
+   their count and total size are bounded, and the first entry is a USD layer.
+2. ``check_asset_paths`` (pxr, on a worker): every layer of the upload is parsed alone (``Sdf`` layer, no
+   composition) and every asset path it names (sublayers, references, payloads, variants, clips, and
+   asset-valued attributes such as textures) must resolve to a file of the upload: a ``.usdz``'s own entries, or
+   the single uploaded file itself (a UDIM pattern needs at least one of its tiles). Absolute paths, URLs, ``..``
+   escapes, package-relative (``a.usdz[b]``) and expression paths, and missing files are rejected naming the path.
+   Layers found this way are checked in turn.
+
+Only then does ``load_scene`` open the stage, and every asset it can reach is inside the upload.
+"""
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import posixpath
+import re
+import shutil
+import tempfile
+import threading
+import uuid
+import zipfile
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+from typing import BinaryIO, Callable
+
+SCENE_EXTENSIONS = (".usda", ".usdc", ".usd", ".usdz")
+LAYER_EXTENSIONS = (".usda", ".usdc", ".usd")
+_CHUNK = 1 << 20
+
+
+class UploadError(Exception):
+    """An upload the service refuses; ``status`` is the HTTP status (413 or 422), the message names the problem."""
+
+    status = 422
+
+
+class UploadTooLarge(UploadError):
+    status = 413
+
+    def __init__(self, limit: int):
+        super().__init__(f"upload exceeds the limit of {limit} bytes")
+
+
+def scene_extension(filename: str | None) -> str:
+    ext = os.path.splitext(filename or "")[1].lower()
+    if ext not in SCENE_EXTENSIONS:
+        raise UploadError("scene must be a .usda, .usdc, .usd or .usdz file")
+    return ext
+
+
+def safe_name(filename: str, ext: str) -> str:
+    """The upload's own base name when it is plain (messages then name the user's file), else ``scene<ext>``."""
+    base = os.path.basename(filename.replace("\\", "/"))
+    stem = base[: -len(ext)] if base.lower().endswith(ext) else ""
+    if re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}", stem or "-") is None:
+        stem = "scene"
+    return stem + ext
+
+
+@dataclass(frozen=True)
+class StoredScene:
+    sha256: str
+    name: str
+    path: Path
+    size: int
+
+
+class SceneStore:
+    """Content-addressed scene files. ``pin`` keeps a scene from being collected while a request uses it."""
+
+    def __init__(self, root: Path, max_bytes: int):
+        self.root = root
+        self.tmp = root / ".incoming"
+        self.max_bytes = max_bytes
+        self.tmp.mkdir(parents=True, exist_ok=True)
+        self._lock = threading.Lock()
+        self._pins: Counter[str] = Counter()
+
+    def receive(self, src: BinaryIO) -> tuple[Path, str, int]:
+        """Copy an upload to a temporary file, hashing as it goes. Returns (temp path, sha256, size)."""
+        h = hashlib.sha256()
+        size = 0
+        fd, tmp = tempfile.mkstemp(dir=self.tmp, suffix=".part")
+        try:
+            with os.fdopen(fd, "wb") as out:
+                while chunk := src.read(_CHUNK):
+                    size += len(chunk)
+                    if size > self.max_bytes:
+                        raise UploadTooLarge(self.max_bytes)
+                    h.update(chunk)
+                    out.write(chunk)
+        except BaseException:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
+            raise
+        return Path(tmp), h.hexdigest(), size
+
+    @contextlib.contextmanager
+    def pinned(self, tmp: Path, sha256: str, name: str, size: int):
+        """Place a received upload at its content address and keep it there for the duration of the block."""
+        with self._lock:
+            self._pins[sha256] += 1
+            try:
+                d = self.root / sha256
+                d.mkdir(parents=True, exist_ok=True)
+                dest = d / name
+                if dest.exists():
+                    tmp.unlink(missing_ok=True)
+                else:
+                    os.replace(tmp, dest)  # atomic: a reader sees no file or the whole upload
+            except BaseException:
+                self._unpin(sha256)
+                raise
+        try:
+            yield StoredScene(sha256=sha256, name=name, path=dest, size=size)
+        finally:
+            with self._lock:
+                self._unpin(sha256)
+
+    def _unpin(self, sha256: str) -> None:
+        self._pins[sha256] -= 1
+        if self._pins[sha256] <= 0:
+            del self._pins[sha256]
+
+    def path(self, sha256: str, name: str) -> Path:
+        return self.root / sha256 / name
+
+    def collect(self, sha256: str, in_use: Callable[[str], bool]) -> bool:
+        """Remove a scene no job uses and no request holds. Returns whether it was removed."""
+        with self._lock:
+            if self._pins.get(sha256) or in_use(sha256):
+                return False
+            shutil.rmtree(self.root / sha256, ignore_errors=True)
+            return True
+
+
+def new_job_id() -> str:
+    return uuid.uuid4().hex
+
+
+# -------------------------------------------------------------------------------------------------------------
+# .usdz packages
+
+
+def _entry_escapes(name: str) -> bool:
+    if not name or name.startswith("/") or "\\" in name or re.match(r"^[A-Za-z]:", name):
+        return True
+    return any(part == ".." for part in name.split("/"))
+
+
+def check_usdz(path: Path, max_unpacked: int, max_entries: int) -> None:
+    try:
+        with zipfile.ZipFile(path) as zf:
+            infos = zf.infolist()
+    except (zipfile.BadZipFile, OSError, ValueError):
+        raise UploadError(".usdz is not a valid zip archive") from None
+    if not infos:
+        raise UploadError(".usdz package is empty")
+    if len(infos) > max_entries:
+        raise UploadError(f".usdz has more than {max_entries} entries")
+    total = 0
+    for info in infos:
+        name = info.filename
+        if _entry_escapes(name):
+            raise UploadError(f".usdz entry escapes the package: {name}")
+        if info.flag_bits & 0x1:
+            raise UploadError(f".usdz entry is encrypted: {name}")
+        if info.compress_type != zipfile.ZIP_STORED:
+            raise UploadError(f".usdz entry is compressed (USDZ stores entries uncompressed): {name}")
+        total += info.file_size
+    if total > max_unpacked:
+        raise UploadError(f".usdz unpacks to more than {max_unpacked} bytes")
+    if os.path.splitext(infos[0].filename)[1].lower() not in LAYER_EXTENSIONS:
+        raise UploadError(f".usdz must start with a USD layer, found {infos[0].filename}")
+
+
+# -------------------------------------------------------------------------------------------------------------
+# Asset paths (pxr: runs on a worker, like everything that parses USD)
+
+
+def _resolve_inside(anchor_entry: str, asset: str) -> str:
+    """The upload-relative name ``asset`` (authored in ``anchor_entry``) points at; UploadError if it leaves."""
+    if "`" in asset:
+        raise UploadError(f"asset path expressions are not supported: {asset}")
+    if re.match(r"^[A-Za-z][A-Za-z0-9+.-]+:", asset):
+        raise UploadError(f"asset path is a URL: {asset}")
+    if asset.startswith(("/", "\\")) or re.match(r"^[A-Za-z]:", asset):
+        raise UploadError(f"asset path is absolute: {asset}")
+    if "[" in asset or "]" in asset:
+        raise UploadError(f"package-relative asset paths are not supported: {asset}")
+    rel = posixpath.normpath(posixpath.join(posixpath.dirname(anchor_entry), asset.replace("\\", "/")))
+    if rel == ".." or rel.startswith("../") or rel.startswith("/"):
+        raise UploadError(f"asset path escapes the upload: {asset}")
+    return rel
+
+
+def hide_dir(text: str, directory: Path) -> str:
+    """A message without the server's directory (clients see their own file names only)."""
+    return text.replace(str(directory) + os.sep, "").replace(str(directory), ".")
+
+
+def _present(target: str, entries: set[str]) -> bool:
+    """``target`` is a file of the upload; a UDIM pattern (``wood.<UDIM>.png``) needs one tile of it."""
+    if "<UDIM>" not in target:
+        return target in entries
+    pattern = re.compile(re.escape(target).replace(re.escape("<UDIM>"), r"1\d{3}") + r"\Z")
+    return any(pattern.match(e) for e in entries)
+
+
+def _parse_failure(name: str, err: Exception, directory: Path) -> UploadError:
+    text = hide_dir(str(err), directory)
+    parts = re.findall(r": '(.*?)'\s*(?=\n\s*Error in|$)", text, re.S)
+    msg = parts[0] if parts else text
+    msg = " ".join(re.sub(r"\b[A-Za-z_][A-Za-z0-9_]*::", "", msg).split())
+    m = re.search(r"[^\s:]*:(\d+):(\d+):\s*(.*)", msg)
+    if m:
+        return UploadError(f"malformed USD in {name}: syntax error at line {m.group(1)} "
+                           f"(column {m.group(2)}): {m.group(3)}")
+    return UploadError(f"malformed USD in {name}: {msg}")
+
+
+def check_asset_paths(path: Path) -> None:
+    """Every asset path reachable from the upload at ``path`` resolves inside it (see the module docstring)."""
+    from pxr import UsdUtils
+
+    path = Path(path)
+    if path.suffix.lower() == ".usdz":
+        with zipfile.ZipFile(path) as zf:
+            names = zf.namelist()
+        entries = set(names)
+        root = names[0]
+
+        def identifier(entry: str) -> str:
+            return f"{path}[{entry}]"
+
+        display = lambda entry: f"{path.name}[{entry}]"  # noqa: E731
+    else:
+        root = path.name
+        entries = {root}
+
+        def identifier(entry: str) -> str:
+            return str(path)
+
+        display = lambda entry: entry  # noqa: E731
+
+    seen = {root}
+    todo = [root]
+    while todo:
+        entry = todo.pop()
+        try:
+            sublayers, references, payloads = UsdUtils.ExtractExternalReferences(identifier(entry))
+        except Exception as e:  # noqa: BLE001 - pxr raises Tf.ErrorException (and others) for unreadable layers
+            raise _parse_failure(display(entry), e, path.parent) from None
+        for asset in [*sublayers, *references, *payloads]:
+            if not asset:
+                continue
+            target = _resolve_inside(entry, asset)
+            if not _present(target, entries):
+                raise UploadError(f"asset not found in the upload: {asset}")
+            if os.path.splitext(target)[1].lower() == ".usdz":
+                raise UploadError(f"nested .usdz packages are not supported: {asset}")
+            if os.path.splitext(target)[1].lower() in LAYER_EXTENSIONS and target not in seen:
+                seen.add(target)
+                todo.append(target)

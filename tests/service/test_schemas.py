@@ -1,0 +1,89 @@
+"""The wire format: settings named like the `drt render` flags, with bounds and messages that name the field."""
+from __future__ import annotations
+
+import pytest
+
+from schemas import AOVS, FILTERS, TIME_FILTERS, FrameRange, JobCreate
+from service.errors import ApiError
+from service.spec import RenderSpec
+from service.submission import parse_settings
+
+
+def test_names_match_the_renderer():
+    from renderer.film import FILTERS as R_FILTERS
+    from renderer.integrator import TIME_FILTERS as R_TIME
+    from renderer.render import AOV_NAMES
+
+    assert set(FILTERS) == set(R_FILTERS)
+    assert set(TIME_FILTERS) == set(R_TIME)
+    assert set(AOVS) == set(AOV_NAMES)
+
+
+def test_defaults_are_drt_render_defaults():
+    s = JobCreate()
+    assert (s.spp, s.seed, s.tile, s.filter, s.time_filter, s.motion_blur, s.dof, s.half, s.priority) == \
+        (16, 0, 64, "gaussian", "box", True, True, False, 0)
+    from renderer.render import MAX_DEPTH, RenderOptions
+
+    o = RenderOptions()
+    assert (s.max_depth, s.clamp) == (o.max_depth, o.clamp)
+    assert JobCreate.model_fields["max_depth"].metadata[-1].le == MAX_DEPTH
+    assert s.frame_times() is None
+
+
+def test_frames_list_or_range():
+    assert JobCreate(frames=[3, 1.5]).frame_times() == [3.0, 1.5]
+    assert JobCreate(frames={"start": 1, "end": 3}).frame_times() == [1.0, 2.0, 3.0]
+    assert FrameRange(start=0, end=1, step=0.1).count() == 11  # 1.0 itself despite binary fractions
+    assert JobCreate.model_validate_json('{"frames": {"start": 0, "end": 4, "step": 2}}').frame_times() == [0, 2, 4]
+
+
+@pytest.mark.parametrize("body, detail", [
+    ('{"spp": 0}', "invalid settings: spp: Input should be greater than or equal to 1"),
+    ('{"spp": 70000}', "invalid settings: spp: Input should be less than or equal to 65536"),
+    ('{"seed": -1}', "invalid settings: seed: Input should be greater than or equal to 0"),
+    ('{"width": 0}', "invalid settings: width: Input should be greater than or equal to 1"),
+    ('{"filter": "mitchell"}',
+     "invalid settings: filter: Input should be 'gaussian', 'box', 'triangle' or 'blackman-harris'"),
+    ('{"aovs": ["beauty"]}', "invalid settings: aovs.0: Input should be 'depth', 'normal' or 'albedo'"),
+    ('{"shutter": [0.5, 0.25]}', "invalid settings: shutter: shutter open (0.5) is after close (0.25)"),
+    ('{"frames": [1, 1]}', "invalid settings: frames: frames must be unique"),
+    ('{"frames": []}', "invalid settings: frames: give at least one frame"),
+    ('{"frames": {"start": 5, "end": 1}}', "invalid settings: frames: end (1) is before start (5)"),
+    ('{"camera": "World/Cam"}', "invalid settings: camera: camera must be an absolute prim path, got 'World/Cam'"),
+    ('{"sp": 64}', "invalid settings: sp: Extra inputs are not permitted"),
+    ('{"priority": 5000}', "invalid settings: priority: Input should be less than or equal to 1000"),
+    ('{"f_stop": -1}', "invalid settings: f_stop: Input should be greater than or equal to 0"),
+    ('{"max_depth": 65}', "invalid settings: max_depth: Input should be less than or equal to 64"),
+    ('{"clamp": -1}', "invalid settings: clamp: Input should be greater than or equal to 0"),
+])
+def test_bad_settings_name_the_field(body, detail):
+    with pytest.raises(ApiError) as e:
+        parse_settings(body)
+    assert e.value.status == 422
+    assert e.value.detail == detail
+
+
+def test_broken_json_says_so():
+    with pytest.raises(ApiError) as e:
+        parse_settings('{"spp": 4')
+    assert e.value.status == 422 and e.value.detail.startswith("invalid settings: Invalid JSON: EOF while parsing")
+
+
+def test_nan_is_rejected():
+    with pytest.raises(ApiError) as e:
+        parse_settings('{"frames": [NaN]}')
+    assert e.value.detail.startswith("invalid settings: frames")
+
+
+def test_spec_maps_settings_like_drt_render():
+    s = JobCreate(spp=8, seed=3, time_filter="strobe", shutter=(-0.25, 0.25), aovs=["depth", "depth"], dof=False,
+                  focal_length=50.0)
+    spec = RenderSpec.from_settings(s, "/x/scene.usda", "abc")
+    o = spec.options()
+    assert (o.spp, o.seed, o.time_filter, o.dof, o.aovs) == (8, 3, "strobe", False, ("depth",))
+    assert spec.shutter == (-0.25, 0.25)
+    # half changes only the file: the same prepared scene serves both
+    halved = RenderSpec.from_settings(s.model_copy(update={"half": True}), "/y", "abc")
+    assert spec.cache_key(1.0) == halved.cache_key(1.0)
+    assert spec.cache_key(1.0) != spec.cache_key(2.0)
