@@ -192,7 +192,7 @@ def node_box(lo: wp.array(dtype=wp.vec3), hi: wp.array(dtype=wp.vec3), b: int, k
     return wp.lerp(lo[b + k0], lo[b + k1], u), wp.lerp(hi[b + k0], hi[b + k1], u)
 
 
-@wp.func
+@wp.func(inline=True)  # one call site: no copy of the Geometry struct
 def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float, s: float, best: Hit, inst: int):
     """Closest triangle of mesh m (object-space ray) nearer than tmax; updates and returns ``best``."""
     k0, k1, u = mesh_keys_at(geo, m, s)
@@ -252,7 +252,7 @@ def instance_visible(geo: Geometry, inst: int, s: float):
     return s >= geo.inst_vis_from[inst] and s <= geo.inst_vis_to[inst]
 
 
-@wp.func
+@wp.func(inline=True)  # one call site: no copy of the Geometry struct
 def intersect_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, tmax: float, s: float):
     """Closest hit of a world-space ray at normalised shutter time s, nearer than tmax."""
     best = Hit()

@@ -17,6 +17,9 @@ import math
 import numpy as np
 import warp as wp
 
+# Rendering needs no gradients: no adjoint code (half the compile time and code size).
+wp.set_module_options({"enable_backward": False})
+
 FILTER_BOX = 0
 FILTER_TRIANGLE = 1
 FILTER_GAUSSIAN = 2

@@ -31,6 +31,9 @@ from .shadow import hit_uv, transmittance
 from .textures import Textures
 from .scene import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_DOME, LIGHT_RECT, LIGHT_SPHERE
 
+# Rendering needs no gradients: no adjoint code (half the compile time and code size).
+wp.set_module_options({"enable_backward": False})
+
 TIME_BOX = 0
 TIME_TRIANGLE = 1
 TIME_STROBE = 2

@@ -118,7 +118,7 @@ def distant_axis(lights: Lights, li: int, s: float):
     return wp.normalize(wp.transform_vector(light_matrix(lights, li, s), wp.vec3(0.0, 0.0, 1.0)))
 
 
-@wp.func
+@wp.func(inline=True)  # called once per path vertex: no copy of the big structs
 def sample_light(lights: Lights, geo: Geometry, mats: Materials, tex: Textures, li: int, p: wp.vec3,
                  n: wp.vec3, s: float, u_pick: float, u: wp.vec2):
     """Sample light ``li`` from point p (shading normal n) at time s.
@@ -205,7 +205,7 @@ def plane_hit(ro: wp.vec3, rd: wp.vec3, point: wp.vec3, normal: wp.vec3):
     return wp.dot(point - ro, normal) / denom
 
 
-@wp.func
+@wp.func(inline=True)  # called once per path vertex: no copy of the big structs
 def area_light_hit(lights: Lights, li: int, ro: wp.vec3, rd: wp.vec3, tmax: float, s: float):
     """Does the ray (ro, rd) reach UsdLux area light li before tmax? Returns (t, Le, pdf of sampling rd).
 
@@ -261,7 +261,7 @@ def area_light_hit(lights: Lights, li: int, ro: wp.vec3, rd: wp.vec3, tmax: floa
     return float(BIG), zero, 0.0
 
 
-@wp.func
+@wp.func(inline=True)  # called once per path vertex: no copy of the big structs
 def infinite_light_eval(lights: Lights, li: int, d: wp.vec3, n_prev: wp.vec3, s: float):
     """Radiance from infinite light li along a ray leaving the scene in direction d, and the pdf of sampling d.
 
@@ -279,7 +279,7 @@ def infinite_light_eval(lights: Lights, li: int, d: wp.vec3, n_prev: wp.vec3, s:
     return wp.vec3(0.0), 0.0
 
 
-@wp.func
+@wp.func(inline=True)  # called once per path vertex: no copy of the big structs
 def mesh_light_pdf(lights: Lights, geo: Geometry, li: int, inst: int, tri_global: int, ref: wp.vec3,
                    hit: wp.vec3, s: float):
     """Solid-angle pdf with which ``sample_light`` would have chosen point ``hit`` on an emissive triangle."""

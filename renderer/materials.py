@@ -32,6 +32,9 @@ import warp as wp
 from .scene import Material, Mesh, Texture
 from .textures import OUTPUT_RGB, OUTPUTS, WRAP_MODES, Textures, texture_fetch, upload_textures
 
+# No gradients are ever taken: no adjoint code (half the compile time and code size).
+wp.set_module_options({"enable_backward": False})
+
 # UsdPreviewSurface input slots
 IN_DIFFUSE = 0
 IN_EMISSIVE = 1
@@ -146,7 +149,7 @@ def select_scalar(c: wp.vec4, output: int):
     return c[output]
 
 
-@wp.func
+@wp.func(inline=True)  # small and called per input: no copy of the Materials struct
 def input_color(mats: Materials, tex: Textures, mat: int, slot: int, uv: wp.vec2):
     """A colour (or vector) input of material ``mat`` at uv."""
     i = mat * NUM_INPUTS + slot
@@ -156,7 +159,7 @@ def input_color(mats: Materials, tex: Textures, mat: int, slot: int, uv: wp.vec2
     return select_color(binding_rgba(mats, tex, b, uv), mats.b_output[b])
 
 
-@wp.func
+@wp.func(inline=True)  # small and called per input: no copy of the Materials struct
 def input_scalar(mats: Materials, tex: Textures, mat: int, slot: int, uv: wp.vec2):
     """A float input of material ``mat`` at uv."""
     i = mat * NUM_INPUTS + slot
@@ -176,7 +179,7 @@ def clamp01_3(c: wp.vec3):
     return wp.vec3(wp.clamp(c[0], 0.0, 1.0), wp.clamp(c[1], 0.0, 1.0), wp.clamp(c[2], 0.0, 1.0))
 
 
-@wp.func
+@wp.func(inline=True)  # called once per path vertex: no copy of the big structs
 def eval_opacity(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2):
     """Just the opacity of ``eval_material`` (after opacityThreshold): for shadow rays through cut-outs."""
     opacity = clamp01(input_scalar(mats, tex, mat_id, IN_OPACITY, uv))
@@ -189,14 +192,14 @@ def eval_opacity(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2):
     return opacity
 
 
-@wp.func
+@wp.func(inline=True)  # called once per path vertex: no copy of the big structs
 def eval_emission(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2):
     """Just the emissive colour of ``eval_material``: for points sampled on emissive meshes."""
     e = input_color(mats, tex, mat_id, IN_EMISSIVE, uv)
     return wp.vec3(wp.max(e[0], 0.0), wp.max(e[1], 0.0), wp.max(e[2], 0.0))
 
 
-@wp.func
+@wp.func(inline=True)  # called once per path vertex: no copy of the big structs
 def eval_material(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2):
     """All UsdPreviewSurface inputs of material ``mat_id`` at texture coordinates ``uv``.
 

@@ -23,7 +23,7 @@ def hit_uv(geo: Geometry, m: int, tri: int, b1: float, b2: float):
     return geo.uvs[3 * tri] * (1.0 - b1 - b2) + geo.uvs[3 * tri + 1] * b1 + geo.uvs[3 * tri + 2] * b2
 
 
-@wp.func
+@wp.func(inline=True)  # one call site: no copy of the Geometry struct
 def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro: wp.vec3, rd: wp.vec3,
                        tmax: float, s: float, trans: float):
     """Multiply ``trans`` by (1 - opacity) of every triangle of mesh m crossed before tmax; stops at 0."""
@@ -64,7 +64,7 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
     return tr
 
 
-@wp.func
+@wp.func(inline=True)  # one call site: no copy of the Geometry struct
 def transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd: wp.vec3, tmax: float,
                   s: float):
     """Fraction of light passing along the segment ro + t rd, t in (0, tmax), at time s."""

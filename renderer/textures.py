@@ -36,6 +36,9 @@ import warp as wp
 
 from .scene import Texture
 
+# No gradients are ever taken: no adjoint code (half the compile time and code size).
+wp.set_module_options({"enable_backward": False})
+
 MAX_TEXTURE_SIZE = 4096  # texels on the longest side; larger images are downsampled when read
 TEXTURE_BUDGET = 1 << 30  # bytes of texels a scene may upload before the largest images are halved
 
