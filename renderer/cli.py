@@ -68,9 +68,7 @@ def _clamp(text: str) -> float:
 
 def add_render_settings(p: argparse.ArgumentParser) -> None:
     """Flags shared by ``drt render`` and ``drt submit``."""
-    from .film import FILTERS
-    from .integrator import TIME_FILTERS
-    from .render import AOV_NAMES
+    from .options import AOV_NAMES, FILTERS, TIME_FILTERS
 
     p.add_argument("--frame", type=_number, default=None, help="time code to render (default: stage start)")
     p.add_argument("--camera", default=None, metavar="PRIM_PATH", help="camera prim (default: render settings)")

@@ -20,13 +20,12 @@ import warp as wp
 # Rendering needs no gradients: no adjoint code (half the compile time and code size).
 wp.set_module_options({"enable_backward": False})
 
-FILTER_BOX = 0
-FILTER_TRIANGLE = 1
-FILTER_GAUSSIAN = 2
-FILTER_BLACKMAN_HARRIS = 3
+from .options import FILTERS
 
-FILTERS = {"box": FILTER_BOX, "triangle": FILTER_TRIANGLE, "gaussian": FILTER_GAUSSIAN,
-           "blackman-harris": FILTER_BLACKMAN_HARRIS}
+FILTER_BOX = FILTERS["box"]
+FILTER_TRIANGLE = FILTERS["triangle"]
+FILTER_GAUSSIAN = FILTERS["gaussian"]
+FILTER_BLACKMAN_HARRIS = FILTERS["blackman-harris"]
 # Radii in pixels: box covers exactly one pixel; gaussian as pbrt-v4 (sigma 0.5); Blackman-Harris 1.5 px
 # radius (Cycles' default filter width of 1.5 px is the *half* width of its window... we take the full 3 px
 # support that Cycles uses).

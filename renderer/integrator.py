@@ -25,19 +25,19 @@ from .film import SampleBuffer
 from .light_sample import area_light_hit, choose_light, infinite_light_eval, mesh_light_pdf, sample_light
 from .lights import Lights
 from .materials import MaterialSample, Materials, apply_normal_map, eval_material, triangle_tangent
+from .options import TIME_FILTERS
 from .sampler import DIM_FILM, DIM_LENS, DIM_LIGHT_BASE, DIM_TIME, sample_1d, sample_2d
 from .sampling import sample_tent
 from .shadow import hit_uv, transmittance
-from .textures import Textures
 from .scene import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_DOME, LIGHT_RECT, LIGHT_SPHERE
+from .textures import Textures
 
 # Rendering needs no gradients: no adjoint code (half the compile time and code size).
 wp.set_module_options({"enable_backward": False})
 
-TIME_BOX = 0
-TIME_TRIANGLE = 1
-TIME_STROBE = 2
-TIME_FILTERS = {"box": TIME_BOX, "triangle": TIME_TRIANGLE, "strobe": TIME_STROBE}
+TIME_BOX = TIME_FILTERS["box"]
+TIME_TRIANGLE = TIME_FILTERS["triangle"]
+TIME_STROBE = TIME_FILTERS["strobe"]
 
 # Sample dimensions of bounce k start at DIM_LIGHT_BASE + k * DIMS_PER_BOUNCE:
 # +0 light choice, +1..2 point on the light, +3 BSDF lobe, +4..5 BSDF direction, +6 Russian roulette.

@@ -5,9 +5,12 @@ lights from their outer surface; a distant light arrives along its local -Z with
 a dome light from every direction (a constant colour or a lat-long texture, see ``envmap``); emissive meshes
 from both faces (as Cycles does).
 
-A shading point samples ONE light, chosen with probability proportional to an estimate of its power (pbrt's
-power light sampler): area lights by radiance x area x pi, infinite lights (dome, distant) by the power they
-would deliver onto the scene's bounding sphere. The sampling routines are in ``light_sample``.
+A shading point samples ONE light, chosen with probability proportional to the irradiance it can deliver to
+the scene: a distant light its irradiance, a dome pi times its mean radiance, a finite light its power spread
+over a sphere reaching the scene's centre (at least the scene's radius away), never more than pi times its
+radiance (no light outshines a dome of its own radiance). Raw power (pbrt's power light sampler) would let a
+huge or far-away light starve a small bright one, or an HDR dome's sun. The sampling routines are in
+``light_sample``.
 """
 from __future__ import annotations
 
@@ -34,7 +37,7 @@ class Lights:
     xf_count: wp.array(dtype=wp.int32)
     xf_still: wp.array(dtype=wp.mat44)  # light-to-world of lights that do not move (xf_count == 1)
     keys: MotionKeys
-    select_cdf: wp.array(dtype=wp.float32)  # (count,) cumulative selection probability, by power
+    select_cdf: wp.array(dtype=wp.float32)  # (count,) cumulative selection probability
     select_pdf: wp.array(dtype=wp.float32)  # (count,) probability of choosing each light
     instance: wp.array(dtype=wp.int32)  # mesh lights: the emissive instance
     inst_light: wp.array(dtype=wp.int32)  # per instance: its mesh light, or -1
@@ -67,6 +70,25 @@ def scene_radius(scene: Scene) -> float:
     return float(max(0.5 * np.linalg.norm(hi - lo), 1e-6))
 
 
+def scene_centre(scene: Scene) -> np.ndarray:
+    """Centre of the scene's geometry at the shutter start (the origin when there is none)."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for inst in scene.instances:
+        pts = scene.meshes[inst.mesh].points[0]
+        if len(pts):
+            m = matrix_at(inst.transform, 0.0)
+            w = pts.min(0) @ m[:3, :3].T + m[:3, 3], pts.max(0) @ m[:3, :3].T + m[:3, 3]
+            lo, hi = np.minimum(lo, np.minimum(*w)), np.maximum(hi, np.maximum(*w))
+    return (lo + hi) / 2 if np.isfinite(lo).all() else np.zeros(3)
+
+
+def delivered_irradiance(power: float, lum: float, light_pos: np.ndarray, centre: np.ndarray, radius: float):
+    """Irradiance a finite light of ``power`` can deliver at the scene: power / (4 pi d^2), d at least the scene
+    radius, capped at pi times its radiance ``lum``."""
+    d2 = max(float(np.sum((light_pos - centre) ** 2)), radius * radius)
+    return min(power / (4.0 * math.pi * d2), math.pi * lum)
+
+
 def _axis_scales(xf) -> np.ndarray:
     m = matrix_at(xf, 0.0)
     return np.linalg.norm(m[:3, :3], axis=0)
@@ -76,6 +98,7 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
     """Lights of a scene for the kernels; returns the struct and the number of lights."""
     kinds, radiance, size, insts, cdfs, bases, counts, powers, transforms = ([] for _ in range(9))
     radius = scene_radius(scene)
+    centre = scene_centre(scene)
     env_image, env_xf = None, np.eye(4)
     dome_visible = 0
     for light in scene.lights:
@@ -100,12 +123,13 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
                 continue
             cdf = (np.cumsum(tri_power) / tri_power.sum()).astype(np.float32)
             cdf[-1] = 1.0
-            power = 2.0 * math.pi * tri_power.sum()  # both faces emit
+            power = delivered_irradiance(2.0 * math.pi * tri_power.sum(),  # both faces emit
+                                         float(emis.max()), tri.mean((0, 1)), centre, radius)
         elif light.kind == LIGHT_DISTANT:
             half = math.radians(max(0.0, light.angle) * 0.5)
             cos_max = math.cos(half) if half > 1e-6 else 1.0
             sz = (cos_max, 0.0, 0.0, 0.0)
-            power = lum * math.pi * radius**2  # irradiance over the scene's cross-section
+            power = lum  # the irradiance it delivers
             if cos_max < 1.0:  # the disk of directions' radiance that gives the irradiance at normal incidence
                 rad = rad / (math.pi * math.sin(half) ** 2)
         elif light.kind == LIGHT_DOME:
@@ -124,17 +148,21 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
             elif texture is not None:  # a second textured dome: its average colour
                 rad = rad * np.asarray(texture, np.float64).reshape(-1, 3).mean(0)
                 mean = _luminance(rad)
-            power = mean * 4.0 * math.pi**2 * radius**2
-        elif light.kind == LIGHT_RECT:
-            power = lum * light.width * light.height * sx * sy * math.pi
-        elif light.kind == LIGHT_DISK:
-            power = lum * math.pi * (light.radius * sx) ** 2 * math.pi
-        elif light.kind == LIGHT_SPHERE:
-            r = light.radius * sx
-            power = lum * 4.0 * math.pi * r * r * math.pi if r > 0 else lum * 4.0 * math.pi
-        else:  # cylinder: length along local X, radius in Y/Z
-            sz = (light.length, 0.0, light.radius, 0.0)
-            power = lum * 2.0 * math.pi * light.radius * sy * light.length * sx * math.pi
+            power = math.pi * mean  # irradiance of a uniform dome of the mean radiance
+        else:
+            if light.kind == LIGHT_RECT:
+                phi = lum * light.width * light.height * sx * sy * math.pi
+            elif light.kind == LIGHT_DISK:
+                phi = lum * math.pi * (light.radius * sx) ** 2 * math.pi
+            elif light.kind == LIGHT_SPHERE:
+                r = light.radius * sx
+                phi = lum * 4.0 * math.pi * r * r * math.pi if r > 0 else lum * 4.0 * math.pi
+            else:  # cylinder: length along local X, radius in Y/Z
+                sz = (light.length, 0.0, light.radius, 0.0)
+                phi = lum * 2.0 * math.pi * light.radius * sy * light.length * sx * math.pi
+            point = light.kind == LIGHT_SPHERE and light.radius <= 0  # radiance holds an intensity: no cap
+            power = delivered_irradiance(phi, math.inf if point else lum, matrix_at(light.transform, 0.0)[:3, 3],
+                                         centre, radius)
         if not np.isfinite(rad).all() or (rad <= 0).all() or not power > 0:
             continue
         kinds.append(light.kind)

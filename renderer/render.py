@@ -26,15 +26,13 @@ from .camera import CameraSetup, ndc_matrix, setup_camera
 from .errors import Cancelled, SettingsError
 from .flatten import flatten_still_instances
 from .geometry import GeometryStats, upload_geometry
-from .integrator import TIME_FILTERS, trace_wave_kernel
+from .integrator import PathSettings, trace_wave_kernel
 from .lights import upload_lights
-from .integrator import PathSettings
 from .materials import upload_material_textures, upload_materials
 from .motion import matrix_at
+from .options import AOV_NAMES, MAX_DEPTH, TIME_FILTERS
 from .scene import Scene
 
-AOV_NAMES = ("depth", "normal", "albedo")
-MAX_DEPTH = 64
 MAX_SPP = 1 << 16
 MAX_PIXELS = 16384 * 16384
 

@@ -98,19 +98,23 @@ def _pxr_message(err: Exception) -> str:
     return " ".join(msg.split())
 
 
+def malformed_usd_message(name: str, err: Exception) -> str:
+    """One line for a USD file pxr cannot read, with the line (and column) the parser reported."""
+    msg = _pxr_message(err)
+    m = re.search(r"[^\s:]*:(\d+):(\d+):\s*(.*)", msg)
+    if m:
+        return f"malformed USD in {name}: syntax error at line {m.group(1)} (column {m.group(2)}): {m.group(3)}"
+    m = re.search(r"line (\d+)", msg)
+    where = f" at line {m.group(1)}" if m else ""
+    return f"malformed USD in {name}{where}: {msg}"
+
+
 def _open_stage(path: str) -> Usd.Stage:
     name = os.path.basename(path)
     try:
         stage = Usd.Stage.Open(path, Usd.Stage.LoadAll)
     except Tf.ErrorException as e:
-        msg = _pxr_message(e)
-        m = re.search(r"[^\s:]*:(\d+):(\d+):\s*(.*)", msg)
-        if m:
-            raise SceneError(f"malformed USD in {name}: syntax error at line {m.group(1)} "
-                             f"(column {m.group(2)}): {m.group(3)}") from None
-        m = re.search(r"line (\d+)", msg)
-        where = f" at line {m.group(1)}" if m else ""
-        raise SceneError(f"malformed USD in {name}{where}: {msg}") from None
+        raise SceneError(malformed_usd_message(name, e)) from None
     except Exception as e:  # noqa: BLE001 - any other pxr failure is a user error about this file
         raise SceneError(f"malformed USD in {name}: {' '.join(str(e).split())}") from None
     if stage is None:

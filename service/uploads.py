@@ -218,15 +218,9 @@ def _present(target: str, entries: set[str]) -> bool:
 
 
 def _parse_failure(name: str, err: Exception, directory: Path) -> UploadError:
-    text = hide_dir(str(err), directory)
-    parts = re.findall(r": '(.*?)'\s*(?=\n\s*Error in|$)", text, re.S)
-    msg = parts[0] if parts else text
-    msg = " ".join(re.sub(r"\b[A-Za-z_][A-Za-z0-9_]*::", "", msg).split())
-    m = re.search(r"[^\s:]*:(\d+):(\d+):\s*(.*)", msg)
-    if m:
-        return UploadError(f"malformed USD in {name}: syntax error at line {m.group(1)} "
-                           f"(column {m.group(2)}): {m.group(3)}")
-    return UploadError(f"malformed USD in {name}: {msg}")
+    from renderer.usd_scene import malformed_usd_message
+
+    return UploadError(malformed_usd_message(name, Exception(hide_dir(str(err), directory))))
 
 
 def check_asset_paths(path: Path) -> None:
