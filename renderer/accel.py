@@ -44,6 +44,11 @@ class Geometry:
     blas_lo: wp.array(dtype=wp.vec3)  # node n of mesh m, key k at mesh_bound_off[m] + (n - node_off) * K + k
     blas_hi: wp.array(dtype=wp.vec3)
     blas_prim: wp.array(dtype=wp.int32)  # local triangle index per leaf slot
+    # Still meshes (one point key): each leaf slot's triangle as a vertex and two edges, contiguous in leaf
+    # order, so a leaf's triangle tests read consecutive memory instead of gathering indexed vertices.
+    leaf_v0: wp.array(dtype=wp.vec3)
+    leaf_e1: wp.array(dtype=wp.vec3)
+    leaf_e2: wp.array(dtype=wp.vec3)
     mesh_node_off: wp.array(dtype=wp.int32)
     mesh_bound_off: wp.array(dtype=wp.int32)
     mesh_prim_off: wp.array(dtype=wp.int32)
@@ -107,10 +112,9 @@ def safe_inverse(d: wp.vec3):
 
 
 @wp.func
-def triangle_hit(p0: wp.vec3, p1: wp.vec3, p2: wp.vec3, ro: wp.vec3, rd: wp.vec3, tmax: float):
-    """Moller-Trumbore. Returns (t, b1, b2); t = BIG on a miss. Both faces are hit (no culling)."""
-    e1 = p1 - p0
-    e2 = p2 - p0
+def triangle_hit_edges(p0: wp.vec3, e1: wp.vec3, e2: wp.vec3, ro: wp.vec3, rd: wp.vec3, tmax: float):
+    """Moller-Trumbore on a vertex and its two edges (p1 - p0, p2 - p0). Returns (t, b1, b2); t = BIG on a
+    miss. Both faces are hit (no culling)."""
     pv = wp.cross(rd, e2)
     det = wp.dot(e1, pv)
     if det == 0.0:
@@ -146,6 +150,15 @@ def triangle_points(geo: Geometry, m: int, local_tri: int, k0: int, k1: int, u: 
     idx = geo.tri_vidx[geo.mesh_tri_off[m] + local_tri]
     return (mesh_vertex(geo, m, k0, k1, u, idx[0]), mesh_vertex(geo, m, k0, k1, u, idx[1]),
             mesh_vertex(geo, m, k0, k1, u, idx[2]))
+
+
+@wp.func
+def leaf_triangle(geo: Geometry, m: int, slot: int, lt: int, nkeys: int, k0: int, k1: int, u: float):
+    """Vertex and edges of the triangle in leaf slot ``slot`` (local triangle ``lt``) at the walk's time."""
+    if nkeys == 1:
+        return geo.leaf_v0[slot], geo.leaf_e1[slot], geo.leaf_e2[slot]
+    p0, p1, p2 = triangle_points(geo, m, lt, k0, k1, u)
+    return p0, p1 - p0, p2 - p0
 
 
 @wp.func
@@ -213,9 +226,10 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float, s
         if a < 0:
             first = -(a + 1)
             for i in range(b):
-                lt = geo.blas_prim[poff + first + i]
-                p0, p1, p2 = triangle_points(geo, m, lt, k0, k1, u)
-                t, b1, b2 = triangle_hit(p0, p1, p2, ro, rd, t_best)
+                slot = poff + first + i
+                lt = geo.blas_prim[slot]
+                v0, e1, e2 = leaf_triangle(geo, m, slot, lt, nk, k0, k1, u)
+                t, b1, b2 = triangle_hit_edges(v0, e1, e2, ro, rd, t_best)
                 if t < t_best:
                     t_best = t
                     best.t = t

@@ -162,6 +162,19 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     g.blas_lo = _v3(cat([b.node_lower.reshape(-1, 3) for b in blas], (1, 3), np.float32), device)
     g.blas_hi = _v3(cat([b.node_upper.reshape(-1, 3) for b in blas], (1, 3), np.float32), device)
     g.blas_prim = _i32(cat([b.prim_order for b in blas], (1,), np.int32), device)
+    v0, e1, e2 = [], [], []
+    for mesh, b in zip(scene.meshes, blas):
+        if len(mesh.point_times) == 1 and len(b.prim_order):
+            tri = mesh.points[0][mesh.triangles[b.prim_order]]  # (slots, 3, 3) float32, leaf order
+            v0.append(tri[:, 0])
+            e1.append(tri[:, 1] - tri[:, 0])
+            e2.append(tri[:, 2] - tri[:, 0])
+        else:  # deforming: interpolated at the ray's time instead
+            z = np.zeros((len(b.prim_order), 3), np.float32)
+            v0.append(z), e1.append(z), e2.append(z)
+    g.leaf_v0 = _v3(cat(v0, (1, 3), np.float32), device)
+    g.leaf_e1 = _v3(cat(e1, (1, 3), np.float32), device)
+    g.leaf_e2 = _v3(cat(e2, (1, 3), np.float32), device)
     prim_off = np.cumsum([0] + [len(b.prim_order) for b in blas])
     g.mesh_node_off = _i32(n_nodes[:-1], device)
     g.mesh_bound_off = _i32(n_bounds[:-1], device)
@@ -208,7 +221,8 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     g.inst_vis_from = _f32([inst.visible_from for inst in scene.instances] or [0.0], device)
     g.inst_vis_to = _f32([inst.visible_to for inst in scene.instances] or [1.0], device)
 
-    nbytes = sum(b.nbytes for b in blas) + tlas.nbytes
+    leaf_bytes = 3 * 12 * sum(len(x) for x in v0)  # the leaf-ordered still triangles
+    nbytes = sum(b.nbytes for b in blas) + tlas.nbytes + leaf_bytes
     stats = GeometryStats(
         triangles=int(n_tris[-1]),
         blas_nodes=int(n_nodes[-1]),

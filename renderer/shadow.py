@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import warp as wp
 
-from .accel import BIG, Geometry, box_entry, instance_visible, instance_world_to_object, mesh_keys_at, \
-    node_box, safe_inverse, stack_t, tlas_keys_at, triangle_hit, triangle_points
+from .accel import BIG, Geometry, box_entry, instance_visible, instance_world_to_object, leaf_triangle, \
+    mesh_keys_at, node_box, safe_inverse, stack_t, tlas_keys_at, triangle_hit_edges
 from .materials import Materials, eval_opacity
 from .textures import Textures
 
@@ -45,9 +45,10 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
         if a < 0:
             first = -(a + 1)
             for i in range(b):
-                lt = geo.blas_prim[poff + first + i]
-                p0, p1, p2 = triangle_points(geo, m, lt, k0, k1, u)
-                t, b1, b2 = triangle_hit(p0, p1, p2, ro, rd, tmax)
+                slot = poff + first + i
+                lt = geo.blas_prim[slot]
+                v0, e1, e2 = leaf_triangle(geo, m, slot, lt, nk, k0, k1, u)
+                t, b1, b2 = triangle_hit_edges(v0, e1, e2, ro, rd, tmax)
                 if t < BIG:
                     tri = geo.mesh_tri_off[m] + lt
                     opacity = eval_opacity(mats, tex, geo.tri_material[tri], hit_uv(geo, m, tri, b1, b2))
