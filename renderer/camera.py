@@ -48,9 +48,6 @@ class CameraSetup:
     film_size: tuple[float, float]
     lens_radius: float
 
-    def world_to_camera(self, camera: Camera, s: float = 0.5) -> np.ndarray:
-        return np.linalg.inv(matrix_at(camera.transform, s))
-
 
 def conform_aperture(h_ap: float, v_ap: float, width: int, height: int, pixel_aspect: float = 1.0):
     """Expand the aperture to the image aspect (UsdRender's default ``expandAperture`` policy)."""

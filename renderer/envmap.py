@@ -40,10 +40,19 @@ def latlong_to_dir_np(u, v):
 
 
 def dir_to_latlong_np(d):
+    """(u, v) of dome-local directions (..., 3); they need not be unit length."""
     d = np.asarray(d, np.float64)
+    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
     phi = np.arctan2(d[..., 0], d[..., 2])
     lam = np.arcsin(np.clip(d[..., 1], -1.0, 1.0))
     return (np.pi - phi) / (2.0 * np.pi), (0.5 * np.pi - lam) / np.pi
+
+
+def latlong_mean(image: np.ndarray) -> np.ndarray:
+    """Mean of a lat-long image (H, W, C), rows top to bottom, over the sphere (rows weighted by solid angle)."""
+    h = image.shape[0]
+    wgt = np.cos(0.5 * np.pi - np.pi * (np.arange(h) + 0.5) / h)
+    return (np.asarray(image, np.float64).mean(axis=1) * wgt[:, None]).sum(0) / wgt.sum()
 
 
 def _density(image: np.ndarray) -> np.ndarray:

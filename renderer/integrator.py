@@ -24,9 +24,12 @@ from .camera import CameraParams, camera_ray
 from .film import SampleBuffer
 from .light_sample import area_light_hit, choose_light, infinite_light_eval, mesh_light_pdf, sample_light
 from .lights import Lights
-from .materials import MaterialSample, Materials, apply_normal_map, eval_material, triangle_tangent
+from .materials import MaterialSample, Materials, apply_normal_map, beer_lambert, eval_material, \
+    triangle_tangent
 from .options import TIME_FILTERS
-from .sampler import DIM_FILM, DIM_LENS, DIM_LIGHT_BASE, DIM_TIME, sample_1d, sample_2d
+from .sampler import (BOUNCE_DIRECTION, BOUNCE_LIGHT_CHOICE, BOUNCE_LIGHT_POSITION, BOUNCE_LOBE,
+                      BOUNCE_ROULETTE, DIM_FILM, DIM_LENS, DIM_LIGHT_BASE, DIM_TIME, DIMS_PER_BOUNCE, sample_1d,
+                      sample_2d)
 from .sampling import sample_tent
 from .shadow import hit_uv, transmittance
 from .scene import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_DOME, LIGHT_RECT, LIGHT_SPHERE
@@ -39,9 +42,6 @@ TIME_BOX = TIME_FILTERS["box"]
 TIME_TRIANGLE = TIME_FILTERS["triangle"]
 TIME_STROBE = TIME_FILTERS["strobe"]
 
-# Sample dimensions of bounce k start at DIM_LIGHT_BASE + k * DIMS_PER_BOUNCE:
-# +0 light choice, +1..2 point on the light, +3 BSDF lobe, +4..5 BSDF direction, +6 Russian roulette.
-DIMS_PER_BOUNCE = 7
 RR_START = 3  # bounces before Russian roulette may end a path
 RAY_EPSILON = 2.0e-5  # relative offset of secondary ray origins (times 1 + |p|_inf, scene units)
 FLAG_DELTA = 1
@@ -260,8 +260,7 @@ def trace_wave_kernel(
         else:
             # Beer-Lambert: absorbed along the way through a solid
             if sigma[0] > 0.0 or sigma[1] > 0.0 or sigma[2] > 0.0:
-                beta = wp.cw_mul(beta, wp.vec3(wp.exp(-sigma[0] * hit.t), wp.exp(-sigma[1] * hit.t),
-                                               wp.exp(-sigma[2] * hit.t)))
+                beta = wp.cw_mul(beta, beer_lambert(sigma, hit.t))
             sp = surface_at(geo, hit.inst, hit.tri, hit.b1, hit.b2, origin, rd, hit.t, s)
             ms = eval_material(mats, tex, sp.material, sp.uv)
             ns = shading_normal(sp, ms)
@@ -290,11 +289,12 @@ def trace_wave_kernel(
                 dim = wp.uint32(DIM_LIGHT_BASE + bounce * DIMS_PER_BOUNCE)
                 # --- next-event estimation: one light by power, one point on it, one shadow ray
                 if lights.count > 0:
-                    li, p_sel = choose_light(lights, sample_1d(seed, pixel, index, dim))
+                    li, p_sel, u_tri = choose_light(
+                        lights, sample_1d(seed, pixel, index, dim + wp.uint32(BOUNCE_LIGHT_CHOICE)))
                     origin_l = offset_origin(sp.p, sp.ng)
-                    wi, dist, Le_l, pdf_l, delta = sample_light(lights, geo, mats, tex, li, origin_l, ns, s,
-                                                                sample_1d(seed, pixel, index, dim + wp.uint32(1)),
-                                                                sample_2d(seed, pixel, index, dim + wp.uint32(1)))
+                    wi, dist, Le_l, pdf_l, delta = sample_light(
+                        lights, geo, mats, tex, li, origin_l, ns, s, u_tri,
+                        sample_2d(seed, pixel, index, dim + wp.uint32(BOUNCE_LIGHT_POSITION)))
                     if pdf_l > 0.0 and (Le_l[0] > 0.0 or Le_l[1] > 0.0 or Le_l[2] > 0.0):
                         f = lobes_eval(lobes, wi)
                         if f[0] > 0.0 or f[1] > 0.0 or f[2] > 0.0:
@@ -311,8 +311,8 @@ def trace_wave_kernel(
                                 cos_i = wp.abs(wp.dot(ns, wi))
                                 L += wp.cw_mul(wp.cw_mul(beta, f), Le_l) * (cos_i * tr * w / (p_sel * pdf_l))
                 # --- the BSDF's own direction continues the path
-                wi, weight, pdf, flags = lobes_sample(lobes, sample_1d(seed, pixel, index, dim + wp.uint32(3)),
-                                                      sample_2d(seed, pixel, index, dim + wp.uint32(4)))
+                wi, weight, pdf, flags = lobes_sample(lobes, sample_1d(seed, pixel, index, dim + wp.uint32(BOUNCE_LOBE)),
+                                                      sample_2d(seed, pixel, index, dim + wp.uint32(BOUNCE_DIRECTION)))
                 if pdf <= 0.0 or not finite3(weight) or (weight[0] <= 0.0 and weight[1] <= 0.0 and weight[2] <= 0.0):
                     alive = 0
                     alpha = 1.0
@@ -339,7 +339,7 @@ def trace_wave_kernel(
                     # Russian roulette once the path has carried light a few bounces
                     if bounce >= RR_START:
                         q = wp.max(0.05, 1.0 - wp.max(wp.max(beta[0], beta[1]), beta[2]))
-                        if sample_1d(seed, pixel, index, dim + wp.uint32(6)) < q:
+                        if sample_1d(seed, pixel, index, dim + wp.uint32(BOUNCE_ROULETTE)) < q:
                             alive = 0
                             alpha = 1.0
                         else:

@@ -27,7 +27,11 @@ DISTANT_DIST = 1.0e30  # shadow-ray length toward lights at infinity (scene unit
 
 @wp.func
 def choose_light(lights: Lights, u: float):
-    """A light index chosen by power from one uniform number, and its probability."""
+    """A light chosen from one uniform number: (index, its probability, u rescaled within the light's share).
+
+    The rescaled number is uniform on [0, 1) again and independent of which light was chosen, so it can pick
+    the triangle of an emissive mesh without spending (or, worse, sharing) another sample dimension.
+    """
     lo = int(0)
     hi = lights.count - 1
     while lo < hi:  # first entry with cdf > u
@@ -36,7 +40,10 @@ def choose_light(lights: Lights, u: float):
             hi = mid
         else:
             lo = mid + 1
-    return lo, lights.select_pdf[lo]
+    p = lights.select_pdf[lo]
+    start = lights.select_cdf[lo] - p
+    u_rest = wp.clamp((u - start) / wp.max(p, 1.0e-30), 0.0, 0.99999994)
+    return lo, p, u_rest
 
 
 @wp.func

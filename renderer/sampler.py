@@ -37,12 +37,14 @@ dims                                               request      use
 ``DIM_FILM`` = 0, 1                                ``2d``       position on the film inside the pixel
 ``DIM_TIME`` = 2                                   ``1d``       time within the shutter (box, or ``sample_tent``)
 ``DIM_LENS`` = 3, 4                                ``2d``       position on the lens (concentric disk)
-``DIM_LIGHT_BASE + b * DIMS_PER_LIGHT`` + 0        ``1d``       choosing a light at bounce ``b``
-``DIM_LIGHT_BASE + b * DIMS_PER_LIGHT`` + 1, 2     ``2d``       position on the chosen light
+``DIM_LIGHT_BASE + b * DIMS_PER_BOUNCE`` + 0       ``1d``       choosing a light at bounce ``b``
+``DIM_LIGHT_BASE + b * DIMS_PER_BOUNCE`` + 1, 2    ``2d``       position on the chosen light
+``DIM_LIGHT_BASE + b * DIMS_PER_BOUNCE`` + 3       ``1d``       choosing a BSDF lobe
+``DIM_LIGHT_BASE + b * DIMS_PER_BOUNCE`` + 4, 5    ``2d``       the BSDF direction (gloss, translucency)
+``DIM_LIGHT_BASE + b * DIMS_PER_BOUNCE`` + 6       ``1d``       Russian roulette
 =================================================  ===========  ==========================================
 
-``DIMS_PER_LIGHT`` is 3 today; BSDF sampling dims will be appended per bounce later (the constant will grow, so
-always index through it). Any dims work: the hash keys on the full 32-bit ``dim``.
+The per-bounce offsets are the ``BOUNCE_*`` constants. Any dims work: the hash keys on the full 32-bit ``dim``.
 
 Warp side: ``sample_1d``, ``sample_2d`` (``@wp.func``, arguments ``wp.uint32``). NumPy side: ``np_sample_1d``,
 ``np_sample_2d`` (vectorised, broadcasting, bit-identical float32 results; tests compare them).
@@ -55,8 +57,13 @@ import warp as wp
 DIM_FILM = 0
 DIM_TIME = 2
 DIM_LENS = 3
-DIM_LIGHT_BASE = 5
-DIMS_PER_LIGHT = 3
+DIM_LIGHT_BASE = 5  # first dimension of bounce 0
+DIMS_PER_BOUNCE = 7
+BOUNCE_LIGHT_CHOICE = 0
+BOUNCE_LIGHT_POSITION = 1
+BOUNCE_LOBE = 3
+BOUNCE_DIRECTION = 4
+BOUNCE_ROULETTE = 6
 
 # Largest float32 below 1 (0x1.fffffep-1); every sample is <= this.
 ONE_MINUS_EPSILON = float(np.float32(1.0) - np.float32(2.0**-24))

@@ -23,8 +23,8 @@ returning the fallback where no tile exists. Channel expansion follows UsdUVText
 grey-alpha -> (g, g, g, a), RGB -> (r, g, b, 1). No mipmaps: the many samples per pixel of distributed ray
 tracing filter minified textures.
 
-Dome lights use the lat-long helpers at the end (``latlong_to_direction`` and its inverse, NumPy and Warp),
-the OpenEXR/UsdLux convention documented there.
+Dome lights use the lat-long (OpenEXR/UsdLux) convention of ``envmap``, re-exported here as
+``latlong_to_direction``, ``direction_to_latlong`` and ``latlong_mean``.
 """
 from __future__ import annotations
 
@@ -34,6 +34,9 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from .envmap import dir_to_latlong_np as direction_to_latlong  # noqa: F401 - re-exported for the importer
+from .envmap import latlong_mean  # noqa: F401
+from .envmap import latlong_to_dir_np as latlong_to_direction  # noqa: F401
 from .scene import Texture
 
 # No gradients are ever taken: no adjoint code (half the compile time and code size).
@@ -439,75 +442,10 @@ def image_bilinear_np(image: np.ndarray, st: np.ndarray, wrap_s: str = "repeat",
             + (fetch(x0, y0 + 1) * (1 - fx) + fetch(x0 + 1, y0 + 1) * fx) * fy).astype(np.float32)
 
 
-# ---------------------------------------------------------------------------------------------------------------
-# Lat-long environment maps (DomeLight)
-#
-# The OpenEXR lat-long convention that UsdLux adopts for a DomeLight whose pole is +Y: an image (W x H, W = 2H)
-# with u = (column + 0.5) / W from the left and v = (row + 0.5) / H from the TOP maps to longitude
-# phi = pi (1 - 2u) and latitude theta = pi (1/2 - v), and to the dome-local direction
-#     d = (cos(theta) sin(phi), sin(theta), cos(theta) cos(phi)).
-# So the top row is +Y, the image centre (u, v) = (0.5, 0.5) is +Z, u = 0.25 is +X, u = 0.75 is -X and the left
-# and right edges are -Z. The dome's world orientation is its Light.transform (prim transform, times a +90 degree
-# turn about X for DomeLight_1 whose poleAxis is Z, or "scene" on a Z-up stage).
-
-
-def latlong_to_direction(u, v) -> np.ndarray:
-    """Dome-local unit direction (..., 3) of lat-long image coordinates u, v in [0, 1] (v from the top)."""
-    u, v = np.asarray(u, np.float64), np.asarray(v, np.float64)
-    phi = np.pi * (1.0 - 2.0 * u)
-    theta = np.pi * (0.5 - v)
-    return np.stack([np.cos(theta) * np.sin(phi), np.sin(theta), np.cos(theta) * np.cos(phi)], -1)
-
-
-def direction_to_latlong(d) -> tuple[np.ndarray, np.ndarray]:
-    """Inverse of ``latlong_to_direction``: (u, v) of dome-local directions (..., 3) (need not be unit)."""
-    d = np.asarray(d, np.float64)
-    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
-    u = 0.5 - np.arctan2(d[..., 0], d[..., 2]) / (2.0 * np.pi)
-    v = np.arccos(np.clip(d[..., 1], -1.0, 1.0)) / np.pi
-    return np.mod(u, 1.0), v
-
-
-@wp.func
-def latlong_direction(u: float, v: float):
-    """Warp twin of ``latlong_to_direction``."""
-    phi = wp.pi * (1.0 - 2.0 * u)
-    theta = wp.pi * (0.5 - v)
-    c = wp.cos(theta)
-    return wp.vec3(c * wp.sin(phi), wp.sin(theta), c * wp.cos(phi))
-
-
-@wp.func
-def direction_latlong(d: wp.vec3):
-    """Warp twin of ``direction_to_latlong``: (u, v) in [0, 1) x [0, 1] of a dome-local direction."""
-    n = wp.normalize(d)
-    u = 0.5 - wp.atan2(n[0], n[2]) / (2.0 * wp.pi)
-    u = u - wp.floor(u)
-    v = wp.acos(wp.clamp(n[1], -1.0, 1.0)) / wp.pi
-    return wp.vec2(u, v)
-
-
-@wp.kernel
-def latlong_kernel(uv: wp.array(dtype=wp.vec2), dirs: wp.array(dtype=wp.vec3), back: wp.array(dtype=wp.vec2)):
-    """Directions of lat-long coordinates and back (tests the Warp twins)."""
-    i = wp.tid()
-    d = latlong_direction(uv[i][0], uv[i][1])
-    dirs[i] = d
-    back[i] = direction_latlong(d)
-
-
-def latlong_mean(image: np.ndarray) -> np.ndarray:
-    """Mean of a lat-long image (H, W, C), rows top to bottom, over the sphere (rows weighted by solid angle)."""
-    h = image.shape[0]
-    theta = np.pi * (0.5 - (np.arange(h) + 0.5) / h)
-    wgt = np.cos(theta)
-    return (np.asarray(image, np.float64).mean(axis=1) * wgt[:, None]).sum(0) / wgt.sum()
-
-
 __all__ = [
     "ImageError", "LoadedImage", "Textures", "read_image", "image_texture", "upload_textures", "texture_lookup",
     "texture_fetch",
     "image_bilinear", "lookup", "image_bilinear_np", "srgb_to_linear", "linear_to_srgb", "latlong_to_direction",
-    "direction_to_latlong", "latlong_direction", "direction_latlong", "latlong_mean", "WRAP_MODES", "OUTPUTS",
+    "direction_to_latlong", "latlong_mean", "WRAP_MODES", "OUTPUTS",
     "MAX_TEXTURE_SIZE", "TEXTURE_BUDGET",
 ]

@@ -163,3 +163,40 @@ def test_penumbra_of_a_distant_light_matches_the_visible_fraction(tmp_path):
     R = h * np.tan(np.radians(angle / 2))
     expected = pixel_average(lambda px: stages.disk_fraction((px - W / 2) * 0.01, R), 0, W)
     assert np.abs(measured - expected).max() < 0.03, np.abs(measured - expected).max()
+
+
+# --------------------------------------------------------------------------- emissive geometry
+def square_irradiance(half, h, L=1.0):
+    """Irradiance under the centre of a Lambertian square (side 2 half, radiance L) at height h: four corner
+    rectangles, each E = L/2 [A/sqrt(1+A^2) atan(B/sqrt(1+A^2)) + B/sqrt(1+B^2) atan(A/sqrt(1+B^2))]."""
+    a = b = half / h
+    corner = 0.5 * L * (a / np.sqrt(1 + a * a) * np.arctan(b / np.sqrt(1 + a * a))
+                        + b / np.sqrt(1 + b * b) * np.arctan(a / np.sqrt(1 + b * b)))
+    return 4 * corner
+
+
+def test_emissive_mesh_of_many_triangles_gives_the_analytic_irradiance(tmp_path):
+    from pxr import UsdGeom, Vt
+
+    stage = stages.new_stage(tmp_path / "panel.usda")
+    # orthographic camera between the panel and the floor, looking down at the floor's centre
+    stages.camera(stage, ortho=True, h_ap_mm=0.4, v_ap_mm=0.4, translate=(0, 0.5, 0), rotate_x=-90.0,
+                  tenths_per_mm=1.0)
+    stages.rect_xz(stage, "/World/Floor", -10, 10, -10, 10, 0.0, stages.material(stage, "White", (1, 1, 1)))
+    n, half, h = 4, 0.5, 1.0  # a 4 x 4 grid of quads, 32 triangles, 1 m above the floor
+    g = np.linspace(-half, half, n + 1)
+    pts = [(x, h, z) for z in g for x in g]
+    idx = [k for j in range(n) for i in range(n)
+           for k in (j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i + 1, (j + 1) * (n + 1) + i)]
+    panel = UsdGeom.Mesh.Define(stage, "/World/Panel")
+    panel.CreatePointsAttr(Vt.Vec3fArray([Gf.Vec3f(*p) for p in pts]))
+    panel.CreateFaceVertexCountsAttr([4] * n * n)
+    panel.CreateFaceVertexIndicesAttr(idx)
+    panel.CreateSubdivisionSchemeAttr("none")
+    from pxr import UsdShade
+
+    UsdShade.MaterialBindingAPI.Apply(panel.GetPrim()).Bind(stages.material(stage, "Emit", emissive=(1, 1, 1)))
+    stage.Save()
+    rgb, _ = render_rgb(tmp_path / "panel.usda", width=8, height=8, spp=1024, filter="box", max_depth=1)
+    expected = square_irradiance(half, h) / np.pi  # a white Lambertian floor: radiance E / pi
+    assert abs(rgb[..., 0].mean() - expected) < 0.01 * expected, (rgb[..., 0].mean(), expected)

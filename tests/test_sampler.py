@@ -39,7 +39,7 @@ def warp_samples(seed, pixel, index, dim):
 
 
 def test_dimension_constants():
-    assert (SM.DIM_FILM, SM.DIM_TIME, SM.DIM_LENS, SM.DIM_LIGHT_BASE, SM.DIMS_PER_LIGHT) == (0, 2, 3, 5, 3)
+    assert (SM.DIM_FILM, SM.DIM_TIME, SM.DIM_LENS, SM.DIM_LIGHT_BASE, SM.DIMS_PER_BOUNCE) == (0, 2, 3, 5, 7)
     assert SM.DIM_FILM + 2 <= SM.DIM_TIME < SM.DIM_LENS and SM.DIM_LENS + 2 <= SM.DIM_LIGHT_BASE
 
 
@@ -142,7 +142,7 @@ def test_dimensions_are_decorrelated():
     n = 4096
     idx = np.arange(n)
     pairs = [(SM.DIM_FILM, SM.DIM_LENS), (SM.DIM_FILM, SM.DIM_TIME), (SM.DIM_LENS, SM.DIM_LIGHT_BASE + 1),
-             (SM.DIM_TIME, SM.DIM_LIGHT_BASE), (SM.DIM_LIGHT_BASE, SM.DIM_LIGHT_BASE + SM.DIMS_PER_LIGHT)]
+             (SM.DIM_TIME, SM.DIM_LIGHT_BASE), (SM.DIM_LIGHT_BASE, SM.DIM_LIGHT_BASE + SM.DIMS_PER_BOUNCE)]
     rs = []
     for pixel in (0, 1, 640 * 480 - 1):
         for da, db in pairs:

@@ -235,15 +235,6 @@ def test_transform2d_and_constant_st_and_primvar_fallback():
     np.testing.assert_allclose(r["roughness"], [0.0, 0.375, 0.75, 0.75, 0.5, 0.25], atol=1e-5)
 
 
-def test_latlong_warp_twin():
-    uv = np.array([[0.5, 0.5], [0.25, 0.5], [0.125, 0.25], [0.9, 0.8]], np.float32)
-    dirs = wp.zeros(len(uv), dtype=wp.vec3)
-    back = wp.zeros(len(uv), dtype=wp.vec2)
-    wp.launch(T.latlong_kernel, dim=len(uv), inputs=[wp.array(uv, dtype=wp.vec2), dirs, back])
-    np.testing.assert_allclose(dirs.numpy(), T.latlong_to_direction(uv[:, 0], uv[:, 1]), atol=1e-6)
-    np.testing.assert_allclose(back.numpy(), uv, atol=1e-6)
-
-
 # ---------------------------------------------------------------------------------------------------------------
 # Tangents and normal maps
 
