@@ -12,6 +12,8 @@ import os
 import sys
 import time
 
+from .options import MAX_DEPTH
+
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line, exit 2 (argparse would print the usage block)
@@ -19,14 +21,24 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(2)
 
 
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1: {text!r}")
-    return v
+def _int_between(lo: int, hi: int | None = None):
+    """An argparse type: an integer in [lo, hi] (no upper bound when hi is None)."""
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+        if v < lo or (hi is not None and v > hi):
+            bound = f">= {lo}" if hi is None else f"between {lo} and {hi}"
+            raise argparse.ArgumentTypeError(f"must be {bound}: {text!r}")
+        return v
+
+    return parse
+
+
+_positive_int = _int_between(1)
+_seed = _int_between(0, 2**32 - 1)
+_depth = _int_between(0, MAX_DEPTH)
 
 
 def _number(text: str) -> float:
@@ -36,26 +48,6 @@ def _number(text: str) -> float:
         raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
     if v != v or v in (float("inf"), float("-inf")):
         raise argparse.ArgumentTypeError(f"not a finite number: {text!r}")
-    return v
-
-
-def _seed(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if not 0 <= v < 2**32:
-        raise argparse.ArgumentTypeError(f"must be between 0 and 4294967295: {text!r}")
-    return v
-
-
-def _depth(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if not 0 <= v <= 64:
-        raise argparse.ArgumentTypeError(f"must be between 0 and 64: {text!r}")
     return v
 
 
@@ -87,7 +79,7 @@ def add_render_settings(p: argparse.ArgumentParser) -> None:
                    help=f"extra output ({', '.join(AOV_NAMES)}); repeatable")
     p.add_argument("--half", action="store_true", help="store colour as 16-bit HALF (default 32-bit FLOAT)")
     p.add_argument("--max-depth", type=_depth, default=8, metavar="N",
-                   help="bounces after the camera ray (default 8; 1 = direct lighting only)")
+                   help=f"bounces after the camera ray, 0..{MAX_DEPTH} (default 8; 1 = direct lighting only)")
     p.add_argument("--clamp", type=_clamp, default=0.0, metavar="X",
                    help="clamp each sample's radiance to X per channel to cut fireflies (default 0 = off)")
 
