@@ -168,6 +168,8 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> Prepar
     materials = upload_materials(flat.materials, device)
     lights, light_count = upload_lights(flat, device)
     cam = setup_camera(scene.camera, width, height, pixel_aspect=par, dof=dof, device=device)
+    if cam.warning:
+        warnings.append(cam.warning)
     return PreparedScene(scene=scene, options=options, width=width, height=height, pixel_aspect=par,
                          geometry=geometry, materials=materials, textures=textures, lights=lights,
                          light_count=light_count, camera=cam, stats=stats, device=device, warnings=warnings)
