@@ -233,18 +233,16 @@ def trace_wave_kernel(
     while alive != 0:
         rays += 1
         hit = intersect_closest(geo, origin, rd, t_far, s)
-        # UsdLux area lights are not in the BVH: any ray may reach one before the geometry it hits. The camera
-        # sees them too (as Cycles and Karma show lights by default), and they cover the pixel (alpha).
-        for li in range(lights.count):
-            if is_area_light(lights.kind[li]):
-                t_l, Le, pdf_l = area_light_hit(lights, li, origin, rd, hit.t, s)
-                if t_l < BIG:
-                    w = float(1.0)
-                    if prev_delta == 0:
-                        w = power_heuristic(prev_pdf, lights.select_pdf[li] * pdf_l)
-                    L += wp.cw_mul(beta, Le) * w
-                    if see_through != 0:
-                        alpha = 1.0
+        # UsdLux area lights are not in the BVH: rays after the first bounce may reach them directly
+        if bounce > 0:
+            for li in range(lights.count):
+                if is_area_light(lights.kind[li]):
+                    t_l, Le, pdf_l = area_light_hit(lights, li, origin, rd, hit.t, s)
+                    if t_l < BIG:
+                        w = float(1.0)
+                        if prev_delta == 0:
+                            w = power_heuristic(prev_pdf, lights.select_pdf[li] * pdf_l)
+                        L += wp.cw_mul(beta, Le) * w
         if hit.inst < 0:
             for li in range(lights.count):
                 kind = lights.kind[li]
