@@ -1,12 +1,16 @@
 """The camera and its lens (the paper's depth of field, section 3), moving over the shutter.
 
-A camera ray is made as in the paper: the film (USD's aperture) sits at the image distance V_P = F P / (P - F)
-behind a thin lens of focal length F focused at distance P; the ray from the film point through the lens centre
-fixes the *focal point* where it meets the plane of focus; a point on the lens disk of radius F / (2 n) is
-chosen from the sample's lens dimensions; the ray runs from the lens point through the focal point. A point at
-depth D then blurs into the paper's circle of confusion C = |V_D - V_P| F / (n V_D) on the film, exactly. Like
-a real lens, focusing closer narrows the view a little (the film at V_P instead of F: focus breathing).
-``f_stop == 0`` skips the lens: the pinhole camera of USD's framing (film at F), bit for bit.
+A camera ray is made as in the paper: the ray from the film point through the lens centre fixes the *focal
+point* where it meets the plane of focus (distance P); a point on the lens disk is chosen from the sample's lens
+dimensions; the ray runs from the lens point through the focal point.
+
+Framing is USD's (the aperture seen through a pinhole at the focal length F), as in every USD renderer: a real
+lens focused at P has its film at V_P = F P / (P - F) and its view narrows when focusing close (focus
+breathing), which would reframe assets authored for those renderers (a 35 mm lens focused at 5 cm zooms 3.3x).
+To keep the paper's blur exactly with that framing, the lens radius is V_P / (2 n) (F / (2 n) for distant
+focus): by similar triangles a point at depth D then blurs into the circle of confusion of section 3,
+C = |V_D - V_P| F / (n V_D), as a fraction of the film, exactly: a breathing-compensated lens, as cine lenses
+are built. ``f_stop == 0`` skips the lens and is the pinhole camera, bit for bit.
 """
 from __future__ import annotations
 
@@ -30,10 +34,9 @@ class CameraParams:
     still: wp.mat44  # camera-to-world when key_count == 1
     orthographic: int
     focal_length: float  # F, scene units
-    image_distance: float  # lens to film, scene units: V_P with depth of field, F for the pinhole
     film_size: wp.vec2  # effective aperture (horizontal, vertical) after conforming to the image aspect
     film_offset: wp.vec2  # aperture offsets, scene units
-    lens_radius: float  # F / (2 n), 0 = pinhole
+    lens_radius: float  # V_P / (2 n) (see the module docstring), 0 = pinhole
     focus_distance: float  # P, scene units
     near: float  # clipping range, scene units along the view axis
     far: float
@@ -49,7 +52,6 @@ class CameraSetup:
     params: CameraParams
     film_size: tuple[float, float]
     lens_radius: float
-    image_distance: float
     warning: str | None = None
 
 
@@ -74,26 +76,23 @@ def setup_camera(camera: Camera, width: int, height: int, *, pixel_aspect: float
     p.film_size = wp.vec2(fw, fh)
     p.film_offset = wp.vec2(camera.horizontal_aperture_offset, camera.vertical_aperture_offset)
     lens_radius = 0.0
-    image_distance = float(camera.focal_length)
     warning = None
     if dof and camera.f_stop > 0.0 and camera.focus_distance > 0.0 and not p.orthographic:
         if camera.focus_distance > camera.focal_length:
-            lens_radius = camera.focal_length / (2.0 * camera.f_stop)
             image_distance = camera.focal_length * camera.focus_distance / (camera.focus_distance
                                                                             - camera.focal_length)
+            lens_radius = image_distance / (2.0 * camera.f_stop)
         else:
             warning = (f"camera {camera.name}: focusDistance {camera.focus_distance:g} is not beyond the focal "
                        f"length {camera.focal_length:g} (scene units): no lens can focus there, rendering pinhole")
     p.lens_radius = float(lens_radius)
-    p.image_distance = float(image_distance)
     p.focus_distance = float(camera.focus_distance)
     p.near = float(camera.clipping_range[0])
     p.far = float(camera.clipping_range[1])
     p.width = int(width)
     p.height = int(height)
     p.exposure_scale = float(2.0 ** camera.exposure)
-    return CameraSetup(params=p, film_size=(fw, fh), lens_radius=lens_radius, image_distance=image_distance,
-                       warning=warning)
+    return CameraSetup(params=p, film_size=(fw, fh), lens_radius=lens_radius, warning=warning)
 
 
 def ndc_matrix(camera: Camera, setup: CameraSetup) -> np.ndarray:
@@ -108,7 +107,7 @@ def ndc_matrix(camera: Camera, setup: CameraSetup) -> np.ndarray:
         m[2, 2], m[2, 3] = -2.0 / (far - near), -(far + near) / (far - near)
         m[3, 3] = 1.0
     else:
-        f = setup.image_distance
+        f = camera.focal_length
         m[0, 0], m[0, 2] = 2.0 * f / fw, 2.0 * ox / fw
         m[1, 1], m[1, 2] = 2.0 * f / fh, 2.0 * oy / fh
         m[2, 2], m[2, 3] = -(far + near) / (far - near), -2.0 * far * near / (far - near)
@@ -123,7 +122,7 @@ def camera_ray(cam: CameraParams, film: wp.vec2, lens_u: wp.vec2, s: float):
     ``lens_u`` are the sample's two lens dimensions, ``s`` its normalised shutter time.
     Returns (origin, direction, tmin, tmax, forward) where forward is the camera's world view axis.
     """
-    # film position in scene units on the film at the image distance (y up)
+    # film position in scene units on the image plane at distance F (y up)
     fx = (film[0] / float(cam.width) - 0.5) * cam.film_size[0] + cam.film_offset[0]
     fy = (0.5 - film[1] / float(cam.height)) * cam.film_size[1] + cam.film_offset[1]
     o = wp.vec3(0.0, 0.0, 0.0)
@@ -131,10 +130,10 @@ def camera_ray(cam: CameraParams, film: wp.vec2, lens_u: wp.vec2, s: float):
     if cam.orthographic != 0:
         o = wp.vec3(fx, fy, 0.0)
     else:
-        d = wp.vec3(fx, fy, -cam.image_distance)
+        d = wp.vec3(fx, fy, -cam.focal_length)
         if cam.lens_radius > 0.0:
             # the focal point: where the ray through the lens centre meets the plane of focus
-            focal = d * (cam.focus_distance / cam.image_distance)
+            focal = d * (cam.focus_distance / cam.focal_length)
             lens = square_to_uniform_disk_concentric(lens_u) * cam.lens_radius
             o = wp.vec3(lens[0], lens[1], 0.0)
             d = focal - o

@@ -40,8 +40,8 @@ def thin_lens_coc(F, n, P, D):
 
 @pytest.mark.parametrize("focus,depth,n", [(5.0, 10.0, 0.5), (8.0, 4.0, 0.5), (0.5, 1.0, 8.0), (0.5, 0.35, 8.0)])
 def test_out_of_focus_edge_blur_is_half_the_circle_of_confusion(tmp_path, focus, depth, n):
-    """Focus at 0.5 m with a 50 mm lens: the image distance V_P is 11 % longer than F, so only the paper's
-    camera (film at V_P) gives C; a film at F would blur 10 % less."""
+    """Focus at 0.5 m with a 50 mm lens: the image distance V_P is 11 % longer than F, so a lens of radius
+    F / (2 n) under USD's framing would blur 10 % less than C; ours (radius V_P / (2 n)) gives C exactly."""
     W, H = 1440, 4
     F_mm = 50.0
     stage = stages.new_stage(tmp_path / "dof.usda")  # metres: 1 mm = 0.01 tenths of a unit
