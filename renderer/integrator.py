@@ -227,7 +227,7 @@ def trace_wave_kernel(
     prev_pdf = float(0.0)
     prev_n = wp.vec3(0.0)
     sigma = wp.vec3(0.0)  # absorption coefficient of the solid the path is inside (1/scene unit)
-    see_through = int(1)  # so far only straight pass-through events: the background shows (alpha)
+    see_through = int(1)  # so far only straight pass-through events: domes hidden from the camera stay hidden
     bounce = int(0)
     alive = int(1)
     while alive != 0:
@@ -254,7 +254,7 @@ def trace_wave_kernel(
                     if prev_delta == 0:
                         w = power_heuristic(prev_pdf, lights.select_pdf[li] * pdf_l)
                     L += wp.cw_mul(beta, Le) * w
-            if see_through == 0 or lights.dome_visible != 0:
+            if bounce == 0 and lights.dome_visible != 0:
                 alpha = 1.0
             alive = 0
         else:
@@ -262,7 +262,7 @@ def trace_wave_kernel(
             if sigma[0] > 0.0 or sigma[1] > 0.0 or sigma[2] > 0.0:
                 beta = wp.cw_mul(beta, beer_lambert(sigma, hit.t))
             sp = surface_at(geo, hit.inst, hit.tri, hit.b1, hit.b2, origin, rd, hit.t, s)
-            ms = eval_material(mats, tex, sp.material, sp.uv)
+            ms = eval_material(mats, tex, sp.material, sp.uv, s)
             ns = shading_normal(sp, ms)
             thin = 1 - geo.tri_solid[hit.tri]  # open surfaces are thin sheets, closed ones bound solids
             params = surface_params(ms, thin)
@@ -272,6 +272,12 @@ def trace_wave_kernel(
                 depth_aov = wp.dot(sp.p - cam_origin, fwd)
                 normal_aov = ns
                 albedo_aov = bsdf_albedo_hint(params)
+                # alpha is coverage: opaque surfaces and solids cover the pixel; partly opaque sheets cover
+                # it as much as light does not get through them along the camera ray (whatever the BSDF samples)
+                alpha = 1.0
+                if lights.dome_visible == 0 and thin != 0 and ms.opacity < 1.0:
+                    rays += 1
+                    alpha = 1.0 - transmittance(geo, mats, tex, origin, rd, t_far, s)
             # emission seen along the path
             Le = ms.emissive_color
             if Le[0] > 0.0 or Le[1] > 0.0 or Le[2] > 0.0:
@@ -281,10 +287,9 @@ def trace_wave_kernel(
                     pdf_l = lights.select_pdf[li] * mesh_light_pdf(lights, geo, li, hit.inst, hit.tri, origin,
                                                                      sp.p, s)
                     w = power_heuristic(prev_pdf, pdf_l)
-                L += wp.cw_mul(beta, Le) * w
+                L += wp.cw_mul(beta, Le) * (w * ms.opacity)  # emission covers what the surface covers
             if bounce >= settings.max_depth:
                 alive = 0
-                alpha = 1.0  # the path ends on a surface: it covers the pixel
             else:
                 dim = wp.uint32(DIM_LIGHT_BASE + bounce * DIMS_PER_BOUNCE)
                 # --- next-event estimation: one light by power, one point on it, one shadow ray
@@ -315,7 +320,6 @@ def trace_wave_kernel(
                                                       sample_2d(seed, pixel, index, dim + wp.uint32(BOUNCE_DIRECTION)))
                 if pdf <= 0.0 or not finite3(weight) or (weight[0] <= 0.0 and weight[1] <= 0.0 and weight[2] <= 0.0):
                     alive = 0
-                    alpha = 1.0
                 else:
                     beta = wp.cw_mul(beta, weight)
                     prev_delta = flags & FLAG_DELTA
@@ -341,7 +345,6 @@ def trace_wave_kernel(
                         q = wp.max(0.05, 1.0 - wp.max(wp.max(beta[0], beta[1]), beta[2]))
                         if sample_1d(seed, pixel, index, dim + wp.uint32(BOUNCE_ROULETTE)) < q:
                             alive = 0
-                            alpha = 1.0
                         else:
                             beta = beta / (1.0 - q)
     if settings.clamp > 0.0:

@@ -1,6 +1,6 @@
 """Materials as the kernels see them: one row per material, indexed by the triangle's material id.
 
-``eval_material(mats, tex, mat_id, uv)`` evaluates every UsdPreviewSurface input of a material at a hit's
+``eval_material(mats, tex, mat_id, uv, s)`` evaluates every UsdPreviewSurface input of a material at a hit's
 texture coordinates and returns a ``MaterialSample``. Each input is either a constant or a *texture binding*
 (a UsdUVTexture, its UsdTransform2d and UsdPrimvarReader_float2 flattened into one row):
 
@@ -79,6 +79,10 @@ class Materials:
     use_specular_workflow: wp.array(dtype=wp.int32)  # per material
     absorption_cd: wp.array(dtype=wp.vec4)  # per material: transmittance colour (rgb) after distance (w)
     absorption: wp.array(dtype=wp.vec3)  # per material: absorption coefficient sigma_a per scene unit (0: none)
+    # opacity changing during the shutter: material m's keys (s, opacity) at [key_off[m], key_off[m] + key_count[m])
+    opacity_key_off: wp.array(dtype=wp.int32)
+    opacity_key_count: wp.array(dtype=wp.int32)  # 0: the constant (or texture) opacity throughout
+    opacity_keys: wp.array(dtype=wp.vec2)
     # --- texture bindings
     b_texture: wp.array(dtype=wp.int32)  # texture index in Textures, -1: missing file (fallback)
     b_output: wp.array(dtype=wp.int32)  # textures.OUTPUT_*
@@ -180,9 +184,25 @@ def clamp01_3(c: wp.vec3):
 
 
 @wp.func(inline=True)  # called once per path vertex: no copy of the big structs
-def eval_opacity(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2):
-    """Just the opacity of ``eval_material`` (after opacityThreshold): for shadow rays through cut-outs."""
+def eval_opacity(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, s: float):
+    """Just the opacity of ``eval_material`` at normalised shutter time s (after opacityThreshold): for shadow
+    rays through cut-outs, and for transparency that changes during the shutter (opacity keys)."""
     opacity = clamp01(input_scalar(mats, tex, mat_id, IN_OPACITY, uv))
+    n = mats.opacity_key_count[mat_id]
+    if n > 0:
+        off = mats.opacity_key_off[mat_id]
+        k = mats.opacity_keys[off]
+        opacity = k[1]
+        for i in range(1, n):
+            k1 = mats.opacity_keys[off + i]
+            if s >= k[0]:
+                span = k1[0] - k[0]
+                u = float(1.0)
+                if span > 0.0:
+                    u = wp.clamp((s - k[0]) / span, 0.0, 1.0)
+                opacity = k[1] + (k1[1] - k[1]) * u
+            k = k1
+        opacity = clamp01(opacity)
     threshold = input_scalar(mats, tex, mat_id, IN_OPACITY_THRESHOLD, uv)
     if threshold > 0.0:
         if opacity >= threshold:
@@ -200,7 +220,7 @@ def eval_emission(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2):
 
 
 @wp.func(inline=True)  # called once per path vertex: no copy of the big structs
-def eval_material(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2):
+def eval_material(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, s: float):
     """All UsdPreviewSurface inputs of material ``mat_id`` at texture coordinates ``uv``.
 
     ``uv`` is the hit's interpolated primvar (st); pass a non-finite uv (e.g. ``wp.vec2(wp.nan, wp.nan)``) for
@@ -215,7 +235,7 @@ def eval_material(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2):
     ms.roughness = clamp01(input_scalar(mats, tex, mat_id, IN_ROUGHNESS, uv))
     ms.clearcoat = clamp01(input_scalar(mats, tex, mat_id, IN_CLEARCOAT, uv))
     ms.clearcoat_roughness = clamp01(input_scalar(mats, tex, mat_id, IN_CLEARCOAT_ROUGHNESS, uv))
-    ms.opacity = eval_opacity(mats, tex, mat_id, uv)
+    ms.opacity = eval_opacity(mats, tex, mat_id, uv, s)
     ms.ior = wp.max(input_scalar(mats, tex, mat_id, IN_IOR, uv), 1.0e-3)
     n = input_color(mats, tex, mat_id, IN_NORMAL, uv)
     ln = wp.length(n)
@@ -427,6 +447,15 @@ def upload_materials(materials: list[Material], device: str = "cpu") -> Material
                                        dtype=wp.int32, device=device)
     m.absorption_cd = f32(absorb, wp.vec4)
     m.absorption = f32(sigma, wp.vec3)
+    key_off, key_count, keys = [], [], []
+    for x in mats:
+        k = [] if (x.opacity_keys is None or "opacity" in x.textures) else list(x.opacity_keys)
+        key_off.append(len(keys))
+        key_count.append(len(k))
+        keys.extend(k)
+    m.opacity_key_off = wp.array(np.array(key_off, np.int32), dtype=wp.int32, device=device)
+    m.opacity_key_count = wp.array(np.array(key_count, np.int32), dtype=wp.int32, device=device)
+    m.opacity_keys = f32(np.nan_to_num(np.array(keys or [(0.0, 1.0)], np.float64)), wp.vec2)
 
     rows_or_dummy = rows or [None]
     tex_ids, outs, wraps, scales, biases, fallbacks, const_st, sts, xfs, xts = ([] for _ in range(10))
@@ -467,7 +496,7 @@ def upload_materials(materials: list[Material], device: str = "cpu") -> Material
 def eval_material_kernel(mats: Materials, tex: Textures, mat_ids: wp.array(dtype=wp.int32),
                          uvs: wp.array(dtype=wp.vec2), out: wp.array(dtype=MaterialSample)):
     i = wp.tid()
-    out[i] = eval_material(mats, tex, mat_ids[i], uvs[i])
+    out[i] = eval_material(mats, tex, mat_ids[i], uvs[i], 0.0)
 
 
 @wp.kernel

@@ -176,6 +176,9 @@ class Material:
     clearcoat: float = 0.0
     clearcoat_roughness: float = 0.01
     opacity_threshold: float = 0.0  # > 0: cut-out; opacity < threshold -> 0, else 1
+    # opacity changing during the shutter (paper section 5: transparency varying in time): ((s, opacity), ...)
+    # keys at normalised shutter times, blended linearly; None: ``opacity`` throughout.
+    opacity_keys: tuple[tuple[float, float], ...] | None = None
     normal: tuple[float, float, float] = (0.0, 0.0, 1.0)  # tangent-space normal (constant; a map in textures)
     occlusion: float = 1.0  # imported, not used by the renderer
     # Beer-Lambert absorption inside closed solids (extension attributes, see ``usd_materials``): light that

@@ -51,7 +51,7 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
                 t, b1, b2 = triangle_hit_edges(v0, e1, e2, ro, rd, tmax)
                 if t < BIG:
                     tri = geo.mesh_tri_off[m] + lt
-                    opacity = eval_opacity(mats, tex, geo.tri_material[tri], hit_uv(geo, m, tri, b1, b2))
+                    opacity = eval_opacity(mats, tex, geo.tri_material[tri], hit_uv(geo, m, tri, b1, b2), s)
                     tr = tr * (1.0 - opacity)
         else:
             lo_a, hi_a = node_box(geo.blas_lo, geo.blas_hi, boff + a * nk, k0, k1, u)

@@ -52,7 +52,7 @@ import os
 import tempfile
 
 import numpy as np
-from pxr import Ar, Sdf, Usd, UsdGeom, UsdShade
+from pxr import Ar, Gf, Sdf, Usd, UsdGeom, UsdShade
 
 from .scene import Material, Texture, TextureInput
 from .textures import ImageError, LoadedImage, image_texture, read_image
@@ -294,8 +294,9 @@ def _vec(value, n: int, default) -> tuple:
 class MaterialTable:
     """Deduplicated materials of one scene; ``assign`` returns material ids for a prim."""
 
-    def __init__(self, frame: float, warn):
+    def __init__(self, frame: float, warn, shutter=None):
         self.frame = frame
+        self.shutter = shutter  # usd_motion.Shutter: constant inputs varying inside it get keys (opacity)
         self.warn = warn
         self.materials: list[Material] = []
         self.files = TextureFiles(warn)
@@ -441,6 +442,8 @@ class MaterialTable:
                     value = _texture_mean(how, self._means)
             v = _as_field(value, default)
             fields[field_name] = default if v is None else v
+        if "opacity" not in textures:
+            fields["opacity_keys"] = self._keys_in_shutter(shader, "opacity")
         ti = textures.get("opacity")
         if ti is not None and fields["opacity_threshold"] > 0 and "opacityThreshold" not in textures:
             fields["opacity"] = _texture_coverage(ti, fields["opacity_threshold"])
@@ -472,6 +475,24 @@ class MaterialTable:
                     if v is not None:
                         return attr, v
         return inp.GetAttr(), inp.Get(self.frame)
+
+    def _keys_in_shutter(self, node: UsdShade.Shader, name: str):
+        """((s, value), ...) of a constant float input that changes during the shutter, else None.
+
+        Keys at the shutter's ends and at every time sample authored in between, in normalised shutter time.
+        """
+        sh = self.shutter
+        if sh is None or sh.static:
+            return None
+        attr, _ = self._resolved(node, name)
+        if attr is None or attr.GetNumTimeSamples() < 2:
+            return None
+        inner = [t for t in attr.GetTimeSamplesInInterval(Gf.Interval(sh.open, sh.close)) if sh.open < t < sh.close]
+        times = [sh.open] + inner + [sh.close]
+        values = [float(attr.Get(t)) for t in times]
+        if max(values) == min(values):
+            return None
+        return tuple(zip((float(x) for x in sh.normalise(times)), values))
 
     def _value(self, node, name: str, default):
         v = self._resolved(node, name)[1]

@@ -159,7 +159,7 @@ class _Importer:
         cam_prim = usd_camera.find_camera(stage, self.camera_path, settings, warn)
         self.shutter = self._shutter(cam_prim, settings)
         self.xf = TransformSampler(self.shutter)
-        self.materials = MaterialTable(self.frame, warn)
+        self.materials = MaterialTable(self.frame, warn, self.shutter)
 
         self._traverse()
         if not self._saw_render:

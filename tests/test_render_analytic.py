@@ -82,9 +82,10 @@ def test_fstop_zero_is_the_pinhole_bit_for_bit(tmp_path):
 
 
 # --------------------------------------------------------------------------- motion blur
-def coverage_stage(path, keys):
+def coverage_stage(path, keys, opacity=None):
     """Orthographic camera looking down -Z over a 6.4 x 0.4 m strip (64 x 4 px, 0.1 m pixels) and an
-    emissive 0.5 m wide bar whose x translation is keyed at frame-relative times ``keys`` {time: x}."""
+    emissive 0.5 m wide bar whose x translation is keyed at frame-relative times ``keys`` {time: x}, and whose
+    opacity, when given, is keyed the same way {time: opacity}."""
     stage = stages.new_stage(path)
     stages.camera(stage, ortho=True, h_ap_mm=64.0, v_ap_mm=4.0, translate=(0, 0, 5), shutter=(0.0, 1.0),
                   tenths_per_mm=1.0)
@@ -94,7 +95,15 @@ def coverage_stage(path, keys):
     op = bar.AddTranslateOp()
     for t, x in keys.items():
         op.Set(Gf.Vec3d(x, 0, 0), t)
-    stages.rect_xy(stage, "/World/Bar/Quad", -0.25, 0.25, -5, 5, 0.0, stages.material(stage, "E", emissive=(1, 1, 1)))
+    emitter = stages.material(stage, "E", emissive=(1, 1, 1))
+    if opacity is not None:
+        from pxr import UsdShade
+
+        attr = UsdShade.Shader(stage.GetPrimAtPath("/World/Looks/E/Surface")).GetInput("opacity").GetAttr()
+        attr.Clear()
+        for t, v in opacity.items():
+            attr.Set(v, t)
+    stages.rect_xy(stage, "/World/Bar/Quad", -0.25, 0.25, -5, 5, 0.0, emitter)
     stage.Save()
     return path
 
@@ -135,6 +144,20 @@ def test_strobe_shutter_sees_the_frame_instant(tmp_path):
     row = ch["R"].mean(0)
     # the bar spans x in [-0.25, 0.25] m: pixels 29.5 .. 34.5, fully covered pixels 30..33
     assert np.all(row[30:34] == 1.0) and np.all(row[:29] == 0.0) and np.all(row[35:] == 0.0)
+
+
+@pytest.mark.parametrize("keys,coverage", [({0.0: 0.0, 1.0: 1.0}, 0.5), ({0.0: 0.0, 0.5: 1.0, 1.0: 1.0}, 0.75)])
+def test_opacity_fading_during_the_shutter_averages_over_it(tmp_path, keys, coverage):
+    """Transparency varying in time (section 5): a still emissive bar whose opacity is keyed over the shutter
+    shows its emission and coverage averaged over the shutter."""
+    path = coverage_stage(tmp_path / "fade.usda", {0.0: 0.0}, opacity=keys)
+    scene = load_scene(path, 0.0)
+    prep = prepare(scene, RenderOptions(width=64, height=4, spp=256, filter="box"))
+    ch = frame_channels(prep, render_frame(prep, tile_size=32).sums)
+    inside = slice(30, 34)  # pixels fully covered by the 0.5 m bar at x = 0
+    np.testing.assert_allclose(ch["R"][:, inside], coverage, atol=0.02)
+    np.testing.assert_allclose(ch["A"][:, inside], coverage, atol=0.02)
+    assert ch["A"][:, :28].max() == 0.0
 
 
 def test_zero_motion_equals_the_still_scene_bit_for_bit(tmp_path):
