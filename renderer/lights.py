@@ -53,8 +53,8 @@ def _luminance(rgb) -> float:
     return float(0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2])
 
 
-def scene_radius(scene: Scene) -> float:
-    """Radius of a sphere around the scene's geometry at the shutter start (for infinite lights' power)."""
+def scene_sphere(scene: Scene) -> tuple[np.ndarray, float]:
+    """Centre and radius of a sphere around the scene's geometry at the shutter start (origin, 1 if empty)."""
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for inst in scene.instances:
         pts = scene.meshes[inst.mesh].points[0]
@@ -66,20 +66,8 @@ def scene_radius(scene: Scene) -> float:
         w = corners @ m[:3, :3].T + m[:3, 3]
         lo, hi = np.minimum(lo, w.min(0)), np.maximum(hi, w.max(0))
     if not np.isfinite(lo).all():
-        return 1.0
-    return float(max(0.5 * np.linalg.norm(hi - lo), 1e-6))
-
-
-def scene_centre(scene: Scene) -> np.ndarray:
-    """Centre of the scene's geometry at the shutter start (the origin when there is none)."""
-    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-    for inst in scene.instances:
-        pts = scene.meshes[inst.mesh].points[0]
-        if len(pts):
-            m = matrix_at(inst.transform, 0.0)
-            w = pts.min(0) @ m[:3, :3].T + m[:3, 3], pts.max(0) @ m[:3, :3].T + m[:3, 3]
-            lo, hi = np.minimum(lo, np.minimum(*w)), np.maximum(hi, np.maximum(*w))
-    return (lo + hi) / 2 if np.isfinite(lo).all() else np.zeros(3)
+        return np.zeros(3), 1.0
+    return (lo + hi) / 2, float(max(0.5 * np.linalg.norm(hi - lo), 1e-6))
 
 
 def delivered_irradiance(power: float, lum: float, light_pos: np.ndarray, centre: np.ndarray, radius: float):
@@ -97,8 +85,7 @@ def _axis_scales(xf) -> np.ndarray:
 def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
     """Lights of a scene for the kernels; returns the struct and the number of lights."""
     kinds, radiance, size, insts, cdfs, bases, counts, powers, transforms = ([] for _ in range(9))
-    radius = scene_radius(scene)
-    centre = scene_centre(scene)
+    centre, radius = scene_sphere(scene)
     env_image, env_xf = None, np.eye(4)
     dome_visible = 0
     for light in scene.lights:

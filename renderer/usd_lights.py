@@ -216,7 +216,3 @@ def default_light_warning() -> str:
 def is_light(prim) -> bool:
     return prim.GetTypeName() in LIGHT_TYPES or prim.HasAPI(UsdLux.LightAPI)
 
-
-def light_visible(prim, frame: float) -> bool:
-    img = UsdGeom.Imageable(prim)
-    return not img or img.ComputeVisibility(frame) != UsdGeom.Tokens.invisible
