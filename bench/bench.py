@@ -39,7 +39,7 @@ def cycles_anchors() -> dict[str, float]:
 
 def render(path, *, spp, threads, motion_blur=True, dof=True, tile=64, repeats=1):
     from renderer.render import RenderOptions, prepare, render_frame
-    from renderer.usd_scene import load_scene
+    from renderer.usd.importer import load_scene
 
     t0 = time.perf_counter()
     scene = load_scene(path, motion_blur=motion_blur)
@@ -64,7 +64,7 @@ def gloss_noise_at_equal_time(scenes, cycles_sps: float, reference_spp: int = 10
     import numpy as np
 
     from renderer.render import RenderOptions, frame_channels, prepare, render_frame
-    from renderer.usd_scene import load_scene
+    from renderer.usd.importer import load_scene
 
     w, h = 320, 180
     budget = w * h * 64 / cycles_sps  # seconds Cycles needs for 64 spp at this size

@@ -42,7 +42,7 @@ def render_tile(path: pathlib.Path, size: int, spp: int, frame: float | None = N
     from pxr import Usd
 
     from renderer.render import RenderOptions, frame_channels, prepare, render_frame
-    from renderer.usd_scene import load_scene
+    from renderer.usd.importer import load_scene
 
     stage = Usd.Stage.Open(str(path))
     if frame is None and stage.HasAuthoredTimeCodeRange():

@@ -19,10 +19,10 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from .motion import matrix_at
-from .motion_kernels import MotionKeys, keys_matrix, upload_keys
-from .sampling import square_to_uniform_disk_concentric
-from .scene import Camera
+from renderer.motion.kernels import MotionKeys, keys_matrix, upload_keys
+from renderer.motion.transform import matrix_at
+from renderer.sampling.warps import square_to_uniform_disk_concentric
+from renderer.scene.model import Camera
 
 
 @wp.struct

@@ -12,7 +12,7 @@ import os
 import sys
 import time
 
-from .options import MAX_DEPTH
+from renderer.options import AOV_NAMES, FILTERS, MAX_DEPTH, TIME_FILTERS, RenderOptions
 
 
 class _Parser(argparse.ArgumentParser):
@@ -51,36 +51,48 @@ def _number(text: str) -> float:
     return v
 
 
-def _clamp(text: str) -> float:
-    v = _number(text)
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0: {text!r}")
-    return v
+def _number_at_least(lo: float, strict: bool = False):
+    """An argparse type: a finite number >= lo (> lo when strict)."""
+    def parse(text: str) -> float:
+        v = _number(text)
+        if v < lo or (strict and v == lo):
+            raise argparse.ArgumentTypeError(f"must be {'>' if strict else '>='} {lo:g}: {text!r}")
+        return v
+
+    return parse
+
+
+_non_negative = _number_at_least(0.0)
+_positive = _number_at_least(0.0, strict=True)
 
 
 def add_render_settings(p: argparse.ArgumentParser) -> None:
-    """Flags shared by ``drt render`` and ``drt submit``."""
-    from .options import AOV_NAMES, FILTERS, TIME_FILTERS
-
+    """Flags shared by ``drt render`` and ``drt submit``; defaults are ``RenderOptions``' own."""
+    d = RenderOptions()
     p.add_argument("--frame", type=_number, default=None, help="time code to render (default: stage start)")
     p.add_argument("--camera", default=None, metavar="PRIM_PATH", help="camera prim (default: render settings)")
     p.add_argument("--width", type=_positive_int, default=None)
     p.add_argument("--height", type=_positive_int, default=None)
-    p.add_argument("--spp", type=_positive_int, default=16, help="samples per pixel (default 16)")
-    p.add_argument("--seed", type=_seed, default=0)
-    p.add_argument("--filter", choices=list(FILTERS), default="gaussian", help="pixel filter (default gaussian)")
-    p.add_argument("--time-filter", choices=list(TIME_FILTERS), default="box",
-                   help="shutter weighting (default box; strobe = instantaneous at the frame time)")
+    p.add_argument("--spp", type=_positive_int, default=d.spp, help=f"samples per pixel (default {d.spp})")
+    p.add_argument("--seed", type=_seed, default=d.seed)
+    p.add_argument("--filter", choices=list(FILTERS), default=d.filter, help=f"pixel filter (default {d.filter})")
+    p.add_argument("--time-filter", choices=list(TIME_FILTERS), default=d.time_filter,
+                   help=f"shutter weighting (default {d.time_filter}; strobe = instantaneous at the frame time)")
     p.add_argument("--shutter", nargs=2, type=_number, metavar=("OPEN", "CLOSE"), default=None,
                    help="shutter interval relative to the frame, overriding the camera's")
     p.add_argument("--no-motion-blur", action="store_true")
     p.add_argument("--no-dof", action="store_true")
+    p.add_argument("--focal-length", type=_positive, default=None, metavar="MM",
+                   help="lens override, in the camera's USD units (tenths of a scene unit, like focalLength)")
+    p.add_argument("--f-stop", type=_non_negative, default=None, help="lens override (0 = pinhole)")
+    p.add_argument("--focus-distance", type=_positive, default=None, metavar="D",
+                   help="lens override, in scene units")
     p.add_argument("--aov", action="append", choices=list(AOV_NAMES), default=[], metavar="NAME",
                    help=f"extra output ({', '.join(AOV_NAMES)}); repeatable")
     p.add_argument("--half", action="store_true", help="store colour as 16-bit HALF (default 32-bit FLOAT)")
-    p.add_argument("--max-depth", type=_depth, default=8, metavar="N",
-                   help=f"bounces after the camera ray, 0..{MAX_DEPTH} (default 8; 1 = direct lighting only)")
-    p.add_argument("--clamp", type=_clamp, default=0.0, metavar="X",
+    p.add_argument("--max-depth", type=_depth, default=d.max_depth, metavar="N",
+                   help=f"bounces after the camera ray, 0..{MAX_DEPTH} (default {d.max_depth}; 1 = direct lighting only)")
+    p.add_argument("--clamp", type=_non_negative, default=d.clamp, metavar="X",
                    help="clamp each sample's radiance to X per channel to cut fireflies (default 0 = off)")
 
 
@@ -135,24 +147,32 @@ def _si(x: float) -> str:
     return f"{x:.0f} "
 
 
+def request_from_args(args: argparse.Namespace):
+    """The RenderRequest that ``drt render``'s flags describe."""
+    from renderer.request import LensOverrides, RenderRequest
+
+    options = RenderOptions(width=args.width, height=args.height, spp=args.spp, seed=args.seed,
+                            filter=args.filter, time_filter=args.time_filter, dof=not args.no_dof,
+                            aovs=tuple(dict.fromkeys(args.aov)), max_depth=args.max_depth, clamp=args.clamp)
+    lens = LensOverrides(focal_length=args.focal_length, f_stop=args.f_stop, focus_distance=args.focus_distance)
+    return RenderRequest(scene_path=args.scene, frame=args.frame, camera=args.camera,
+                         shutter=tuple(args.shutter) if args.shutter else None,
+                         motion_blur=not args.no_motion_blur, lens=lens, options=options, half=args.half)
+
+
 def cmd_render(args: argparse.Namespace) -> int:
-    from .errors import RenderError
-    from .render import RenderOptions, default_threads, prepare, render_frame, write_frame
-    from .usd_scene import load_scene
+    from renderer.errors import RenderError
+    from renderer.render import default_threads, render_frame, write_frame
+    from renderer.request import RenderRequest
 
     out = os.path.abspath(args.output)
     out_dir = os.path.dirname(out)
     if not os.path.isdir(out_dir):
         raise RenderError(f"output directory does not exist: {out_dir}")
     t_load = time.perf_counter()
-    strobe = args.time_filter == "strobe"
-    scene = load_scene(args.scene, args.frame, camera_path=args.camera,
-                       shutter=tuple(args.shutter) if args.shutter else None,
-                       motion_blur=not (args.no_motion_blur or strobe))
-    options = RenderOptions(width=args.width, height=args.height, spp=args.spp, seed=args.seed,
-                            filter=args.filter, time_filter=args.time_filter, dof=not args.no_dof,
-                            aovs=tuple(dict.fromkeys(args.aov)), max_depth=args.max_depth, clamp=args.clamp)
-    prep = prepare(scene, options)
+    request = request_from_args(args)
+    options = request.options
+    prep = request.prepare()
     load_seconds = time.perf_counter() - t_load
     if not args.quiet:
         for w in prep.warnings:
@@ -163,7 +183,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         result = render_frame(prep, tile_size=args.tile, threads=threads, progress=bar)
     finally:
         bar.close()
-    zeroed = write_frame(out, prep, result.sums, half=args.half)
+    zeroed = write_frame(out, prep, result.sums, half=request.half)
     if result.nonfinite and not args.quiet:
         sys.stderr.write(f"drt: warning: {result.nonfinite} samples had NaN/Inf radiance and were zeroed\n")
     if zeroed and not args.quiet:
@@ -186,7 +206,7 @@ def main(argv: list[str] | None = None) -> int:
 def render_main(args: argparse.Namespace) -> int:
     """Run ``drt render`` with parsed arguments under the CLI's error contract; returns the exit code."""
     try:
-        from .device import init_warp
+        from renderer.device import init_warp
 
         init_warp()
         return cmd_render(args)
@@ -194,7 +214,7 @@ def render_main(args: argparse.Namespace) -> int:
         sys.stderr.write("drt: interrupted\n")
         return 130
     except Exception as e:  # noqa: BLE001 - the CLI's contract: one line, never a traceback
-        from .errors import RenderError
+        from renderer.errors import RenderError
 
         msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         if isinstance(e, (RenderError, OSError)):

@@ -17,23 +17,47 @@ from __future__ import annotations
 
 import warp as wp
 
-from .accel import BIG, Geometry, instance_object_to_world, instance_world_to_object, intersect_closest, \
-    mesh_keys_at, triangle_points
-from .bsdf import SurfaceParams, bsdf_albedo_hint, bsdf_setup, lobes_eval, lobes_pdf, lobes_sample
-from .camera import CameraParams, camera_ray
-from .film import SampleBuffer
-from .light_sample import area_light_hit, choose_light, infinite_light_eval, mesh_light_pdf, sample_light
-from .lights import Lights
-from .materials import MaterialSample, Materials, apply_normal_map, beer_lambert, eval_material, \
-    triangle_tangent
-from .options import TIME_FILTERS
-from .sampler import (BOUNCE_DIRECTION, BOUNCE_LIGHT_CHOICE, BOUNCE_LIGHT_POSITION, BOUNCE_LOBE,
-                      BOUNCE_ROULETTE, DIM_FILM, DIM_LENS, DIM_LIGHT_BASE, DIM_TIME, DIMS_PER_BOUNCE, sample_1d,
-                      sample_2d)
-from .sampling import sample_tent
-from .shadow import hit_uv, transmittance
-from .scene import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_DOME, LIGHT_RECT, LIGHT_SPHERE
-from .textures import Textures
+from renderer.accel.intersect import (
+    BIG,
+    Geometry,
+    instance_object_to_world,
+    instance_world_to_object,
+    intersect_closest,
+    mesh_keys_at,
+    triangle_points,
+)
+from renderer.accel.occlusion import hit_uv, transmittance
+from renderer.camera import CameraParams, camera_ray
+from renderer.film.film import SampleBuffer
+from renderer.lights.sample import area_light_hit, choose_light, infinite_light_eval, mesh_light_pdf, sample_light
+from renderer.lights.table import Lights
+from renderer.options import TIME_FILTERS
+from renderer.sampling.sobol import (
+    BOUNCE_DIRECTION,
+    BOUNCE_LIGHT_CHOICE,
+    BOUNCE_LIGHT_POSITION,
+    BOUNCE_LOBE,
+    BOUNCE_ROULETTE,
+    DIM_FILM,
+    DIM_LENS,
+    DIM_LIGHT_BASE,
+    DIM_TIME,
+    DIMS_PER_BOUNCE,
+    sample_1d,
+    sample_2d,
+)
+from renderer.sampling.warps import sample_tent
+from renderer.scene.model import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_DOME, LIGHT_RECT, LIGHT_SPHERE
+from renderer.shading.bsdf import SurfaceParams, bsdf_albedo_hint, bsdf_setup, lobes_eval, lobes_pdf, lobes_sample
+from renderer.shading.materials import (
+    Materials,
+    MaterialSample,
+    apply_normal_map,
+    beer_lambert,
+    eval_material,
+    triangle_tangent,
+)
+from renderer.shading.textures import Textures
 
 # Rendering needs no gradients: no adjoint code (half the compile time and code size).
 wp.set_module_options({"enable_backward": False})

@@ -1,6 +1,6 @@
 """The renderer as a library: prepare a loaded scene once, render any tile of it, assemble, write the EXR.
 
-    scene = load_scene("shot.usda", frame=12)                 # renderer.usd_scene
+    scene = load_scene("shot.usda", frame=12)                 # renderer.usd.importer
     prep = prepare(scene, RenderOptions(width=640, height=360, spp=64))
     sums = render_frame(prep, tile_size=64, threads=2)        # or render_tile(prep, Tile(...)) per worker
     write_frame("out.exr", prep, sums)
@@ -11,7 +11,6 @@ into tiles and calls it from its workers.
 """
 from __future__ import annotations
 
-import math
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -21,57 +20,21 @@ from typing import Callable
 import numpy as np
 import warp as wp
 
-from . import film
-from .camera import CameraSetup, ndc_matrix, setup_camera
-from .errors import Cancelled, SettingsError
-from .flatten import flatten_still_instances
-from .geometry import GeometryStats, upload_geometry
-from .integrator import PathSettings, trace_wave_kernel
-from .lights import upload_lights
-from .materials import upload_material_textures, upload_materials
-from .motion import matrix_at
-from .options import AOV_NAMES, MAX_DEPTH, TIME_FILTERS
-from .scene import Scene
-
-MAX_SPP = 1 << 16
-MAX_PIXELS = 16384 * 16384
-
-
-@dataclass(frozen=True)
-class RenderOptions:
-    """How to render. Resolution None = the scene's RenderSettings, else 640 wide at the camera's aspect."""
-
-    width: int | None = None
-    height: int | None = None
-    spp: int = 16
-    seed: int = 0
-    filter: str = "gaussian"  # pixel reconstruction filter: box, triangle, gaussian, blackman-harris
-    time_filter: str = "box"  # shutter weighting: box, triangle, strobe (the instant of the frame)
-    dof: bool = True
-    aovs: tuple[str, ...] = ()
-    max_depth: int = 8  # bounces after the camera ray; 1 = direct lighting only
-    clamp: float = 0.0  # maximum radiance of a sample per channel, 0 = off (fireflies are never cut silently)
-
-    def validate(self) -> "RenderOptions":
-        if self.filter not in film.FILTERS:
-            raise SettingsError(f"unknown filter {self.filter!r} (choose from {', '.join(film.FILTERS)})")
-        if self.time_filter not in TIME_FILTERS:
-            raise SettingsError(f"unknown time filter {self.time_filter!r} (choose from {', '.join(TIME_FILTERS)})")
-        if not 1 <= self.spp <= MAX_SPP:
-            raise SettingsError(f"spp must be between 1 and {MAX_SPP}, got {self.spp}")
-        if not 0 <= self.seed < 2**32:
-            raise SettingsError(f"seed must be between 0 and 2^32-1, got {self.seed}")
-        for name, v in (("width", self.width), ("height", self.height)):
-            if v is not None and not 1 <= v <= 16384:
-                raise SettingsError(f"{name} must be between 1 and 16384, got {v}")
-        if not 0 <= self.max_depth <= MAX_DEPTH:
-            raise SettingsError(f"max_depth must be between 0 and {MAX_DEPTH}, got {self.max_depth}")
-        if not (self.clamp >= 0.0 and math.isfinite(self.clamp)):
-            raise SettingsError(f"clamp must be a finite number >= 0, got {self.clamp}")
-        for a in self.aovs:
-            if a not in AOV_NAMES:
-                raise SettingsError(f"unknown AOV {a!r} (choose from {', '.join(AOV_NAMES)})")
-        return self
+from renderer import integrator
+from renderer.accel.upload import GeometryStats, upload_geometry
+from renderer.camera import CameraSetup, ndc_matrix, setup_camera
+from renderer.device import init_warp
+from renderer.errors import Cancelled, SettingsError
+from renderer.film import film
+from renderer.film.exr import timecode_from_frame, write_exr
+from renderer.integrator import PathSettings, trace_wave_kernel
+from renderer.lights.table import upload_lights
+from renderer.motion.transform import matrix_at
+# MAX_SPP and RenderOptions are re-exported: ``renderer.render`` is the library API the README shows.
+from renderer.options import AOV_NAMES, MAX_DEPTH, MAX_PIXELS, MAX_SPP, TIME_FILTERS, RenderOptions  # noqa: F401
+from renderer.scene.flatten import flatten_still_instances
+from renderer.scene.model import Scene
+from renderer.shading.materials import upload_material_textures, upload_materials
 
 
 @dataclass(frozen=True)
@@ -143,9 +106,6 @@ _compile_lock = threading.Lock()
 
 def load_kernels(device: str = "cpu") -> None:
     """Compile (or fetch from the kernel cache) the render kernels once, before threads race to do it."""
-    from . import integrator
-    from .device import init_warp
-
     init_warp()
     with _compile_lock:
         wp.load_module(integrator, device=device)
@@ -307,8 +267,6 @@ def frame_shutter_time(scene: Scene) -> float:
 
 def frame_attributes(prep: PreparedScene) -> dict:
     """EXR header attributes: camera matrices at the frame time, frame rate, time code, render settings."""
-    from .exr import timecode_from_frame
-
     scene, o = prep.scene, prep.options
     w2c = np.linalg.inv(matrix_at(scene.camera.transform, frame_shutter_time(scene)))
     return {
@@ -330,8 +288,6 @@ def frame_attributes(prep: PreparedScene) -> dict:
 
 def write_frame(path, prep: PreparedScene, sums: dict[str, np.ndarray], *, half: bool = False) -> int:
     """Write the frame's EXR atomically. Returns the number of non-finite values that had to be zeroed."""
-    from .exr import write_exr
-
     return write_exr(path, frame_channels(prep, sums), half=half, attributes=frame_attributes(prep))
 
 

@@ -14,7 +14,7 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, field_validator, model_validator
 
-# The renderer's names (tests check they match renderer.film.FILTERS, renderer.integrator.TIME_FILTERS and
+# The renderer's names (tests check they match renderer.film.film.FILTERS, renderer.integrator.TIME_FILTERS and
 # renderer.render.AOV_NAMES); repeated here so the wire format does not import the renderer.
 FILTERS = ("gaussian", "box", "triangle", "blackman-harris")
 TIME_FILTERS = ("box", "triangle", "strobe")

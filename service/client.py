@@ -189,9 +189,6 @@ def add_commands(sub) -> None:
                    help="several frames (instead of --frame)")
     s.add_argument("--tile", type=_int, default=64, help="tile size in pixels (default 64)")
     s.add_argument("--priority", type=_int, default=0, help="higher runs first (default 0)")
-    s.add_argument("--focal-length", type=_float, default=None, help="override, in USD units (tenths of a unit)")
-    s.add_argument("--f-stop", type=_float, default=None, help="override (0 = pinhole)")
-    s.add_argument("--focus-distance", type=_float, default=None, help="override, in scene units")
     s.add_argument("--idempotency-key", default=None, help="makes retrying this submission safe (default: random)")
     s.add_argument("--wait", action="store_true", help="wait for the job to finish, with a progress bar")
     s.add_argument("-o", "--output", type=Path, default=None,

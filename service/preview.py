@@ -33,7 +33,7 @@ def png(rgb: np.ndarray) -> bytes:
 
 
 def from_exr(path: Path) -> bytes:
-    from renderer.exr import read_exr
+    from renderer.film.exr import read_exr
 
     channels, _ = read_exr(path)
     return png(np.stack([channels["R"], channels["G"], channels["B"]], axis=-1))

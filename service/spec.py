@@ -3,20 +3,17 @@
 A ``RenderSpec`` is what a Dask task needs to know about a job: plain, frozen and hashable, so it pickles cheaply
 and keys the worker's scene cache. It never holds pydantic objects (workers need not import the wire format).
 
-Mapping (the same as ``renderer.cli.cmd_render``): ``time_filter == "strobe"`` or ``motion_blur == false`` loads the
-scene still (``motion_blur=False``); ``shutter`` overrides the camera's shutter; the rest go to ``RenderOptions``.
-Camera overrides (no ``drt render`` flag) replace fields of the loaded ``Camera``: ``focal_length`` is given in the
-camera's USD units (tenths of a scene unit), ``focus_distance`` in scene units, ``f_stop`` unitless.
+``RenderSpec.request(frame)`` maps it onto the renderer's ``RenderRequest``, the record ``drt render`` builds from
+its flags; loading, the lens overrides' units and the strobe rule live there, once.
 """
 from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
 
+from renderer.options import RenderOptions
+from renderer.request import LensOverrides, RenderRequest
 from schemas import JobCreate
-
-# USD camera lengths (focalLength, apertures) are in tenths of a scene unit; the renderer's Camera is in scene units.
-USD_LENS_UNITS_PER_SCENE_UNIT = 10.0
 
 
 @dataclass(frozen=True)
@@ -58,29 +55,17 @@ class RenderSpec:
         d.pop("half")  # only changes how the EXR is stored
         return (frame, tuple(sorted(d.items())))
 
-    def options(self):
-        from renderer.render import RenderOptions
-
+    def options(self) -> RenderOptions:
         return RenderOptions(width=self.width, height=self.height, spp=self.spp, seed=self.seed, filter=self.filter,
                              time_filter=self.time_filter, dof=self.dof, aovs=self.aovs, max_depth=self.max_depth,
                              clamp=self.clamp)
 
+    def request(self, frame: float | None) -> RenderRequest:
+        """One frame of this job as the renderer's RenderRequest."""
+        lens = LensOverrides(focal_length=self.focal_length, f_stop=self.f_stop, focus_distance=self.focus_distance)
+        return RenderRequest(scene_path=self.scene_path, frame=frame, camera=self.camera, shutter=self.shutter,
+                             motion_blur=self.motion_blur, lens=lens, options=self.options(), half=self.half)
+
     def load(self, frame: float | None):
         """Load one frame as the renderer's Scene, with the camera overrides applied."""
-        from renderer.usd_scene import load_scene
-
-        scene = load_scene(self.scene_path, frame, camera_path=self.camera, shutter=self.shutter,
-                           motion_blur=self.motion_blur and self.time_filter != "strobe")
-        return self.override_camera(scene)
-
-    def override_camera(self, scene):
-        changes = {}
-        if self.focal_length is not None:
-            changes["focal_length"] = self.focal_length / USD_LENS_UNITS_PER_SCENE_UNIT
-        if self.f_stop is not None:
-            changes["f_stop"] = self.f_stop
-        if self.focus_distance is not None:
-            changes["focus_distance"] = self.focus_distance
-        if not changes:
-            return scene
-        return dataclasses.replace(scene, camera=dataclasses.replace(scene.camera, **changes))
+        return self.request(frame).load()

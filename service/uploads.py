@@ -218,7 +218,7 @@ def _present(target: str, entries: set[str]) -> bool:
 
 
 def _parse_failure(name: str, err: Exception, directory: Path) -> UploadError:
-    from renderer.usd_scene import malformed_usd_message
+    from renderer.usd.importer import malformed_usd_message
 
     return UploadError(malformed_usd_message(name, Exception(hide_dir(str(err), directory))))
 

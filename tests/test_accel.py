@@ -4,14 +4,14 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from renderer.accel import Geometry, intersect_closest
-from renderer.materials import Materials, upload_material_textures, upload_materials
-from renderer.shadow import transmittance
-from renderer.textures import Textures
-from renderer.accel_build import build_bvh
-from renderer.geometry import instance_key_bounds, upload_geometry
-from renderer.motion import make_transform, matrix_at
-from renderer.scene import Camera, Instance, Material, Mesh, MotionTransform, Scene
+from renderer.accel.intersect import Geometry, intersect_closest
+from renderer.shading.materials import Materials, upload_material_textures, upload_materials
+from renderer.accel.occlusion import transmittance
+from renderer.shading.textures import Textures
+from renderer.accel.build import build_bvh
+from renderer.accel.upload import instance_key_bounds, upload_geometry
+from renderer.motion.transform import make_transform, matrix_at
+from renderer.scene.model import Camera, Instance, Material, Mesh, MotionTransform, Scene
 
 
 @wp.kernel

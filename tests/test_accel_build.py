@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from renderer.accel_build import EMPTY, Bvh, build_bvh, bytes_per_primitive
+from renderer.accel.build import EMPTY, Bvh, build_bvh, bytes_per_primitive
 
 
 # ---------------------------------------------------------------------------------------------- inputs

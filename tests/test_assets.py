@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from renderer.render import RenderOptions, frame_channels, prepare, render_frame
-from renderer.usd_scene import load_scene
+from renderer.usd.importer import load_scene
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 CANDIDATES = [ROOT.parent / "shared" / "usd-assets", pathlib.Path("/work/shared/usd-assets")]

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import stages
-from renderer.exr import read_exr
+from renderer.film.exr import read_exr
 
 
 def drt(*args, cwd=None):
@@ -116,3 +116,31 @@ def test_failed_render_leaves_existing_output_untouched(tmp_path):
 def test_output_directory_must_exist(scene_file, tmp_path):
     r = drt("render", scene_file, "-o", tmp_path / "no" / "dir" / "x.exr")
     assert_one_line_error(r, "directory")
+
+
+def test_lens_overrides(scene_file, tmp_path):
+    """Lens overrides in USD units: `--f-stop 0` is the pinhole bit for bit (= --no-dof); wide open and focused
+    near, the card (3 m away) blurs into every pixel, and refocused on it its edges are the pinhole's; doubling the
+    focal length (0.5 -> 1 tenth of a unit) narrows the view so the 1 x 0.8 card covers the expected fraction."""
+    def alpha(name, *flags):
+        out = tmp_path / f"{name}.exr"
+        r = drt("render", scene_file, "-o", out, "--width", 48, "--height", 32, "--spp", 16, *flags)
+        assert r.returncode == 0, r.stderr
+        return read_exr(out)[0]["A"]
+
+    soft = lambda a: int(((a > 0.02) & (a < 0.98)).sum())  # noqa: E731 - pixels of partial coverage
+    pinhole = alpha("pin", "--no-dof")
+    assert np.array_equal(pinhole, alpha("f0", "--f-stop", 0))
+    assert soft(alpha("near", "--f-stop", 0.1, "--focus-distance", 0.5)) > 0.9 * pinhole.size
+    assert soft(alpha("on_card", "--f-stop", 0.1, "--focus-distance", 3)) <= soft(pinhole) + 4
+    # View at 3 m: aperture 0.36 x 0.24 tenths over focal length, times 3 m; the card is 1 x 0.8 m.
+    for focal, coverage in ((0.5, (1.0 * 0.8) / (2.16 * 1.44)), (1.0, (1.0 * 0.72) / (1.08 * 0.72))):
+        a = alpha(f"f{focal}", "--no-dof", "--focal-length", focal)
+        assert abs(a.mean() - coverage) < 0.02, (focal, a.mean(), coverage)
+
+
+@pytest.mark.parametrize("flags", [["--f-stop", "-1"], ["--focus-distance", "0"], ["--focal-length", "inf"]])
+def test_bad_lens_overrides(scene_file, tmp_path, flags):
+    r = drt("render", scene_file, "-o", tmp_path / "x.exr", *flags)
+    assert r.returncode == 2
+    assert_one_line_error(r, flags[0])

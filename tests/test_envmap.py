@@ -5,7 +5,7 @@ import numpy as np
 import warp as wp
 
 from chi2 import SphericalCap, assert_chi2
-from renderer.envmap import (EnvMap, build_distribution, dir_to_latlong_np, env_pdf, env_pdf_np, env_radiance,
+from renderer.lights.envmap import (EnvMap, build_distribution, dir_to_latlong_np, env_pdf, env_pdf_np, env_radiance,
                              env_sample, env_sample_np, latlong_to_dir_np, upload_envmap)
 
 

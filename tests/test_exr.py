@@ -10,8 +10,8 @@ import numpy as np
 import OpenEXR
 import pytest
 
-from renderer import exr
-from renderer.exr import fps_to_rational, read_exr, timecode_from_frame, write_exr
+from renderer.film import exr
+from renderer.film.exr import fps_to_rational, read_exr, timecode_from_frame, write_exr
 
 H, W = 6, 8
 RGBA = ("R", "G", "B", "A")

@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from renderer.flatten import flatten_still_instances
-from renderer.motion import make_transform
-from renderer.scene import LIGHT_MESH, Camera, Instance, Light, Material, Mesh, MotionTransform, Scene
+from renderer.scene.flatten import flatten_still_instances
+from renderer.motion.transform import make_transform
+from renderer.scene.model import LIGHT_MESH, Camera, Instance, Light, Material, Mesh, MotionTransform, Scene
 
 
 def translate(x):

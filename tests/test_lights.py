@@ -5,8 +5,8 @@ import math
 
 import numpy as np
 
-from renderer.lights import delivered_irradiance, upload_lights
-from renderer.scene import (LIGHT_DOME, LIGHT_RECT, LIGHT_SPHERE, Camera, Instance, Light, Material, Mesh,
+from renderer.lights.table import delivered_irradiance, upload_lights
+from renderer.scene.model import (LIGHT_DOME, LIGHT_RECT, LIGHT_SPHERE, Camera, Instance, Light, Material, Mesh,
                             MotionTransform, Scene)
 
 

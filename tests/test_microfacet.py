@@ -15,7 +15,7 @@ import warp as wp
 from scipy import stats
 
 from chi2 import Domain, expected_probabilities, histogram, pooled_chi2
-from renderer import microfacet as M
+from renderer.shading import microfacet as M
 
 wp.set_module_options({"enable_backward": False})
 

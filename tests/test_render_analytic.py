@@ -9,7 +9,7 @@ from scipy.optimize import minimize_scalar
 
 import stages
 from renderer.render import RenderOptions, Tile, frame_channels, prepare, render_frame, render_tile
-from renderer.usd_scene import load_scene
+from renderer.usd.importer import load_scene
 
 
 def render_rgb(path, *, tile=None, motion_blur=True, **opts):

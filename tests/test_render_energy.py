@@ -6,7 +6,7 @@ import pytest
 
 import stages
 from renderer.render import RenderOptions, frame_channels, prepare, render_frame
-from renderer.usd_scene import load_scene
+from renderer.usd.importer import load_scene
 
 
 def furnace(tmp_path, material):
@@ -51,7 +51,7 @@ def test_rough_dielectric_sphere_loses_at_most_the_single_scattering_energy(tmp_
     through the ball crosses its surface at least twice, so the ball may lose up to the product of the
     worst entering and the worst leaving single-scattering albedo of its BSDF (measured here by
     ``directional_albedo`` at normal, 45 and 80 degrees), and never gains energy."""
-    from renderer.bsdf import directional_albedo
+    from renderer.shading.bsdf import directional_albedo
 
     glass = dict(diffuse_color=(1.0, 1.0, 1.0), opacity=0.0, ior=1.5, roughness=roughness)
     cosines = (1.0, np.cos(np.radians(45)), np.cos(np.radians(80)))

@@ -4,10 +4,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from renderer import film
-from renderer.motion import make_transform
+from renderer.film import film
+from renderer.motion.transform import make_transform
 from renderer.render import RenderOptions, Tile, prepare, render_frame, render_tile
-from renderer.scene import (LIGHT_RECT, LIGHT_SPHERE, Camera, Instance, Light, Material, Mesh, MotionTransform,
+from renderer.scene.model import (LIGHT_RECT, LIGHT_SPHERE, Camera, Instance, Light, Material, Mesh, MotionTransform,
                             Scene)
 
 

@@ -6,7 +6,7 @@ import pytest
 import warp as wp
 
 from chi2 import Rectangle, assert_chi2
-from renderer import sampler as SM
+from renderer.sampling import sobol as SM
 
 wp.set_module_options({"enable_backward": False})
 

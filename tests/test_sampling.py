@@ -8,7 +8,7 @@ import pytest
 import warp as wp
 
 from chi2 import AzimuthWedge, Interval, Rectangle, SphericalCap, assert_chi2, cap_around
-from renderer import sampling as S
+from renderer.sampling import warps as S
 
 wp.set_module_options({"enable_backward": False})
 

@@ -6,9 +6,9 @@ import OpenImageIO as oiio
 import pytest
 import warp as wp
 
-from renderer import materials as M
-from renderer import textures as T
-from renderer.scene import Material, Texture, TextureInput
+from renderer.shading import materials as M
+from renderer.shading import textures as T
+from renderer.scene.model import Material, Texture, TextureInput
 
 
 def write_image(path, pixels, fmt=oiio.UINT8):

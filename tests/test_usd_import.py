@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdRender, UsdShade, Vt
 
-from renderer import scene as sc
+from renderer.scene import model as sc
 from renderer.errors import SceneError
-from renderer.motion import make_transform, matrix_at, quat_to_matrix
-from renderer.usd_geometry import triangulate
-from renderer.usd_motion import motion_transforms
-from renderer.usd_scene import load_scene
+from renderer.motion.transform import make_transform, matrix_at, quat_to_matrix
+from renderer.usd.geometry import triangulate
+from renderer.usd.motion import motion_transforms
+from renderer.usd.importer import load_scene
 
 ASSETS = pathlib.Path("/work/shared/usd-assets")
 HEAVY = pathlib.Path("/work/shared/bench/scenes/heavy.usda")

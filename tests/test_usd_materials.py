@@ -9,13 +9,13 @@ import OpenImageIO as oiio
 import pytest
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade, Vt
 
-from renderer import materials as M
-from renderer import scene as sc
-from renderer import textures as T
-from renderer.motion import matrix_at
-from renderer.usd_geometry import read_named_uvs
-from renderer.usd_materials import MaterialTable
-from renderer.usd_scene import WarningLog, load_scene
+from renderer.shading import materials as M
+from renderer.scene import model as sc
+from renderer.shading import textures as T
+from renderer.motion.transform import matrix_at
+from renderer.usd.geometry import read_named_uvs
+from renderer.usd.materials import MaterialTable
+from renderer.usd.importer import WarningLog, load_scene
 
 ASSETS = pathlib.Path("/work/shared/usd-assets")
 F = Sdf.ValueTypeNames

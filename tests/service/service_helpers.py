@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 import stages
-from renderer.exr import read_exr
+from renderer.film.exr import read_exr
 
 
 def write_card(path: Path, *, fstop: float = 2.0, extra: str | None = None) -> Path:

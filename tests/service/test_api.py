@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from renderer.exr import read_exr
+from renderer.film.exr import read_exr
 from service import worker
 from service.api.deps import get_settings
 

@@ -10,7 +10,7 @@ from service.submission import parse_settings
 
 
 def test_names_match_the_renderer():
-    from renderer.film import FILTERS as R_FILTERS
+    from renderer.film.film import FILTERS as R_FILTERS
     from renderer.integrator import TIME_FILTERS as R_TIME
     from renderer.render import AOV_NAMES
 

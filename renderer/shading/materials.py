@@ -29,8 +29,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .scene import Material, Mesh, Texture
-from .textures import OUTPUT_RGB, OUTPUTS, WRAP_MODES, Textures, texture_fetch, upload_textures
+from renderer.scene.model import Material, Mesh, Texture
+from renderer.shading.textures import OUTPUT_RGB, OUTPUTS, WRAP_MODES, Textures, texture_fetch, upload_textures
 
 # No gradients are ever taken: no adjoint code (half the compile time and code size).
 wp.set_module_options({"enable_backward": False})

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from .motion_kernels import MotionKeys, find_segment, keys_matrix
+from renderer.motion.kernels import MotionKeys, find_segment, keys_matrix
 
 STACK_SIZE = 64
 stack_t = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)

@@ -22,6 +22,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from renderer.motion.transform import MotionTransform  # noqa: F401  (part of the scene contract)
+
 # Light kinds (the integer ``kind`` the kernels dispatch on).
 LIGHT_RECT = 0
 LIGHT_DISK = 1
@@ -30,49 +32,6 @@ LIGHT_CYLINDER = 3
 LIGHT_DISTANT = 4
 LIGHT_DOME = 5
 LIGHT_MESH = 6  # emissive geometry, sampled by area
-
-LIGHT_KIND_NAMES = {
-    "rect": LIGHT_RECT,
-    "disk": LIGHT_DISK,
-    "sphere": LIGHT_SPHERE,
-    "cylinder": LIGHT_CYLINDER,
-    "distant": LIGHT_DISTANT,
-    "dome": LIGHT_DOME,
-    "mesh": LIGHT_MESH,
-}
-
-
-@dataclass
-class MotionTransform:
-    """Object-to-world transform over the shutter, as K decomposed keys.
-
-    matrix(s) = T(s) * R(s) * S(s) in the column-vector convention (p_world = M @ p_object), where T is
-    interpolated linearly, R (unit quaternion, x, y, z, w) by slerp and S (3x3 scale/shear, the symmetric
-    polar factor) linearly. K == 1 means static.
-    """
-
-    times: np.ndarray  # (K,) float32, sorted, normalised shutter time in [0, 1]
-    translation: np.ndarray  # (K, 3) float32
-    rotation: np.ndarray  # (K, 4) float32 unit quaternions (x, y, z, w)
-    scale: np.ndarray  # (K, 3, 3) float32
-
-    @property
-    def num_keys(self) -> int:
-        return int(len(self.times))
-
-    @staticmethod
-    def static(matrix: np.ndarray) -> "MotionTransform":
-        """A motionless transform from a 4x4 column-vector matrix (p_world = M @ p)."""
-        from .motion import decompose
-
-        t, q, s = decompose(np.asarray(matrix, dtype=np.float64))
-        return MotionTransform(
-            times=np.zeros(1, np.float32),
-            translation=t[None].astype(np.float32),
-            rotation=q[None].astype(np.float32),
-            scale=s[None].astype(np.float32),
-        )
-
 
 @dataclass
 class Mesh:

@@ -48,7 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from . import accel_build_kernels as K_
+from renderer.accel import build_kernels as K_
 
 NUM_BINS = 16
 C_TRAV = 1.0

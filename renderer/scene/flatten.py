@@ -12,9 +12,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from .geometry_util import is_closed
-from .motion import matrix_at
-from .scene import LIGHT_MESH, Instance, Mesh, MotionTransform, Scene
+from renderer.motion.transform import matrix_at
+from renderer.scene.mesh_facts import is_closed
+from renderer.scene.model import LIGHT_MESH, Instance, Mesh, MotionTransform, Scene
 
 SHARED_COPY_LIMIT = 1024  # triangles: shared meshes up to this size are copied into the merged mesh
 MERGED_LIMIT = 1 << 23  # triangles the merged mesh may reach through copies of shared meshes

@@ -34,10 +34,10 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from .envmap import dir_to_latlong_np as direction_to_latlong  # noqa: F401 - re-exported for the importer
-from .envmap import latlong_mean  # noqa: F401
-from .envmap import latlong_to_dir_np as latlong_to_direction  # noqa: F401
-from .scene import Texture
+from renderer.lights.envmap import dir_to_latlong_np as direction_to_latlong  # noqa: F401 - re-exported for the importer
+from renderer.lights.envmap import latlong_mean  # noqa: F401
+from renderer.lights.envmap import latlong_to_dir_np as latlong_to_direction  # noqa: F401
+from renderer.scene.model import Texture
 
 # No gradients are ever taken: no adjoint code (half the compile time and code size).
 wp.set_module_options({"enable_backward": False})

@@ -19,11 +19,19 @@ import math
 import numpy as np
 import warp as wp
 
-from .envmap import EnvMap, upload_envmap
-from .motion import matrix_at
-from .motion_kernels import MotionKeys, upload_keys
-from .scene import (LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_DOME, LIGHT_MESH, LIGHT_RECT,
-                    LIGHT_SPHERE, Scene)
+from renderer.lights.envmap import EnvMap, upload_envmap
+from renderer.motion.kernels import MotionKeys, upload_keys
+from renderer.motion.transform import matrix_at
+from renderer.scene.model import (
+    LIGHT_CYLINDER,
+    LIGHT_DISK,
+    LIGHT_DISTANT,
+    LIGHT_DOME,
+    LIGHT_MESH,
+    LIGHT_RECT,
+    LIGHT_SPHERE,
+    Scene,
+)
 
 
 @wp.struct

@@ -9,10 +9,22 @@ from __future__ import annotations
 
 import warp as wp
 
-from .accel import BIG, Geometry, box_entry, instance_visible, instance_world_to_object, leaf_triangle, \
-    mesh_keys_at, node_box, safe_inverse, stack_t, tlas_keys_at, triangle_hit_edges
-from .materials import Materials, eval_opacity
-from .textures import Textures
+from renderer.accel.intersect import (
+    BIG,
+    Geometry,
+    box_entry,
+    instance_visible,
+    instance_world_to_object,
+    leaf_triangle,
+    mesh_keys_at,
+    node_box,
+    safe_inverse,
+    stack_t,
+    tlas_keys_at,
+    triangle_hit_edges,
+)
+from renderer.shading.materials import Materials, eval_opacity
+from renderer.shading.textures import Textures
 
 
 @wp.func

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from pxr import Usd, UsdGeom
 
-from .usd_motion import Shutter
+from renderer.usd.motion import Shutter
 
 SPHERE_SEGMENTS = 64  # around the axis
 SPHERE_RINGS = 32  # pole to pole

@@ -54,8 +54,8 @@ import tempfile
 import numpy as np
 from pxr import Ar, Gf, Sdf, Usd, UsdGeom, UsdShade
 
-from .scene import Material, Texture, TextureInput
-from .textures import ImageError, LoadedImage, image_texture, read_image
+from renderer.scene.model import Material, Texture, TextureInput
+from renderer.shading.textures import ImageError, LoadedImage, image_texture, read_image
 
 GREY = (0.18, 0.18, 0.18)
 PREVIEW_SURFACE_IDS = ("UsdPreviewSurface", "ND_UsdPreviewSurface_surfaceshader")

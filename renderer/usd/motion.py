@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from pxr import Gf, Usd, UsdGeom
 
-from .scene import MotionTransform
+from renderer.scene.model import MotionTransform
 
 MAX_SEGMENT_DEGREES = 10.0  # largest rotation between two consecutive keys
 _MAX_REFINE_ROUNDS = 6  # at most 2^6 sub-segments per authored segment

@@ -13,9 +13,9 @@ from __future__ import annotations
 import numpy as np
 from pxr import Sdf, Usd, UsdGeom, UsdRender
 
-from .errors import SceneError
-from .scene import Camera, MotionTransform, RenderSettingsInfo
-from .usd_motion import TransformSampler, motion_transform
+from renderer.errors import SceneError
+from renderer.scene.model import Camera, MotionTransform, RenderSettingsInfo
+from renderer.usd.motion import TransformSampler, motion_transform
 
 AUTO_FOCAL_35MM = 35.0  # the automatic camera's lens, in "mm" against a 36 mm wide aperture
 

@@ -73,13 +73,32 @@ from typing import NamedTuple
 import numpy as np
 import warp as wp
 
-from .bsdf_lobes import (diffuse_eval, diffuse_fresnel_factor, diffuse_sample, diffuse_sample_pdf,
-                         dielectric_eval, dielectric_sample, dielectric_sample_pdf, ggx_reflection_eval,
-                         ggx_reflection_sample, ggx_reflection_sample_pdf)
-from .bsdf_lobes import lambert_eval, lambert_pdf, lambert_sample  # noqa: F401  (the spine's API, re-exported)
-from .microfacet import (f0_from_ior, fresnel_dielectric, fresnel_schlick, is_delta, reflect, refract,
-                         roughness_to_alpha)
-from .sampling import frame_from_normal
+from renderer.sampling.warps import frame_from_normal
+from renderer.shading.lobes import (  # noqa: F401  (the spine's API, re-exported)
+    dielectric_eval,
+    dielectric_sample,
+    dielectric_sample_pdf,
+    diffuse_eval,
+    diffuse_fresnel_factor,
+    diffuse_sample,
+    diffuse_sample_pdf,
+    ggx_reflection_eval,
+    ggx_reflection_sample,
+    ggx_reflection_sample_pdf,
+    lambert_eval,
+    lambert_pdf,
+    lambert_sample,
+)
+from renderer.shading.microfacet import (
+    f0_from_ior,
+    fresnel_dielectric,
+    fresnel_schlick,
+    is_delta,
+    np_fresnel_dielectric,
+    reflect,
+    refract,
+    roughness_to_alpha,
+)
 
 # No gradients are ever taken: no adjoint code (half the compile time and code size).
 wp.set_module_options({"enable_backward": False})
@@ -95,7 +114,6 @@ W_CLEARCOAT_IOR = wp.constant(CLEARCOAT_IOR)
 def _coat_diffuse_k() -> float:
     """K = int (1 - cc Fcc(ci)) weighted by the coupled diffuse's cos-weighted shape, per unit cc: the diffuse under
     a coat of weight cc reflects (1 - cc K) of what it would without, averaged over wi. Gauss-Legendre in cos."""
-    from .microfacet import np_fresnel_dielectric
     x, w = np.polynomial.legendre.leggauss(64)
     c = 0.5 * (x + 1.0)
     shape = (1.0 - (1.0 - c) ** 5) * c * 2.0 * (21.0 / 20.0)  # integrates to 1 over [0, 1] (times 1/2 below)

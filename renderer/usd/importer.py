@@ -25,12 +25,13 @@ import re
 import numpy as np
 from pxr import Tf, Usd, UsdGeom, UsdRender, UsdShade
 
-from . import scene as sc
-from . import usd_camera, usd_lights
-from .errors import SceneError, SettingsError
-from .usd_geometry import PRIMITIVE_TYPES, primitive_signature, read_geometry
-from .usd_materials import MaterialTable
-from .usd_motion import Shutter, TransformSampler, motion_transforms, refine_keys
+from renderer.errors import SceneError, SettingsError
+from renderer.scene import model as sc
+from renderer.usd import camera as usd_camera
+from renderer.usd import lights as usd_lights
+from renderer.usd.geometry import PRIMITIVE_TYPES, primitive_signature, read_geometry
+from renderer.usd.materials import MaterialTable
+from renderer.usd.motion import Shutter, TransformSampler, motion_transforms, refine_keys
 
 _PI_ATTRS = ("positions", "orientations", "orientationsf", "scales", "velocities", "angularVelocities",
              "accelerations", "protoIndices")

@@ -28,9 +28,16 @@ import math
 
 import warp as wp
 
-from .microfacet import (fresnel_dielectric, ggx_d, ggx_g2, ggx_sample_visible, ggx_sample_visible_pdf, reflect,
-                         refract)
-from .sampling import square_to_cosine_hemisphere, square_to_cosine_hemisphere_pdf, to_world
+from renderer.sampling.warps import square_to_cosine_hemisphere, square_to_cosine_hemisphere_pdf, to_world
+from renderer.shading.microfacet import (
+    fresnel_dielectric,
+    ggx_d,
+    ggx_g2,
+    ggx_sample_visible,
+    ggx_sample_visible_pdf,
+    reflect,
+    refract,
+)
 
 _Z = wp.constant(wp.vec3(0.0, 0.0, 1.0))
 

@@ -9,18 +9,44 @@ from __future__ import annotations
 
 import warp as wp
 
-from .accel import BIG, Geometry, instance_object_to_world, instance_visible, mesh_keys_at, triangle_points
-from .envmap import env_pdf, env_radiance, env_sample
-from .lights import Lights
-from .materials import Materials, eval_emission
-from .shadow import hit_uv
-from .textures import Textures
-from .motion_kernels import keys_matrix
-from .sampling import (cylinder_light_pdf, disk_light_pdf, rect_pdf, sample_cylinder_light, sample_disk_light,
-                       sample_rect, sample_sphere_light, sample_triangle_light, sphere_light_pdf,
-                       square_to_cosine_hemisphere, square_to_uniform_cone, square_to_uniform_triangle, to_world)
-from .scene import (LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_DOME, LIGHT_MESH, LIGHT_RECT,
-                    LIGHT_SPHERE)
+from renderer.accel.intersect import (
+    BIG,
+    Geometry,
+    instance_object_to_world,
+    instance_visible,
+    mesh_keys_at,
+    triangle_points,
+)
+from renderer.accel.occlusion import hit_uv
+from renderer.lights.envmap import env_pdf, env_radiance, env_sample
+from renderer.lights.table import Lights
+from renderer.motion.kernels import keys_matrix
+from renderer.sampling.warps import (
+    cylinder_light_pdf,
+    disk_light_pdf,
+    rect_pdf,
+    sample_cylinder_light,
+    sample_disk_light,
+    sample_rect,
+    sample_sphere_light,
+    sample_triangle_light,
+    sphere_light_pdf,
+    square_to_cosine_hemisphere,
+    square_to_uniform_cone,
+    square_to_uniform_triangle,
+    to_world,
+)
+from renderer.scene.model import (
+    LIGHT_CYLINDER,
+    LIGHT_DISK,
+    LIGHT_DISTANT,
+    LIGHT_DOME,
+    LIGHT_MESH,
+    LIGHT_RECT,
+    LIGHT_SPHERE,
+)
+from renderer.shading.materials import Materials, eval_emission
+from renderer.shading.textures import Textures
 
 DISTANT_DIST = 1.0e30  # shadow-ray length toward lights at infinity (scene units)
 

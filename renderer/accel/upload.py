@@ -11,12 +11,12 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from .accel import Geometry
-from .accel_build import Bvh, build_bvh
-from .geometry_util import is_closed
-from .motion import matrix_at
-from .motion_kernels import upload_keys
-from .scene import Instance, Mesh, MotionTransform, Scene
+from renderer.accel.build import Bvh, build_bvh
+from renderer.accel.intersect import Geometry
+from renderer.motion.kernels import upload_keys
+from renderer.motion.transform import matrix_at
+from renderer.scene.mesh_facts import is_closed
+from renderer.scene.model import Instance, Mesh, MotionTransform, Scene
 
 MAX_TLAS_KEYS = 33  # top-level time keys for moving scenes (32 segments over the shutter)
 SUBSTEPS = 8  # samples per top-level segment when measuring how far curved motion leaves the linear blend

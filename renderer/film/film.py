@@ -20,7 +20,7 @@ import warp as wp
 # Rendering needs no gradients: no adjoint code (half the compile time and code size).
 wp.set_module_options({"enable_backward": False})
 
-from .options import FILTERS
+from renderer.options import FILTERS
 
 FILTER_BOX = FILTERS["box"]
 FILTER_TRIANGLE = FILTERS["triangle"]

@@ -20,9 +20,10 @@ from __future__ import annotations
 import numpy as np
 from pxr import UsdGeom, UsdLux
 
-from . import scene as sc
-from .textures import ImageError, latlong_mean
-from .usd_motion import TransformSampler, motion_transform
+from renderer.scene import model as sc
+from renderer.shading.textures import ImageError, latlong_mean
+from renderer.usd.materials import read_asset_image, resolve_asset
+from renderer.usd.motion import TransformSampler, motion_transform
 
 # Row-vector matrix of a +90 degree turn about X: the dome's +Y pole to +Z (UsdLuxDomeLight.OrientToStageUpAxis).
 _POLE_Z_ROW = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
@@ -134,8 +135,6 @@ def dome_pole_is_z(prim) -> bool:
 def _dome_texture(prim, light: sc.Light, radiance: np.ndarray, frame: float, warn) -> np.ndarray:
     """Load a dome's lat-long texture into ``light.texture`` (scaled by ``radiance``); returns the radiance the
     light reports (the texture's mean, or ``radiance`` unchanged without a usable texture)."""
-    from .usd_materials import read_asset_image, resolve_asset
-
     path = str(prim.GetPath())
     attr = None
     for name in ("inputs:texture:file", "texture:file"):

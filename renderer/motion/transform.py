@@ -6,7 +6,39 @@ The Warp twins of ``interpolate`` live in ``motion_kernels.py``; tests compare t
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
+
+
+@dataclass
+class MotionTransform:
+    """Object-to-world transform over the shutter, as K decomposed keys.
+
+    matrix(s) = T(s) * R(s) * S(s) in the column-vector convention (p_world = M @ p_object), where T is
+    interpolated linearly, R (unit quaternion, x, y, z, w) by slerp and S (3x3 scale/shear, the symmetric
+    polar factor) linearly. K == 1 means static.
+    """
+
+    times: np.ndarray  # (K,) float32, sorted, normalised shutter time in [0, 1]
+    translation: np.ndarray  # (K, 3) float32
+    rotation: np.ndarray  # (K, 4) float32 unit quaternions (x, y, z, w)
+    scale: np.ndarray  # (K, 3, 3) float32
+
+    @property
+    def num_keys(self) -> int:
+        return int(len(self.times))
+
+    @staticmethod
+    def static(matrix: np.ndarray) -> "MotionTransform":
+        """A motionless transform from a 4x4 column-vector matrix (p_world = M @ p)."""
+        t, q, s = decompose(np.asarray(matrix, dtype=np.float64))
+        return MotionTransform(
+            times=np.zeros(1, np.float32),
+            translation=t[None].astype(np.float32),
+            rotation=q[None].astype(np.float32),
+            scale=s[None].astype(np.float32),
+        )
 
 
 def decompose(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -76,8 +108,6 @@ def make_transform(times, matrices):
 
     Consecutive quaternions are made to lie in the same hemisphere so slerp takes the short arc.
     """
-    from .scene import MotionTransform
-
     times = np.asarray(times, np.float64)
     ts, qs, ss = [], [], []
     for m in matrices:

@@ -1,0 +1,1 @@
+"""The film: reconstruction filters, sample waves, tiles, and OpenEXR output."""

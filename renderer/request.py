@@ -1,0 +1,81 @@
+"""RenderRequest: the one record of what to render, built by ``drt render`` from its flags and by the service from
+a job's settings, so both paths load, override and prepare a frame the same way.
+
+    req = RenderRequest("shot.usda", frame=12, lens=LensOverrides(f_stop=2.8), options=RenderOptions(spp=64))
+    prep = req.prepare()                      # load_scene + camera overrides + prepare
+
+Physical conversions live here once: the lens overrides arrive in USD's camera units (``focal_length`` in tenths
+of a scene unit, like the ``focalLength`` attribute; ``focus_distance`` in scene units; ``f_stop`` unitless) and
+are converted by ``usd_lens_to_scene_units``; "a strobe shutter or no motion blur loads the frame still" is
+``RenderRequest.motion_blur_keys``. The shutter stays relative to the frame (USD's ``shutter:open/close``) until
+the importer turns it into absolute time codes.
+"""
+from __future__ import annotations
+
+import dataclasses
+import os
+from dataclasses import dataclass, field
+
+from renderer.render import PreparedScene, RenderOptions, prepare
+from renderer.scene.model import Scene
+from renderer.usd.importer import load_scene
+
+# USD camera lengths (focalLength, apertures and their offsets) are in tenths of a scene unit.
+USD_LENS_UNITS_PER_SCENE_UNIT = 10.0
+
+
+def usd_lens_to_scene_units(length_usd: float) -> float:
+    """A USD camera length (tenths of a scene unit) in scene units."""
+    return float(length_usd) / USD_LENS_UNITS_PER_SCENE_UNIT
+
+
+@dataclass(frozen=True)
+class LensOverrides:
+    """Replacements for the loaded camera's lens; None keeps the scene's value."""
+
+    focal_length: float | None = None  # tenths of a scene unit (USD's focalLength units)
+    f_stop: float | None = None  # unitless; 0 = pinhole
+    focus_distance: float | None = None  # scene units
+
+    def apply(self, scene: Scene) -> Scene:
+        changes = {}
+        if self.focal_length is not None:
+            changes["focal_length"] = usd_lens_to_scene_units(self.focal_length)
+        if self.f_stop is not None:
+            changes["f_stop"] = float(self.f_stop)
+        if self.focus_distance is not None:
+            changes["focus_distance"] = float(self.focus_distance)
+        if not changes:
+            return scene
+        return dataclasses.replace(scene, camera=dataclasses.replace(scene.camera, **changes))
+
+
+@dataclass(frozen=True)
+class RenderRequest:
+    """Scene, frame, camera, lens and shutter overrides, and the render options of one frame."""
+
+    scene_path: str
+    frame: float | None = None  # time code; None = the stage's start time code
+    camera: str | None = None  # camera prim path; None = the render settings' camera, else the first
+    shutter: tuple[float, float] | None = None  # (open, close) relative to the frame, overriding the camera's
+    motion_blur: bool = True
+    lens: LensOverrides = field(default_factory=LensOverrides)
+    options: RenderOptions = field(default_factory=RenderOptions)
+    half: bool = False  # store colour and AOVs as HALF in the EXR (does not change the pixels)
+
+    @property
+    def motion_blur_keys(self) -> bool:
+        """Whether the scene is loaded with motion keys: not when blur is off or the shutter is a strobe."""
+        return self.motion_blur and self.options.time_filter != "strobe"
+
+    def at_frame(self, frame: float | None) -> "RenderRequest":
+        return dataclasses.replace(self, frame=frame)
+
+    def load(self) -> Scene:
+        """The frame as the renderer's Scene, lens overrides applied."""
+        scene = load_scene(os.fspath(self.scene_path), self.frame, camera_path=self.camera, shutter=self.shutter,
+                           motion_blur=self.motion_blur_keys)
+        return self.lens.apply(scene)
+
+    def prepare(self, device: str = "cpu") -> PreparedScene:
+        return prepare(self.load(), self.options, device=device)

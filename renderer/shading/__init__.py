@@ -1,0 +1,1 @@
+"""Surface scattering: the UsdPreviewSurface BSDF, its lobes and microfacet pieces, materials, textures."""

@@ -1,0 +1,130 @@
+"""The package layout's rules, checked on the source: no import cycles inside ``renderer`` or ``service`` (imports
+inside functions count too, so a cycle cannot hide there), dependencies pointing one way, ``pxr`` only in the USD
+import package and the service's scene checks, and the renderer importable with the service's libraries absent."""
+import ast
+import pathlib
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+
+
+def module_name(path: pathlib.Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def imported_modules(path: pathlib.Path) -> set[str]:
+    """Every module a file imports, anywhere in it (module level or inside functions), as absolute names."""
+    name = module_name(path)
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - (node.level - 1)]
+                mod = ".".join(base + ([node.module] if node.module else []))
+            else:
+                mod = node.module
+            out.add(mod)
+            out.update(f"{mod}.{a.name}" for a in node.names)  # "from pkg import module"
+    return out
+
+
+def graph(top: str) -> dict[str, set[str]]:
+    files = {module_name(p): p for p in (ROOT / top).rglob("*.py")}
+    return {m: {i for i in imported_modules(p) if i in files and i != m} for m, p in files.items()}
+
+
+def cycles(g: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in g[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    sys.setrecursionlimit(10000)
+    for v in g:
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_cycle_finder_finds_a_cycle():
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert cycles({"a": {"b"}, "b": set()}) == []
+
+
+@pytest.mark.parametrize("top", ["renderer", "service", "schemas"])
+def test_no_import_cycles(top):
+    assert cycles(graph(top)) == []
+
+
+def test_dependencies_point_one_way():
+    """renderer knows nothing of the service, the wire schemas, HTTP, the queue or Dask; schemas not the service."""
+    service_libs = ("service", "schemas", "fastapi", "starlette", "pydantic", "sqlalchemy", "dask", "distributed",
+                    "httpx", "uvicorn")
+    for p in (ROOT / "renderer").rglob("*.py"):
+        bad = [m for m in imported_modules(p) if m.split(".")[0] in service_libs]
+        assert not bad, f"{p.relative_to(ROOT)} imports {bad}"
+    for p in (ROOT / "schemas").rglob("*.py"):
+        bad = [m for m in imported_modules(p) if m.split(".")[0] in ("service", "fastapi", "sqlalchemy", "dask")]
+        assert not bad, f"{p.relative_to(ROOT)} imports {bad}"
+
+
+def test_pxr_only_in_the_usd_package():
+    allowed = {ROOT / "renderer" / "usd"}
+    for p in (ROOT / "renderer").rglob("*.py"):
+        if any(a in p.parents for a in allowed):
+            continue
+        pxr = [m for m in imported_modules(p) if m.split(".")[0] == "pxr"]
+        assert not pxr, f"{p.relative_to(ROOT)} imports {pxr}: USD belongs in renderer/usd"
+
+
+def test_renderer_imports_and_parses_without_the_service_libraries():
+    """A library user installs `drt` without the [service] extra: the renderer and `drt render` still work."""
+    code = textwrap.dedent("""
+        import importlib.abc, sys
+        BLOCKED = {"fastapi", "starlette", "sqlalchemy", "dask", "distributed", "uvicorn", "httpx", "pydantic",
+                   "pydantic_settings"}
+        class Block(importlib.abc.MetaPathFinder):
+            def find_spec(self, name, path=None, target=None):
+                if name.split(".")[0] in BLOCKED:
+                    raise ImportError(f"blocked: {name}")
+        sys.meta_path.insert(0, Block())
+        import renderer.render, renderer.request, renderer.usd.importer, renderer.cli
+        from renderer.cli import build_parser
+        args = build_parser().parse_args(["render", "x.usda", "-o", "x.exr", "--f-stop", "2.8"])
+        req = renderer.cli.request_from_args(args)
+        assert req.lens.f_stop == 2.8, req
+        from service.cli import build_parser as drt_parser
+        drt_parser().parse_args(["render", "x.usda", "-o", "x.exr"])
+        print("ok")
+    """)
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stdout.strip().endswith("ok"), r.stderr[-2000:]
