@@ -9,6 +9,7 @@ from schemas import Health
 
 from .. import metrics
 from .deps import Authorized, RuntimeDep
+from .docs import UNAUTHORIZED_ANSWER
 
 router = APIRouter(tags=["health"])
 
@@ -21,7 +22,9 @@ async def healthz(runtime: RuntimeDep):
     return Health(status="ok", workers=workers, threads=threads)
 
 
-@router.get("/metrics", response_class=PlainTextResponse, dependencies=[Authorized])
+@router.get("/metrics", response_class=PlainTextResponse, dependencies=[Authorized],
+            responses={200: {"content": {"text/plain": {"schema": {"type": "string"}}},
+                             "description": "Prometheus text format 0.0.4"}, **UNAUTHORIZED_ANSWER})
 def get_metrics(runtime: RuntimeDep):
     """Jobs by state, queue depth, tiles in flight and pending, tiles/s, task failures, cluster size."""
     sch = runtime.scheduler
