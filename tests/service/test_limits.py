@@ -82,7 +82,8 @@ def test_an_unauthenticated_request_is_refused_before_its_body_is_read(make_clie
         r = client.post("/v1/jobs", content=b"x" * (2 << 20), headers=headers)
         assert (r.status_code, r.headers["www-authenticate"]) == (401, "Bearer")
     auth = {"Authorization": "Bearer s3cret"}
-    r = client.post("/v1/jobs", content=b"--x\r\nnot multipart", headers={**auth, "content-type": "multipart/form-data"})
+    r = client.post("/v1/jobs", content=b"--x\r\nnot multipart",
+                    headers={**auth, "content-type": "multipart/form-data"})
     assert (r.status_code, r.json()) == (400, {"detail": "malformed request body: Missing boundary in multipart."})
     r = client.post("/v1/jobs", content=b"x" * (2 << 20), headers=auth)
     assert (r.status_code, r.json()) == (413, {"detail": "upload exceeds the limit of 1000 bytes"})
