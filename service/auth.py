@@ -22,7 +22,8 @@ def bearer_ok(expected: str | None, authorization: str | None) -> bool:
     if expected is None:
         return True
     scheme, _, given = (authorization or "").partition(" ")
-    # compare_digest takes equal-length-independent time over bytes; latin-1 is how HTTP headers arrive.
+    # compare_digest's time does not depend on where the bytes differ (only on their length); a header's bytes
+    # arrive as latin-1 text, so encoding it back gives exactly what the client sent.
     return scheme.lower() == "bearer" and hmac.compare_digest(given.strip().encode("latin-1", "replace"),
                                                               expected.encode("utf-8"))
 
