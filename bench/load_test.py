@@ -74,12 +74,14 @@ def loopback_only(url: str) -> None:
         sys.exit(f"load_test: refusing {url}: only loopback servers may be load-tested")
 
 
-def start_server(data_dir: Path, log: Path) -> tuple[subprocess.Popen, str]:
+def start_server(data_dir: Path, log: Path, jobs: int) -> tuple[subprocess.Popen, str]:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     repo = Path(__file__).absolute().parents[1]
-    env = dict(os.environ, DRT_DATA_DIR=str(data_dir),
+    # Every simulated client comes from 127.0.0.1 with the same token: one client to the queue limits.
+    queue = str(max(jobs, 200))
+    env = dict(os.environ, DRT_DATA_DIR=str(data_dir), DRT_MAX_QUEUED_JOBS=queue, DRT_MAX_QUEUED_JOBS_PER_CLIENT=queue,
                PYTHONPATH=os.pathsep.join([str(repo), os.environ.get("PYTHONPATH", "")]))
     proc = subprocess.Popen([sys.executable, "-m", "service.cli", "serve", "--port", str(port), "--log-level",
                              "warning"], env=env, stdout=open(log, "wb"), stderr=subprocess.STDOUT,
@@ -193,7 +195,8 @@ def main(argv=None) -> int:
             url = args.server.rstrip("/")
             existing = set(all_job_ids(url, args.token))
         else:
-            proc, url = start_server(Path(tmp.name) / "data", Path(tmp.name) / "serve.log")
+            proc, url = start_server(Path(tmp.name) / "data", Path(tmp.name) / "serve.log",
+                                     args.clients * args.jobs_per_client)
             existing = set()
         settings = {"width": args.size, "height": args.size, "spp": args.spp, "tile": 8}
         stats = Stats()

@@ -4,7 +4,8 @@
 renderer's own plain dataclasses. Settings keys are named like the ``drt render`` flags.
 """
 from .jobs import ErrorBody, FramePublic, FrameState, Health, JobList, JobPublic, JobState, SceneInfo
+from .limits import Limits
 from .settings import AOVS, FILTERS, MAX_FRAMES, TIME_FILTERS, FrameRange, JobCreate, RenderSettings
 
 __all__ = ["AOVS", "FILTERS", "MAX_FRAMES", "TIME_FILTERS", "ErrorBody", "FramePublic", "FrameRange", "FrameState",
-           "Health", "JobCreate", "JobList", "JobPublic", "JobState", "RenderSettings", "SceneInfo"]
+           "Health", "JobCreate", "JobList", "Limits", "JobPublic", "JobState", "RenderSettings", "SceneInfo"]

@@ -1,8 +1,9 @@
 """``create_app(settings)``: the FastAPI application, its lifespan (database, Dask, scheduler) and error format.
 
 Every error answers ``{"detail": "<one line>"}``: ``ApiError`` from the service, FastAPI's own validation errors
-flattened to ``"<field>: <message>"``, and an oversized body cut off early with 413 (the ``Content-Length`` is
-checked before anything is read, the bytes are counted as they arrive).
+flattened to ``"<field>: <message>"``, a malformed body (e.g. multipart without a boundary) 400, and an oversized
+body cut off early with 413 (the ``Content-Length`` is checked before anything is read, the bytes are counted as
+they arrive). The bearer token is checked before all of that (``auth.TokenFirst``, the outermost middleware).
 """
 from __future__ import annotations
 
@@ -16,9 +17,11 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.exceptions import RequestValidationError
 from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from .api import health, jobs
+from .api import health, jobs, limits
 from .api.deps import require_token
+from .auth import TokenFirst
 from .errors import ApiError
 from .runtime import Runtime
 from .settings import ServiceSettings
@@ -118,12 +121,23 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     async def _api_error(_request: Request, exc: ApiError):
         return JSONResponse({"detail": exc.detail}, status_code=exc.status, headers=exc.headers)
 
+    @app.exception_handler(StarletteHTTPException)
+    async def _http_error(_request: Request, exc: StarletteHTTPException):
+        # FastAPI's body parsing (400), unknown routes (404), wrong methods (405): the same one-line shape.
+        detail = exc.detail if isinstance(exc.detail, str) else str(exc.detail)
+        if exc.status_code == 400:
+            detail = f"malformed request body: {detail}"
+        return JSONResponse({"detail": detail}, status_code=exc.status_code, headers=exc.headers)
+
     @app.exception_handler(RequestValidationError)
     async def _invalid(_request: Request, exc: RequestValidationError):
         return JSONResponse({"detail": _validation_detail(exc)}, status_code=422)
 
     app.add_middleware(BodyLimit, limit=settings.max_upload_bytes + MULTIPART_OVERHEAD,
                        detail=str(UploadTooLarge(settings.max_upload_bytes)))
+    # Added last, so outermost: an unauthenticated request is answered 401 before its body is read or measured.
+    app.add_middleware(TokenFirst, token=settings.api_token.get_secret_value() if protected_docs else None)
     app.include_router(health.router)
     app.include_router(jobs.router, prefix="/v1")
+    app.include_router(limits.router, prefix="/v1")
     return app

@@ -57,6 +57,7 @@ class JobRow(Base):
     updated_at: Mapped[float] = mapped_column(Float)
     started_at: Mapped[float | None] = mapped_column(Float, nullable=True)
     finished_at: Mapped[float | None] = mapped_column(Float, nullable=True)
+    client: Mapped[str | None] = mapped_column(String(80), nullable=True)  # who submitted it (queue limits)
 
     frames: Mapped[list["FrameRow"]] = relationship(back_populates="job", cascade="all, delete-orphan",
                                                     order_by="FrameRow.idx", lazy="selectin",
@@ -142,9 +143,14 @@ def decode_cursor(cursor: str) -> int:
         text = base64.urlsafe_b64decode(cursor + "=" * (-len(cursor) % 4)).decode()
     except Exception:  # noqa: BLE001 - any garbage is the same client error
         raise ValueError("invalid cursor") from None
-    if not text.startswith("seq:") or not text[4:].isdigit():
+    digits = text[4:]
+    # ASCII digits only (str.isdigit also accepts superscripts), and within SQLite's signed 64-bit integers.
+    if not text.startswith("seq:") or not digits.isascii() or not digits.isdigit() or len(digits) > 19:
         raise ValueError("invalid cursor")
-    return int(text[4:])
+    seq = int(digits)
+    if seq > 2**63 - 1:
+        raise ValueError("invalid cursor")
+    return seq
 
 
 class Store:
@@ -166,9 +172,17 @@ class Store:
 
         self._writer = self.engine.execution_options(drt_write=True)
         Base.metadata.create_all(self.engine)
+        self._migrate()
         # Claims left by requests that were in flight when the service stopped can never complete.
         with self._write() as s:
             s.execute(delete(IdempotencyRow).where(IdempotencyRow.job_id.is_(None)))
+
+    def _migrate(self) -> None:
+        """Columns added since a data directory was created (create_all only makes missing tables)."""
+        with self._write() as s, s.begin():
+            columns = {r[1] for r in s.connection().exec_driver_sql("PRAGMA table_info(jobs)")}
+            if "client" not in columns:
+                s.connection().exec_driver_sql("ALTER TABLE jobs ADD COLUMN client VARCHAR(80)")
 
     def close(self) -> None:
         self.engine.dispose()
@@ -183,14 +197,14 @@ class Store:
     def create_job(self, *, job_id: str, priority: int, settings_json: str, scene_sha256: str, scene_name: str,
                    scene_bytes: int, width: int, height: int, tile_size: int, tiles_per_frame: int,
                    frame_times: list[float], exposure_scale: float, warnings: list[str],
-                   idempotency_key: str | None = None) -> JobRow:
+                   idempotency_key: str | None = None, client: str | None = None) -> JobRow:
         now = time.time()
         row = JobRow(id=job_id, state=sm.QUEUED.value, priority=priority, settings_json=settings_json,
                      scene_sha256=scene_sha256, scene_name=scene_name, scene_bytes=scene_bytes, width=width,
                      height=height, tile_size=tile_size, tiles_per_frame=tiles_per_frame,
                      tiles_total=tiles_per_frame * len(frame_times), tiles_done=0, samples_done=0,
                      exposure_scale=exposure_scale, warnings_json=json.dumps(warnings), created_at=now,
-                     updated_at=now)
+                     updated_at=now, client=client)
         row.frames = [FrameRow(idx=i, time=t, tiles_done=0, done=False) for i, t in enumerate(frame_times)]
         with self._write() as s, s.begin():
             s.add(row)
@@ -263,6 +277,14 @@ class Store:
                              .where(JobRow.state.in_([x.value for x in sm.ACTIVE]))
                              .order_by(JobRow.priority.desc(), JobRow.seq.asc()))
             return [JobHead(i, JobState(st), p) for i, st, p in rows]
+
+    def count_active(self, client: str | None = None) -> int:
+        """Jobs queued or running, of one client or (None) of all."""
+        q = select(func.count()).select_from(JobRow).where(JobRow.state.in_([x.value for x in sm.ACTIVE]))
+        if client is not None:
+            q = q.where(JobRow.client == client)
+        with self._read() as s:
+            return int(s.scalar(q))
 
     def job_states(self, job_ids: list[str]) -> dict[str, JobState]:
         with self._read() as s:

@@ -7,7 +7,8 @@ or a cancellation takes effect within about one tile's time, and waits for a tas
 * A finished tile is checkpointed (atomically) on disk, then recorded in the database. When all tiles of a frame
   are recorded, a worker assembles them and writes the frame's EXR; the frame is marked done and its tile
   checkpoints are removed. The job succeeds when every frame is done.
-* A job that left the active states (canceled, failed) has its queued tasks cancelled and late results dropped.
+* A job that left the active states (canceled, failed, deleted) has its queued tasks cancelled, its running
+  tiles told to stop through a Dask event (``service.stopping``), and late results dropped.
 * A task that raises (including a worker that died three times running it, Dask's ``KilledWorker``) is submitted
   again up to ``tile_retries`` times, one database record per attempt, then the job fails with the message.
   A renderer error (bad scene or settings) fails the job at once: trying again would give the same answer.
@@ -35,6 +36,7 @@ from .db import JobNotFound, Store
 from .engine import Engine
 from .settings import ServiceSettings
 from .spec import RenderSpec
+from .stopping import StopSignals, new_key
 from .uploads import SceneStore
 from .worker import FrameTask, TileTask, finish_frame_task, render_tile_task
 
@@ -66,6 +68,7 @@ class JobPlan:
     boxes: list[TileBox]
     frames: list[FramePlan]
     files: JobFiles
+    stop_key: str  # the Dask event that stops this plan's running tiles
 
     def next_work(self) -> tuple[FramePlan, int] | None:
         """(frame, tile index) to submit next, or (frame, FINISH) to assemble a frame, or None."""
@@ -103,6 +106,7 @@ class Scheduler:
         self._tile_times: collections.deque = collections.deque(maxlen=4096)
         self.tiles_completed = 0
         self.tiles_failed = 0
+        self.stops = StopSignals(engine.client)
 
     # -- lifecycle -------------------------------------------------------------------------------------------
     def start(self) -> None:
@@ -140,6 +144,7 @@ class Scheduler:
                 self._sync()
                 self._fill()
                 self._wait_and_handle()
+                self.stops.sweep()
             except Exception:  # noqa: BLE001 - the loop must outlive any one bad turn (database busy, etc.)
                 log.exception("scheduler turn failed; retrying")
                 self._stop.wait(1.0)
@@ -224,7 +229,7 @@ class Scheduler:
         else:
             task = TileTask(spec=plan.spec, frame=frame.time, tile=plan.boxes[tile_idx], width=plan.width,
                             height=plan.height, cache_size=s.scene_cache_size,
-                            stop_flag=str(plan.files.stop_flag))
+                            stop_key=plan.stop_key)
             fn, kind, priority = render_tile_task, "tile", plan.priority
         key = f"drt-{kind}-{plan.job_id}-{frame.idx}-{tile_idx}-{uuid.uuid4().hex[:8]}"
         try:
@@ -326,17 +331,17 @@ class Scheduler:
             self.store.transition(job_id, sm.FAILED, error=message)
         except (sm.IllegalTransition, JobNotFound):
             pass
-        else:
-            JobFiles(self.settings.data_dir, job_id).stop()  # its other running tiles need not finish
-        self._drop(job_id)
+        self._drop(job_id)  # its other running tiles need not finish
 
     def _drop(self, job_id: str) -> None:
-        """Forget a job that is no longer active: cancel its tasks still queued on Dask."""
-        self._plans.pop(job_id, None)
+        """Forget a job that is no longer active: cancel its tasks still queued on Dask, stop its running ones."""
+        plan = self._plans.pop(job_id, None)
         self._order = [p for p in self._order if p.job_id != job_id]
         doomed = [k for k, rec in self._inflight.items() if rec.job_id == job_id]
         futures = [self._inflight.pop(k).future for k in doomed]
         if futures:
+            if plan is not None:
+                self.stops.stop(plan.stop_key)  # cancelling a future does not interrupt a running task
             try:
                 self.engine.client.cancel(futures)
             except Exception:  # noqa: BLE001 - best effort: their results are ignored anyway
@@ -365,4 +370,5 @@ class Scheduler:
             log.info("resuming job %s: %d of %d tiles checkpointed", row.id, row.tiles_done, row.tiles_total)
         return JobPlan(job_id=row.id, state=row.job_state, priority=row.priority,
                        spec=RenderSpec.from_settings(settings, str(path), row.scene_sha256), width=row.width,
-                       height=row.height, spp=settings.spp, boxes=boxes, frames=frames, files=files)
+                       height=row.height, spp=settings.spp, boxes=boxes, frames=frames, files=files,
+                       stop_key=new_key(row.id))

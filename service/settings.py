@@ -26,6 +26,14 @@ class ServiceSettings(BaseSettings):
     processes: bool = Field(True, description="LocalCluster workers as processes (false: threads in the service)")
     api_token: SecretStr | None = Field(None, description="bearer token required by every endpoint but /healthz")
     max_upload_bytes: int = Field(256 * 2**20, ge=1, description="largest scene upload (413 above)")
+    # A job's cost, refused with 422 before it is queued. Defaults for one 2-core machine, which renders about
+    # 6e5 samples/s on a simple scene: 2e9 samples is roughly an hour of it.
+    max_samples_per_job: int = Field(2_000_000_000, ge=1,
+                                     description="width x height x spp x frames of one job")
+    max_pixels_per_frame: int = Field(4096 * 4096, ge=1, description="width x height of one frame")
+    max_queued_jobs: int = Field(200, ge=1, description="jobs queued or running, all clients together")
+    max_queued_jobs_per_client: int = Field(
+        50, ge=1, description="jobs queued or running of one client (its bearer token, else its address)")
     max_usdz_unpacked_bytes: int = Field(1 * 2**30, ge=1, description="largest total size of a .usdz's entries")
     max_usdz_entries: int = Field(10_000, ge=1)
     max_frames: int = Field(10_000, ge=1, description="frames per job")

@@ -4,7 +4,9 @@ Order matters, cheapest and most certain first: settings JSON (422) and the file
 streamed to disk with a byte limit (413) and hashed; the Idempotency-Key is claimed (a replay returns the first
 job; the same key with a different request is 422; while the first request is still running, 409); a ``.usdz``'s
 entries are checked; a worker checks every asset path, composes the stage and loads the first frame (422 with the
-renderer's message); job limits (frames, tiles) are checked (422); only then is the job queued.
+renderer's message); the job's cost against the farm's limits (``service.limits``: 422) is checked once from the
+settings alone (before the upload is looked at, when they give the resolution) and again with the scene's real
+resolution and frames, the queue's length too; only then is the job queued.
 
 Idempotency: the request's identity is the scene's content hash, its file name and the canonical settings JSON. A
 key is remembered with its job until the job is deleted.
@@ -21,7 +23,7 @@ from pydantic import ValidationError
 from schemas import JobCreate
 from schemas.settings import FRAMES_TAGS
 
-from . import errors
+from . import errors, limits
 from .checkpoints import tile_count
 from .db import JobRow, Store
 from .engine import Engine
@@ -104,16 +106,20 @@ class Submitter:
         self.on_created = on_created
 
     def submit(self, upload: BinaryIO, filename: str | None, settings_text: str, idempotency_key: str | None,
-               inspector: Inspector) -> tuple[JobRow, bool]:
-        """Returns (job, created): created is False when an Idempotency-Key replays an earlier request."""
+               inspector: Inspector, client: str | None = None) -> tuple[JobRow, bool]:
+        """Returns (job, created): created is False when an Idempotency-Key replays an earlier request.
+        ``client`` identifies the submitter for the per-client queue limit."""
         settings = parse_settings(settings_text)
         try:
             ext = scene_extension(filename)
         except UploadError as e:
             raise ApiError(e.status, str(e)) from None
         frames = settings.frame_times()
-        if frames is not None and len(frames) > self.settings.max_frames:
-            raise ApiError(422, f"too many frames: {len(frames)} (the limit is {self.settings.max_frames})")
+        if frames is not None:
+            limits.check_frames(self.settings, len(frames))
+        if settings.width is not None and settings.height is not None:
+            limits.check_cost(self.settings, width=settings.width, height=settings.height, spp=settings.spp,
+                              frames=len(frames) if frames is not None else 1)
         try:
             tmp, sha, size = self.scenes.receive(upload)
         except UploadError as e:
@@ -132,7 +138,7 @@ class Submitter:
                     raise ApiError(409, errors.IDEMPOTENCY_BUSY)
                 claimed = True
             try:
-                job = self._create(tmp, sha, name, size, ext, settings, idempotency_key, inspector)
+                job = self._create(tmp, sha, name, size, ext, settings, idempotency_key, inspector, client)
             except BaseException:
                 if claimed:
                     self.store.release_key(idempotency_key)
@@ -143,7 +149,7 @@ class Submitter:
         return job, True
 
     def _create(self, tmp: Path, sha: str, name: str, size: int, ext: str, settings: JobCreate,
-                idempotency_key: str | None, inspector: Inspector) -> JobRow:
+                idempotency_key: str | None, inspector: Inspector, client: str | None) -> JobRow:
         s = self.settings
         created = False
         try:
@@ -153,21 +159,22 @@ class Submitter:
                         check_usdz(stored.path, s.max_usdz_unpacked_bytes, s.max_usdz_entries)
                 except UploadError as e:
                     raise ApiError(e.status, str(e)) from None
+                limits.check_queue(s, self.store, client)  # before the inspection: it costs a worker's time
                 info = inspector(stored, settings)
                 if "error" in info:
                     raise ApiError(422, info["error"])
                 width, height, frames = int(info["width"]), int(info["height"]), list(info["frames"])
+                limits.check_cost(s, width=width, height=height, spp=settings.spp, frames=len(frames))
                 per_frame = tile_count(width, height, settings.tile)
-                if per_frame * len(frames) > s.max_tiles:
-                    raise ApiError(422, f"the job has {per_frame * len(frames)} tiles; the limit is {s.max_tiles} "
-                                        f"(use a larger tile size or fewer frames)")
+                limits.check_tiles(s, per_frame * len(frames))
+                limits.check_queue(s, self.store, client)  # again: other jobs may have been queued meanwhile
                 job_id = new_job_id()  # (its files' directories are made when the scheduler first plans it)
                 job = self.store.create_job(
                     job_id=job_id, priority=settings.priority, settings_json=settings.model_dump_json(),
                     scene_sha256=sha, scene_name=name, scene_bytes=size, width=width, height=height,
                     tile_size=settings.tile, tiles_per_frame=per_frame, frame_times=frames,
                     exposure_scale=float(info.get("exposure_scale", 1.0)), warnings=list(info.get("warnings", [])),
-                    idempotency_key=idempotency_key)
+                    idempotency_key=idempotency_key, client=client)
                 created = True
                 return job
         finally:

@@ -19,14 +19,16 @@ import time
 from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 from .checkpoints import TileBox, load_tile
 from .spec import RenderSpec
+from .stopping import dask_should_stop
 
 _cache: OrderedDict = OrderedDict()
 _cache_lock = threading.Lock()
 _key_locks: dict = {}
-_stats = {"prepared": 0, "tiles": 0}
+_stats = {"prepared": 0, "tiles": 0, "running": 0}  # running: tiles rendering now
 
 
 def _one_line(e: BaseException, spec: RenderSpec | None = None) -> str:
@@ -83,25 +85,19 @@ class TileTask:
     width: int  # the resolution the job was planned at
     height: int
     cache_size: int = 2
-    stop_flag: str | None = None  # a file whose existence means "stop": the job was canceled or failed
+    stop_key: str | None = None  # a Dask event set when the job is stopped (canceled, failed, deleted)
 
 
-def _stop_check(flag: str | None, every: float = 0.1):
-    """``render_tile``'s wave callback: raise Cancelled once ``flag`` exists (looked at most every ``every`` s;
-    Dask cannot interrupt a running task, so a long tile of a canceled job would otherwise run to its end)."""
-    if flag is None:
+def _stop_check(should_stop: Callable[[], bool] | None):
+    """``render_tile``'s wave callback: raise Cancelled once ``should_stop()`` says so (Dask cannot interrupt a
+    running task, so a long tile of a canceled job would otherwise run to its end)."""
+    if should_stop is None:
         return None
     from renderer.errors import Cancelled
 
-    last = time.monotonic()
-
     def on_wave(_done: int, _total: int) -> None:
-        nonlocal last
-        now = time.monotonic()
-        if now - last >= every:
-            last = now
-            if os.path.exists(flag):
-                raise Cancelled("job stopped")
+        if should_stop():
+            raise Cancelled("job stopped")
 
     return on_wave
 
@@ -116,7 +112,14 @@ def render_tile_task(task: TileTask) -> dict:
             return {"error": f"frame {task.frame:g} renders at {prep.width}x{prep.height}, "
                              f"not at the job's {task.width}x{task.height}"}
         t0 = time.perf_counter()
-        sums = render_tile(prep, Tile(*task.tile), on_wave=_stop_check(task.stop_flag))
+        should_stop = dask_should_stop(task.stop_key) if task.stop_key else None
+        with _cache_lock:
+            _stats["running"] += 1
+        try:
+            sums = render_tile(prep, Tile(*task.tile), on_wave=_stop_check(should_stop))
+        finally:
+            with _cache_lock:
+                _stats["running"] -= 1
         seconds = time.perf_counter() - t0
     except Cancelled:
         return {"stopped": True}

@@ -1,11 +1,12 @@
 """Request dependencies as ``Annotated`` aliases. Tests swap them with ``app.dependency_overrides``."""
 from __future__ import annotations
 
-import secrets
 from typing import Annotated
 
-from fastapi import Depends, Header, Request
+from fastapi import Depends, Request, Security
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
+from ..auth import CHALLENGE, bearer_ok, client_identity
 from ..db import Store
 from ..errors import UNAUTHORIZED, ApiError
 from ..runtime import Runtime
@@ -42,14 +43,30 @@ SubmitterDep = Annotated[Submitter, Depends(get_submitter)]
 InspectorDep = Annotated[Inspector, Depends(get_inspector)]
 
 
-def require_token(settings: SettingsDep, authorization: Annotated[str | None, Header()] = None) -> None:
-    """With ``DRT_API_TOKEN`` set, requests must carry ``Authorization: Bearer <token>``."""
-    if settings.api_token is None:
-        return
-    expected = settings.api_token.get_secret_value()
-    scheme, _, given = (authorization or "").partition(" ")
-    if scheme.lower() != "bearer" or not secrets.compare_digest(given.strip().encode(), expected.encode()):
-        raise ApiError(401, UNAUTHORIZED, headers={"WWW-Authenticate": "Bearer"})
+# Declares the bearer scheme in the OpenAPI description; the check itself reads the raw header (as the middleware).
+_bearer = HTTPBearer(auto_error=False, description="required when the service has DRT_API_TOKEN set")
+
+
+def require_token(settings: SettingsDep, request: Request,
+                  _declared: Annotated[HTTPAuthorizationCredentials | None, Security(_bearer)] = None) -> None:
+    """With ``DRT_API_TOKEN`` set, requests must carry ``Authorization: Bearer <token>``. ``auth.TokenFirst``
+    already refused others before their body was read; this dependency documents the scheme and honours
+    ``dependency_overrides`` of the settings."""
+    if not bearer_ok(_token(settings), request.headers.get("authorization")):
+        raise ApiError(401, UNAUTHORIZED, headers=CHALLENGE)
 
 
 Authorized = Depends(require_token)
+
+
+def _token(settings: ServiceSettings) -> str | None:
+    return settings.api_token.get_secret_value() if settings.api_token is not None else None
+
+
+def get_client_id(settings: SettingsDep, request: Request) -> str:
+    """The submitter, for the per-client queue limit: its token's hash, else its address."""
+    return client_identity(_token(settings), request.headers.get("authorization"),
+                           request.client.host if request.client else None)
+
+
+ClientIdDep = Annotated[str, Depends(get_client_id)]

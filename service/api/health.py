@@ -3,12 +3,13 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 from fastapi.concurrency import run_in_threadpool
-from fastapi.responses import PlainTextResponse
+from fastapi.responses import PlainTextResponse, Response
 
 from schemas import Health
 
 from .. import metrics
 from .deps import Authorized, RuntimeDep
+from .docs import UNAUTHORIZED_ANSWER
 
 router = APIRouter(tags=["health"])
 
@@ -21,7 +22,10 @@ async def healthz(runtime: RuntimeDep):
     return Health(status="ok", workers=workers, threads=threads)
 
 
-@router.get("/metrics", response_class=PlainTextResponse, dependencies=[Authorized])
+# response_class=Response (no media type of its own): the errors are then documented as JSON, which they are.
+@router.get("/metrics", response_class=Response, dependencies=[Authorized],
+            responses={200: {"content": {"text/plain": {"schema": {"type": "string"}}},
+                             "description": "Prometheus text format 0.0.4"}, **UNAUTHORIZED_ANSWER})
 def get_metrics(runtime: RuntimeDep):
     """Jobs by state, queue depth, tiles in flight and pending, tiles/s, task failures, cluster size."""
     sch = runtime.scheduler

@@ -1,8 +1,9 @@
 """``/v1/jobs``: submit, read, list, cancel, delete; frame EXRs and previews.
 
-Status codes: 202 + ``Location`` on create (also when an Idempotency-Key replays it), 404 unknown job or frame,
-409 illegal state change or frame not ready, 413 upload too large, 422 invalid input. Detail strings are in
-``service.errors``.
+Status codes: 202 + ``Location`` on create (also when an Idempotency-Key replays it), 400 malformed multipart, 401
+no or a wrong token, 404 unknown job or frame, 409 illegal state change or frame not ready, 413 upload too large,
+422 invalid input or a job over the limits, 503 cluster unavailable; each operation documents the ones it can
+answer. Detail strings are in ``service.errors`` and ``service.limits``. DELETE cancels an active job first.
 """
 from __future__ import annotations
 
@@ -13,17 +14,17 @@ import anyio
 from fastapi import APIRouter, File, Form, Header, Query, Request, Response, UploadFile
 from fastapi.responses import FileResponse, JSONResponse
 
-from schemas import ErrorBody, JobList, JobPublic, JobState
+from schemas import JobList, JobPublic, JobState
 
 from .. import errors, jobs as sm, preview
 from ..checkpoints import JobFiles, tile_grid
 from ..db import JobActive, JobNotFound, JobRow, decode_cursor, encode_cursor
 from ..errors import ApiError
 from ..views import find_frame, job_public, job_url
-from .deps import Authorized, InspectorDep, RuntimeDep, SettingsDep, StoreDep, SubmitterDep
+from .deps import Authorized, ClientIdDep, InspectorDep, RuntimeDep, SettingsDep, StoreDep, SubmitterDep
+from .docs import UNAUTHORIZED_ANSWER, errors as answers
 
-router = APIRouter(prefix="/jobs", tags=["jobs"], dependencies=[Authorized],
-                   responses={401: {"model": ErrorBody}, 404: {"model": ErrorBody}})
+router = APIRouter(prefix="/jobs", tags=["jobs"], dependencies=[Authorized], responses=UNAUTHORIZED_ANSWER)
 
 
 def _job(store, job_id: str) -> JobRow:
@@ -33,30 +34,34 @@ def _job(store, job_id: str) -> JobRow:
         raise ApiError(404, errors.JOB_NOT_FOUND) from None
 
 
-@router.post("", status_code=202, response_model=JobPublic,
-             responses={409: {"model": ErrorBody}, 413: {"model": ErrorBody}, 422: {"model": ErrorBody}})
+@router.post("", status_code=202, response_model=JobPublic, responses=answers(400, 409, 413, 422, 503))
 async def create_job(
     request: Request,
     submitter: SubmitterDep,
     inspector: InspectorDep,
+    client_id: ClientIdDep,
     scene: Annotated[UploadFile, File(description="a .usda, .usdc, .usd or .usdz file")],
     settings: Annotated[str, Form(description="JSON: schemas.JobCreate")] = "{}",
     idempotency_key: Annotated[str | None, Header(alias="Idempotency-Key", min_length=1, max_length=255)] = None,
 ):
-    """Queue a render of an uploaded USD scene. Retrying with the same ``Idempotency-Key`` returns the same job."""
+    """Queue a render of an uploaded USD scene. Retrying with the same ``Idempotency-Key`` returns the same job.
+
+    A job over the farm's limits (``GET /v1/limits``: samples, pixels, frames, tiles, jobs queued) is refused with
+    422 naming the limit and the job's cost; an upload over ``max_upload_bytes`` with 413."""
     row, _created = await anyio.to_thread.run_sync(
-        functools.partial(submitter.submit, scene.file, scene.filename, settings, idempotency_key, inspector),
+        functools.partial(submitter.submit, scene.file, scene.filename, settings, idempotency_key, inspector,
+                          client_id),
         limiter=request.app.state.submit_limiter)
     body = job_public(row).model_dump(mode="json")
     return JSONResponse(body, status_code=202, headers={"Location": job_url(row.id)})
 
 
-@router.get("", response_model=JobList, responses={422: {"model": ErrorBody}})
+@router.get("", response_model=JobList, responses=answers(422))
 def list_jobs(
     store: StoreDep,
     state: JobState | None = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 50,
-    cursor: str | None = None,
+    cursor: Annotated[str | None, Query(max_length=64, description="next_cursor of the previous page")] = None,
 ):
     """Jobs, newest first, optionally of one state; follow ``next_cursor`` for more."""
     before = None
@@ -70,12 +75,12 @@ def list_jobs(
                    next_cursor=encode_cursor(next_seq) if next_seq is not None else None)
 
 
-@router.get("/{job_id}", response_model=JobPublic)
+@router.get("/{job_id}", response_model=JobPublic, responses=answers(404, 422))
 def get_job(store: StoreDep, job_id: str):
     return job_public(_job(store, job_id))
 
 
-@router.post("/{job_id}/cancel", response_model=JobPublic, responses={409: {"model": ErrorBody}})
+@router.post("/{job_id}/cancel", response_model=JobPublic, responses=answers(404, 409, 422))
 def cancel_job(runtime: RuntimeDep, job_id: str):
     """Cancel a queued or running job: no new tiles start, queued ones are dropped, running ones stop."""
     try:
@@ -84,27 +89,35 @@ def cancel_job(runtime: RuntimeDep, job_id: str):
         raise ApiError(404, errors.JOB_NOT_FOUND) from None
     except sm.IllegalTransition as e:
         raise ApiError(409, errors.cannot_cancel(e.current.value)) from None
-    JobFiles(runtime.settings.data_dir, job_id).stop()  # running tiles stop at their next sample wave
-    runtime.scheduler.wake()
+    runtime.scheduler.wake()  # it drops the job and signals its running tiles to stop at their next sample wave
     return job_public(row)
 
 
-@router.delete("/{job_id}", status_code=204, responses={409: {"model": ErrorBody}})
+@router.delete("/{job_id}", status_code=204, responses=answers(404, 409, 422))
 def delete_job(runtime: RuntimeDep, job_id: str):
-    """Delete a finished job with its files (and its scene, if no other job uses it)."""
+    """Delete a job with its files (and its scene, if no other job uses it); a queued or running job is canceled
+    first, and its running tiles stop within about a second wherever they run."""
     try:
-        row = runtime.store.delete_job(job_id)
+        runtime.store.transition(job_id, sm.CANCELED)
     except JobNotFound:
         raise ApiError(404, errors.JOB_NOT_FOUND) from None
-    except JobActive as e:
+    except sm.IllegalTransition:
+        pass  # already finished
+    try:
+        row = runtime.store.delete_job(job_id)
+    except JobNotFound:  # deleted by a concurrent request
+        raise ApiError(404, errors.JOB_NOT_FOUND) from None
+    except JobActive as e:  # cannot happen after the cancel above, unless a future state allows it
         raise ApiError(409, errors.cannot_delete(e.state.value)) from None
+    runtime.scheduler.wake()
     JobFiles(runtime.settings.data_dir, job_id).remove()
     runtime.scenes.collect(row.scene_sha256, runtime.store.scene_in_use)
     return Response(status_code=204)
 
 
 @router.get("/{job_id}/frames/{frame}.exr", response_class=FileResponse,
-            responses={200: {"content": {"image/x-exr": {}}}, 409: {"model": ErrorBody}})
+            responses={200: {"content": {"image/x-exr": {"schema": {"type": "string", "format": "binary"}}},
+                             "description": "the frame's OpenEXR file"}, **answers(404, 409, 422)})
 def get_frame(store: StoreDep, settings: SettingsDep, job_id: str, frame: str):
     """The frame's EXR, once it is rendered (409 before)."""
     row = _job(store, job_id)
@@ -118,7 +131,8 @@ def get_frame(store: StoreDep, settings: SettingsDep, job_id: str, frame: str):
 
 
 @router.get("/{job_id}/frames/{frame}/preview.png", response_class=Response,
-            responses={200: {"content": {"image/png": {}}}})
+            responses={200: {"content": {"image/png": {"schema": {"type": "string", "format": "binary"}}},
+                             "description": "a tone-mapped PNG"}, **answers(404, 422)})
 def get_preview(store: StoreDep, settings: SettingsDep, job_id: str, frame: str):
     """A tone-mapped PNG of the frame: the finished tiles while it renders, the EXR once it is done."""
     row = _job(store, job_id)

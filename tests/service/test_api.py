@@ -98,8 +98,6 @@ def test_cancel_delete_and_their_conflicts(make_client, card, tmp_path):
     queued = submit(client, card, {**SMALL, "seed": 1}).json()["id"]
     assert client.get(f"/v1/jobs/{queued}").json()["state"] == "queued"
 
-    r = client.delete(f"/v1/jobs/{slow}")
-    assert (r.status_code, r.json()) == (409, {"detail": "cannot delete a running job; cancel it first"})
     r = client.get(f"/v1/jobs/{slow}/frames/0.exr")
     assert (r.status_code, r.json()) == (409, {"detail": "frame is not rendered yet"})
     assert client.get(f"/v1/jobs/{slow}/frames/0/preview.png").status_code == 200  # while rendering, too
@@ -391,20 +389,27 @@ def test_http_contract(make_client, card, tmp_path):
     http_contract(make_client(**CONTRACT_LIMITS), card, tmp_path)
 
 
-def test_a_running_tile_stops_when_its_job_is_stopped(card, tmp_path):
-    """Dask cannot interrupt a task: the tile itself looks for the job's STOP file between sample waves."""
+def test_a_running_tile_stops_when_its_job_is_stopped(make_client, card):
+    """Dask cannot interrupt a task: the tile asks the Dask scheduler for its stop event between sample waves (no
+    shared disk involved), and a tile whose event is never set renders on."""
     from schemas import JobCreate
-    from service.checkpoints import JobFiles
     from service.spec import RenderSpec
+    from service.stopping import StopSignals, new_key
 
-    files = JobFiles(tmp_path, "job")
+    engine = make_client(threads_per_worker=1).app.state.runtime.engine
     spec = RenderSpec.from_settings(JobCreate(width=64, height=64, spp=4096), str(card), "sha")
-    task = worker.TileTask(spec=spec, frame=0.0, tile=(0, 0, 64, 64), width=64, height=64,
-                           stop_flag=str(files.stop_flag))
-    worker.prepared(spec, 0.0)  # load and prepare first: time only the tile
-    stopper = threading.Timer(0.3, files.stop)
-    stopper.start()
+    key = new_key("job")
+    task = worker.TileTask(spec=spec, frame=0.0, tile=(0, 0, 64, 64), width=64, height=64, stop_key=key)
+    engine.client.submit(worker.prepared, spec, 0.0, pure=False).result()  # load first: time only the tile
+    future = engine.submit(worker.render_tile_task, task, key="tile-1")
+    time.sleep(0.5)
+    signals = StopSignals(engine.client, grace=0.0)
     t0 = time.perf_counter()
-    assert worker.render_tile_task(task) == {"stopped": True}
+    signals.stop(key)
+    assert future.result(timeout=30) == {"stopped": True}
     assert time.perf_counter() - t0 < 3.0  # 16M samples would take well over 10 s
-    stopper.join()
+    signals.sweep()  # cleared: the event no longer exists on the Dask scheduler
+    assert not engine.client.sync(engine.client.scheduler.event_is_set, name=key)
+
+    small = worker.TileTask(spec=spec, frame=0.0, tile=(0, 0, 8, 8), width=64, height=64, stop_key=new_key("job"))
+    assert "arrays" in engine.submit(worker.render_tile_task, small, key="tile-2").result(timeout=60)

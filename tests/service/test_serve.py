@@ -3,6 +3,7 @@ killed with SIGKILL mid-job and restarted; and a Dask worker process killed mid-
 from __future__ import annotations
 
 import ctypes
+import json
 import os
 import signal
 import socket
@@ -202,3 +203,54 @@ def test_a_killed_worker_process_still_yields_the_same_image(card, tmp_path):
         (tmp_path / "svc.exr").write_bytes(client.get(job["frames"][0]["exr_url"]).content)
     cli_render(card, tmp_path / "cli.exr", "--width", 64, "--height", 64, "--spp", 2048)
     assert_same_exr(tmp_path / "svc.exr", tmp_path / "cli.exr")
+
+
+def _cpu_seconds(procs: list[psutil.Process]) -> float:
+    total = 0.0
+    for p in procs:
+        try:
+            t = p.cpu_times()
+            total += t.user + t.system
+        except psutil.Error:
+            pass
+    return total
+
+
+def test_abuse_against_drt_serve(servers, card, tmp_path):
+    """With a token: a stranger's malformed body is 401, the maximal job is refused by `drt submit` naming the
+    limit, and a running job deleted outright stops rendering in the worker processes (no shared flag file)."""
+    server = servers(api_token="t0ken", threads_per_worker=2)
+    r = httpx.post(f"{server.url}/v1/jobs", content=b"--x\r\nnot multipart",
+                   headers={"content-type": "multipart/form-data"})
+    assert (r.status_code, r.json(), r.headers["www-authenticate"]) == (
+        401, {"detail": "missing or invalid bearer token"}, "Bearer")
+    r = drt("submit", card, "--width", 16384, "--height", 16384, "--spp", 65536, "--max-depth", 64,
+            "--server", server.url, "--token", "t0ken")
+    assert (r.returncode, r.stderr) == (1, "drt: error: 422: a frame of 16384x16384 has 268435456 pixels; the limit "
+                                           "is 16777216 pixels per frame\n")
+
+    auth = {"Authorization": "Bearer t0ken"}
+    settings = {"width": 64, "height": 64, "spp": 65536, "tile": 32}  # 67M samples a tile: minutes each
+    with open(card, "rb") as f:
+        job = server.http.post("/v1/jobs", files={"scene": ("card.usda", f)}, data={"settings": json.dumps(settings)},
+                               headers=auth).json()
+    workers = server.family()[1:]
+    deadline = time.monotonic() + 120
+    while server.http.get(job["url"], headers=auth).json()["state"] != "running":
+        assert time.monotonic() < deadline
+        time.sleep(0.1)
+    while True:  # rendering (after loading the scene): the workers are busy, as busy as a shared machine lets them
+        cpu0 = _cpu_seconds(workers)
+        time.sleep(1.0)
+        before = _cpu_seconds(workers) - cpu0
+        if before > 0.3:
+            break
+        assert time.monotonic() < deadline, "the job never kept the workers busy"
+    assert server.http.delete(job["url"], headers=auth).status_code == 204
+    time.sleep(2.0)  # a tile asks whether to stop every 0.25 s, between sample waves of a fraction of a second
+    cpu0, t0 = _cpu_seconds(workers), time.monotonic()
+    time.sleep(2.0)
+    busy = (_cpu_seconds(workers) - cpu0) / (time.monotonic() - t0)
+    assert busy < min(0.15, before / 3), f"{busy:.2f} cores busy in the workers after the delete, {before:.2f} before"
+    assert server.http.get(job["url"], headers=auth).status_code == 404
+    assert not (tmp_path / "data" / "jobs" / job["id"]).exists()

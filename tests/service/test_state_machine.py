@@ -116,3 +116,32 @@ def test_cursor_round_trip():
     for bad in ["", "xyz", encode_cursor(1)[:-2] + "!!"]:
         with pytest.raises(ValueError):
             decode_cursor(bad)
+
+
+def test_active_jobs_are_counted_per_client_and_old_databases_gain_the_column(tmp_path):
+    import sqlite3
+
+    path = tmp_path / "db.sqlite3"
+    Store(path).close()
+    with sqlite3.connect(path) as db:  # a data directory from before the column existed
+        db.execute("ALTER TABLE jobs DROP COLUMN client")
+    store = Store(path)
+    try:
+        for job_id, client in (("a", "addr:1"), ("b", "addr:1"), ("c", "addr:2"), ("d", None)):
+            store.create_job(job_id=job_id, priority=0, settings_json="{}", scene_sha256="s" * 64,
+                             scene_name="x.usda", scene_bytes=1, width=4, height=4, tile_size=2, tiles_per_frame=4,
+                             frame_times=[0.0], exposure_scale=1.0, warnings=[], client=client)
+        store.transition("b", JobState.running)
+        assert (store.count_active(), store.count_active("addr:1"), store.count_active("addr:2")) == (4, 2, 1)
+        store.transition("a", JobState.canceled)
+        store.transition("b", JobState.succeeded)
+        assert (store.count_active(), store.count_active("addr:1")) == (2, 0)
+    finally:
+        store.close()
+
+
+def test_cursor_sequence_numbers_stay_within_sqlite_integers():
+    assert decode_cursor(encode_cursor(2**63 - 1)) == 2**63 - 1
+    for seq in (2**63, 10**30):
+        with pytest.raises(ValueError):
+            decode_cursor(encode_cursor(seq))
