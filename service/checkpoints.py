@@ -55,6 +55,10 @@ class JobFiles:
         self.root.mkdir(parents=True, exist_ok=True)
         self.stop_flag.touch()
 
+    def resume(self) -> None:
+        """Remove the stop flag (the job is retried: its tiles must run again)."""
+        self.stop_flag.unlink(missing_ok=True)
+
     def remove_tiles(self, frame_idx: int) -> None:
         shutil.rmtree(self.root / "tiles" / str(frame_idx), ignore_errors=True)
 

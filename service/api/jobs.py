@@ -1,4 +1,4 @@
-"""``/v1/jobs``: submit, read, list, cancel, delete; frame EXRs and previews.
+"""``/v1/jobs``: submit, read, list, cancel, retry, delete; frame EXRs and previews.
 
 Status codes: 202 + ``Location`` on create (also when an Idempotency-Key replays it), 404 unknown job or frame,
 409 illegal state change or frame not ready, 413 upload too large, 422 invalid input. Detail strings are in
@@ -85,6 +85,24 @@ def cancel_job(runtime: RuntimeDep, job_id: str):
     except sm.IllegalTransition as e:
         raise ApiError(409, errors.cannot_cancel(e.current.value)) from None
     JobFiles(runtime.settings.data_dir, job_id).stop()  # running tiles stop at their next sample wave
+    runtime.scheduler.wake()
+    return job_public(row)
+
+
+@router.post("/{job_id}/retry", response_model=JobPublic, responses={409: {"model": ErrorBody}})
+def retry_job(runtime: RuntimeDep, job_id: str):
+    """Queue a failed or canceled job again: it resumes from its checkpointed tiles and finished frames."""
+    row = _job(runtime.store, job_id)
+    if not sm.can_move(row.job_state, sm.QUEUED):
+        raise ApiError(409, errors.cannot_retry(row.state))
+    # The stop flag goes first: a tile started after the transition must not find it and stop.
+    JobFiles(runtime.settings.data_dir, job_id).resume()
+    try:
+        row = runtime.store.transition(job_id, sm.QUEUED)
+    except JobNotFound:
+        raise ApiError(404, errors.JOB_NOT_FOUND) from None
+    except sm.IllegalTransition as e:
+        raise ApiError(409, errors.cannot_retry(e.current.value)) from None
     runtime.scheduler.wake()
     return job_public(row)
 
