@@ -25,6 +25,7 @@ class FarmTask(BaseModel):
     kind: str = Field(description="`tile` (rendering a tile) or `frame` (assembling a frame's EXR)")
     job_id: str
     frame_index: int = Field(description="position of the frame in the job's `frames`")
+    frame: float | None = Field(None, description="the frame's time code (null if the job is gone)")
     tile: int | None = Field(description="tile index (null for a frame's assembly)")
 
 

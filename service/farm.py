@@ -12,7 +12,7 @@ from collections import defaultdict
 
 from schemas import Farm, FarmTask, FarmWorker, FrameTiles, TileMap
 
-from .db import JobRow, Store
+from .db import JobNotFound, JobRow, Store
 from .engine import Engine
 from .settings import ServiceSettings
 
@@ -50,7 +50,20 @@ def dashboard_url(settings: ServiceSettings, engine: Engine, services: dict) -> 
         return None
 
 
-def farm(settings: ServiceSettings, engine: Engine, *, tiles_in_flight: int, tiles_pending: int,
+def _frame_times(store: Store, tasks: list[FarmTask]) -> None:
+    """Name each task's frame by its time code (as the job's page does)."""
+    times: dict[str, list[float]] = {}
+    for t in tasks:
+        if t.job_id not in times:
+            try:
+                times[t.job_id] = [f.time for f in store.get_job(t.job_id).frames]
+            except JobNotFound:
+                times[t.job_id] = []
+        frames = times[t.job_id]
+        t.frame = frames[t.frame_index] if t.frame_index < len(frames) else None
+
+
+def farm(settings: ServiceSettings, engine: Engine, store: Store, *, tiles_in_flight: int, tiles_pending: int,
          tiles_per_second: float) -> Farm:
     try:
         info = engine.client.scheduler_info(n_workers=-1)
@@ -66,6 +79,7 @@ def farm(settings: ServiceSettings, engine: Engine, *, tiles_in_flight: int, til
             nthreads=int(w.get("nthreads", 0)), memory_limit=w.get("memory_limit"),
             memory=metrics.get("memory"), cpu=metrics.get("cpu"), tasks=tasks,
             other_tasks=len(held.get(address, ())) - len(tasks)))
+    _frame_times(store, [t for w in workers for t in w.tasks])
     return Farm(scheduler=info.get("address"),
                 dashboard_url=dashboard_url(settings, engine, info.get("services") or {}), workers=workers, tiles_in_flight=tiles_in_flight, tiles_pending=tiles_pending,
                 tiles_per_second=tiles_per_second)

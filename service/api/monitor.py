@@ -28,5 +28,5 @@ def job_tiles(runtime: RuntimeDep, job_id: str):
 def get_farm(runtime: RuntimeDep):
     """The Dask workers (threads, memory, CPU) with the drt tasks each holds, and the Dask dashboard's link."""
     sch = runtime.scheduler
-    return farm.farm(runtime.settings, runtime.engine, tiles_in_flight=sch.in_flight(),
+    return farm.farm(runtime.settings, runtime.engine, runtime.store, tiles_in_flight=sch.in_flight(),
                      tiles_pending=sch.pending_tiles(), tiles_per_second=sch.tiles_per_second())

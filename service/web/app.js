@@ -610,7 +610,8 @@
         h("p", { class: "muted" }, `${w.nthreads} thread(s) · CPU ${w.cpu === null ? "–" : w.cpu.toFixed(0) + "%"} · `
           + `memory ${bytes(w.memory)} of ${bytes(w.memory_limit)}`),
         w.tasks.length ? h("ul", { class: "tasks" }, w.tasks.map((t) => h("li", {},
-          t.kind === "tile" ? `tile ${t.tile}` : "assembling", ` · frame #${t.frame_index} · job `,
+          t.kind === "tile" ? `tile ${t.tile}` : "assembling the EXR",
+          ` · frame ${t.frame === null ? "#" + t.frame_index : frameName(t.frame)} · job `,
           h("a", { href: `/jobs/${encodeURIComponent(t.job_id)}`, "data-internal": true }, t.job_id.slice(0, 8)))))
           : h("p", { class: "muted" }, "idle"),
         w.other_tasks ? h("p", { class: "muted" }, `${w.other_tasks} other task(s)`) : ""));

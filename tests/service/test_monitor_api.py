@@ -220,7 +220,8 @@ def test_tile_map_and_farm_show_the_tiles_workers_hold(server, card):
     assert set(tiles["frames"][0]["rendering"]).isdisjoint(tiles["frames"][0]["done"])
     assert all(0 <= i < 64 for i in tiles["frames"][0]["rendering"])
     assert [w["nthreads"] for w in farm["workers"]] == [1]
-    assert held[0]["kind"] == "tile" and held[0]["frame_index"] == 0 and 0 <= held[0]["tile"] < 64
+    assert (held[0]["kind"], held[0]["frame_index"], held[0]["frame"]) == ("tile", 0, 0.0)
+    assert 0 <= held[0]["tile"] < 64
     assert farm["tiles_in_flight"] >= 1 and farm["dashboard_url"] is None
     server.http.post(f"/v1/jobs/{job_id}/cancel")
     job_id = wait_job(server.http, submit(server.http, card, SMALL).json()["id"])["id"]

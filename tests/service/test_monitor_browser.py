@@ -207,7 +207,7 @@ def test_the_farm_page_shows_workers_and_their_tiles(server, tab, card):
         tab.goto("/farm")
         task = tab.page.locator(".worker .tasks li", has_text=job_id[:8]).first
         task.wait_for(timeout=30_000)
-        assert task.inner_text().startswith("tile ") and "frame #0" in task.inner_text()
+        assert task.inner_text().startswith("tile ") and " · frame 0 · job " in task.inner_text()
         assert tab.page.locator(".worker").count() == 1
         assert "1 thread(s)" in tab.page.locator(".worker").inner_text()
         task.locator("a").click()
