@@ -90,10 +90,12 @@ class ChangeFeed:
             return None
 
     async def _watch(self) -> None:
-        known: set[str] = await anyio.to_thread.run_sync(self.store.job_ids)
+        known: set[str] | None = None  # ids of the jobs that exist
         sent: dict[str, float] = {}  # job id -> updated_at of the version last sent
         while self._subs and not self._closed:
             try:
+                if known is None:
+                    known = await anyio.to_thread.run_sync(self.store.job_ids)
                 known, sent = await self._tick(known, sent)
             except Exception:  # noqa: BLE001 - a busy database must not end the feed; the next turn retries
                 log.warning("change feed turn failed", exc_info=True)
