@@ -3,6 +3,7 @@ shell and its headers, the token, and ``drt cancel/retry/delete``."""
 from __future__ import annotations
 
 import json
+import signal
 import subprocess
 import sys
 import threading
@@ -314,3 +315,22 @@ def test_drt_cancel_retry_delete(server, card):
     r = drt("retry", job_id, "--server", server.url)
     assert r.returncode == 0 and r.stdout.startswith(f"{job_id} queued "), (r.stdout, r.stderr)
     server.http.post(f"/v1/jobs/{job_id}/cancel")
+
+
+def test_drt_serve_stops_promptly_with_a_monitor_open(tmp_path):
+    """SIGTERM with an event stream open: ``drt serve`` ends the stream instead of waiting out uvicorn's 10 s
+    graceful-shutdown timeout for it."""
+    from test_serve import Server
+
+    s = Server(tmp_path / "data", tmp_path / "serve.log", processes="false")
+    reader = EventReader(f"{s.url}/v1/events")
+    try:
+        reader.wait_for(lambda e: e[0] == "ready", timeout=20)
+        t0 = time.monotonic()
+        assert s.terminate() in (0, -signal.SIGTERM)  # uvicorn re-raises the signal once it has stopped
+        assert time.monotonic() - t0 < 6.0, (tmp_path / "serve.log").read_text()
+        assert reader.ended.wait(5)
+    finally:
+        reader.close()
+        if s.proc.poll() is None:
+            s.kill()
