@@ -243,6 +243,7 @@
     constructor(params) {
       this.filter = STATES.includes(params.get("state")) ? params.get("state") : "";
       this.jobs = new Map();
+      this.rows = new Map(); // job id -> its <tr>
       this.cursor = null;
       this.tbody = h("tbody");
       this.empty = h("p", { class: "muted empty", hidden: true });
@@ -301,27 +302,41 @@
       this.render();
     }
 
+    // Rows are kept and their cells updated in place (a row rebuilt under the pointer would swallow a click);
+    // they are moved only when the order changes.
     render() {
       const jobs = [...this.jobs.values()].sort((a, b) => (a.created_at < b.created_at ? 1 : -1));
-      this.tbody.replaceChildren(...jobs.map((j) => this.row(j)));
+      const rows = jobs.map((j) => this.row(j));
+      for (const [id, tr] of this.rows) if (!this.jobs.has(id)) { tr.remove(); this.rows.delete(id); }
+      const current = [...this.tbody.children];
+      if (current.length !== rows.length || rows.some((tr, i) => current[i] !== tr)) this.tbody.replaceChildren(...rows);
       this.empty.hidden = jobs.length > 0;
       this.empty.textContent = this.filter ? `No ${this.filter} jobs.` : "No jobs yet: submit one with drt submit SCENE.";
       this.more.hidden = !this.cursor;
     }
 
     row(j) {
-      const cell = (label, ...c) => h("td", { dataset: { label } }, ...c);
-      return h("tr", { dataset: { id: j.id, state: j.state } },
-        cell("Scene", h("a", { href: `/jobs/${encodeURIComponent(j.id)}`, "data-internal": true, class: "scene" },
-          j.scene.filename), h("span", { class: "id muted" }, j.id.slice(0, 8))),
-        cell("State", badge(j.state)),
-        cell("Priority", String(j.priority)),
-        cell("Progress", h("div", { class: "progress" }, bar(j.progress, `progress of ${j.scene.filename}`),
-          h("span", { class: "pct" }, pct(j.progress)))),
-        cell("Samples/s", rate(j.samples_per_second)),
-        cell("Submitted", h("time", { datetime: j.created_at, title: j.created_at }, clock(j.created_at))),
-        cell("Elapsed", h("span", { class: "elapsed" }, duration(elapsed(j)))),
-        cell("Remaining", h("span", { class: "remaining" }, duration(remaining(j)))));
+      let tr = this.rows.get(j.id);
+      if (!tr) {
+        const cell = (label) => h("td", { dataset: { label } });
+        tr = h("tr", { dataset: { id: j.id } }, ["Scene", "State", "Priority", "Progress", "Samples/s", "Submitted",
+          "Elapsed", "Remaining"].map(cell));
+        tr.cells[0].append(h("a", { href: `/jobs/${encodeURIComponent(j.id)}`, "data-internal": true, class: "scene" },
+          j.scene.filename), h("span", { class: "id muted" }, j.id.slice(0, 8)));
+        tr.cells[5].append(h("time", { datetime: j.created_at, title: j.created_at }, clock(j.created_at)));
+        this.rows.set(j.id, tr);
+      }
+      if (tr.dataset.version === j.updated_at && tr.dataset.state === j.state) return tr;
+      tr.dataset.version = j.updated_at;
+      tr.dataset.state = j.state;
+      tr.cells[1].replaceChildren(badge(j.state));
+      tr.cells[2].textContent = String(j.priority);
+      tr.cells[3].replaceChildren(h("div", { class: "progress" }, bar(j.progress, `progress of ${j.scene.filename}`),
+        h("span", { class: "pct" }, pct(j.progress))));
+      tr.cells[4].textContent = rate(j.samples_per_second);
+      tr.cells[6].replaceChildren(h("span", { class: "elapsed" }, duration(elapsed(j))));
+      tr.cells[7].replaceChildren(h("span", { class: "remaining" }, duration(remaining(j))));
+      return tr;
     }
 
     tick() {
@@ -431,19 +446,28 @@
       document.title = `${j.scene.filename} · drt`;
       e.state.replaceChildren(badge(j.state));
 
-      const act = (label, cls, fn, enabled) => h("button", {
-        type: "button", class: cls, disabled: !enabled, dataset: { action: label.toLowerCase().split(" ")[0] },
-        onclick: async (ev) => {
-          ev.currentTarget.disabled = true;
-          try { await fn(); notice(""); } catch (err) { reportError(err); }
-        },
-      }, label);
-      const done = this.frame() && this.frame().exr_url;
-      e.actions.replaceChildren(
-        act("Cancel", "danger", () => this.post("cancel"), ACTIVE.has(j.state)),
-        act("Retry", "", () => this.post("retry"), j.state === "failed" || j.state === "canceled"),
-        act("Delete", "ghost", () => this.remove(), !ACTIVE.has(j.state)),
-        act("Download EXR", "primary", () => this.downloadFrame(this.frame()), Boolean(done)));
+      // Buttons and frame rows are built once and updated in place: one rebuilt under the pointer (updates
+      // arrive several times a second while a job renders) would swallow the click.
+      if (!this.btn) {
+        const act = (label, cls, fn) => h("button", {
+          type: "button", class: cls, dataset: { action: label.toLowerCase().split(" ")[0] },
+          onclick: async (ev) => {
+            ev.currentTarget.disabled = true;
+            try { await fn(); notice(""); } catch (err) { reportError(err); } finally { if (!this.gone) this.fill(); }
+          },
+        }, label);
+        this.btn = {
+          cancel: act("Cancel", "danger", () => this.post("cancel")),
+          retry: act("Retry", "", () => this.post("retry")),
+          delete: act("Delete", "ghost", () => this.remove()),
+          download: act("Download EXR", "primary", () => this.downloadFrame(this.frame())),
+        };
+        e.actions.replaceChildren(...Object.values(this.btn));
+      }
+      this.btn.cancel.disabled = !ACTIVE.has(j.state);
+      this.btn.retry.disabled = !(j.state === "failed" || j.state === "canceled");
+      this.btn.delete.disabled = ACTIVE.has(j.state);
+      this.btn.download.disabled = !(this.frame() && this.frame().exr_url);
 
       const s = j.settings;
       const facts = [
@@ -469,18 +493,26 @@
         warnings.length ? h("ul", { class: "warning-list" }, warnings.map((w) => h("li", {}, w)))
           : h("p", { class: "muted" }, "The renderer had nothing to say about this scene."));
 
-      e.frames.replaceChildren(...j.frames.map((f, i) => h("tr", {
-        class: i === this.frameIdx ? "selected" : "", dataset: { frame: frameName(f.frame) },
-        onclick: () => this.select(i),
-      },
-      h("td", {}, h("button", { type: "button", class: "link", onclick: () => this.select(i) }, frameName(f.frame))),
-      h("td", {}, f.state),
-      h("td", {}, h("div", { class: "progress" }, bar(f.progress, `frame ${frameName(f.frame)}`),
-        h("span", { class: "pct" }, pct(f.progress)))),
-      h("td", {}, f.exr_url ? h("button", { type: "button", class: "link", onclick: (ev) => {
-        ev.stopPropagation();
-        this.downloadFrame(f).catch(reportError);
-      } }, "EXR") : ""))));
+      if (e.frames.childElementCount !== j.frames.length) {
+        e.frames.replaceChildren(...j.frames.map((f, i) => h("tr", { dataset: { frame: frameName(f.frame) },
+          onclick: () => this.select(i) },
+        h("td", {}, h("button", { type: "button", class: "link", onclick: () => this.select(i) }, frameName(f.frame))),
+        h("td"), h("td"),
+        h("td", {}, h("button", { type: "button", class: "link", hidden: true, onclick: (ev) => {
+          ev.stopPropagation();
+          this.downloadFrame(this.job.frames[i]).catch(reportError);
+        } }, "EXR")))));
+      }
+      j.frames.forEach((f, i) => {
+        const tr = e.frames.rows[i];
+        tr.className = i === this.frameIdx ? "selected" : "";
+        if (tr.dataset.key === `${f.state}:${f.progress}`) return;
+        tr.dataset.key = `${f.state}:${f.progress}`;
+        tr.cells[1].textContent = f.state;
+        tr.cells[2].replaceChildren(h("div", { class: "progress" }, bar(f.progress, `frame ${frameName(f.frame)}`),
+          h("span", { class: "pct" }, pct(f.progress))));
+        tr.cells[3].firstChild.hidden = !f.exr_url;
+      });
       e.frameLabel.textContent = j.frames.length > 1 ? `frame ${frameName(this.frame().frame)}` : "";
     }
 
