@@ -81,8 +81,8 @@ def farm(settings: ServiceSettings, engine: Engine, store: Store, *, tiles_in_fl
             other_tasks=len(held.get(address, ())) - len(tasks)))
     _frame_times(store, [t for w in workers for t in w.tasks])
     return Farm(scheduler=info.get("address"),
-                dashboard_url=dashboard_url(settings, engine, info.get("services") or {}), workers=workers, tiles_in_flight=tiles_in_flight, tiles_pending=tiles_pending,
-                tiles_per_second=tiles_per_second)
+                dashboard_url=dashboard_url(settings, engine, info.get("services") or {}), workers=workers,
+                tiles_in_flight=tiles_in_flight, tiles_pending=tiles_pending, tiles_per_second=tiles_per_second)
 
 
 def tile_map(row: JobRow, store: Store, engine: Engine) -> TileMap:

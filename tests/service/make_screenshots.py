@@ -3,7 +3,8 @@
     python tests/service/make_screenshots.py [OUT_DIR]    # default docs/
 
 Writes monitor-jobs.png (the job list), monitor-job.png (a job rendering: preview, tile grid, warnings),
-monitor-failed.png, monitor-farm.png and monitor-phone.png. Needs Chromium (see tests/service/browser.py); takes about a minute.
+monitor-failed.png, monitor-farm.png and monitor-phone.png. Needs Chromium (see tests/service/browser.py); takes
+about a minute.
 """
 from __future__ import annotations
 

@@ -14,7 +14,7 @@ import pytest
 
 from schemas import JobState
 from service import jobs as sm
-from service.db import Store, TileRow
+from service.db import Store
 
 from live_server import LiveServer
 from service_helpers import assert_same_exr, cli_env, cli_render, submit, wait_job

@@ -4,7 +4,6 @@ and warnings shown as text, the farm, the polling fallback, a phone's width, and
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import pytest
 
@@ -72,10 +71,12 @@ ROW = """id => { const tr = document.querySelector(`tr[data-id="${id}"]`);
   return tr ? [tr.dataset.state, Number(tr.querySelector('[role=progressbar]').getAttribute('aria-valuenow'))]
             : null; }"""
 
-JOB_PAGE = """() => { const img = document.querySelector('img.preview'); const grid = document.querySelector('.tilegrid');
+JOB_PAGE = """() => { const img = document.querySelector('img.preview');
+  const grid = document.querySelector('.tilegrid');
   const badge = document.querySelector('.toolbar .badge');
+  const bar = document.querySelector('[data-fact=Progress] [role=progressbar]');
   return { state: badge ? badge.textContent : null,
-           progress: Number(document.querySelector('[data-fact=Progress] [role=progressbar]')?.getAttribute('aria-valuenow')),
+           progress: Number(bar?.getAttribute('aria-valuenow')),
            preview: img && !img.hidden && img.complete ? img.naturalWidth : 0,
            previewSrc: img ? img.getAttribute('src') : null,
            done: grid ? Number(grid.dataset.done || 0) : 0, cells: grid ? grid.childElementCount : 0,
@@ -241,7 +242,8 @@ def test_a_phone_width_needs_no_sideways_scrolling(server, browser, card, path):
 def test_with_a_token_the_page_asks_for_it(browser, card, tmp_path):
     s = LiveServer(tmp_path / "data", api_token="s3cret")
     try:
-        job_id = wait_job(s.http, submit(s.http, card, {"width": 32, "height": 24, "spp": 2, "tile": 8}).json()["id"])["id"]
+        job = submit(s.http, card, {"width": 32, "height": 24, "spp": 2, "tile": 8}).json()
+        job_id = wait_job(s.http, job["id"])["id"]
         t = Page(browser, s.url)
         t.goto("/")
         t.page.wait_for_selector("#login:not([hidden])")
