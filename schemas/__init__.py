@@ -5,7 +5,9 @@ renderer's own plain dataclasses. Settings keys are named like the ``drt render`
 """
 from .jobs import ErrorBody, FramePublic, FrameState, Health, JobList, JobPublic, JobState, SceneInfo
 from .limits import Limits
+from .monitor import Farm, FarmTask, FarmWorker, FrameTiles, TileMap
 from .settings import AOVS, FILTERS, MAX_FRAMES, TIME_FILTERS, FrameRange, JobCreate, RenderSettings
 
-__all__ = ["AOVS", "FILTERS", "MAX_FRAMES", "TIME_FILTERS", "ErrorBody", "FramePublic", "FrameRange", "FrameState",
-           "Health", "JobCreate", "JobList", "Limits", "JobPublic", "JobState", "RenderSettings", "SceneInfo"]
+__all__ = ["AOVS", "FILTERS", "MAX_FRAMES", "TIME_FILTERS", "ErrorBody", "Farm", "FarmTask", "FarmWorker",
+           "FramePublic", "FrameRange", "FrameState", "FrameTiles", "Health", "JobCreate", "JobList", "JobPublic",
+           "JobState", "Limits", "RenderSettings", "SceneInfo", "TileMap"]

@@ -19,10 +19,11 @@ from fastapi.openapi.docs import get_swagger_ui_html
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from .api import health, jobs, limits
+from .api import events, health, jobs, limits, monitor, web
 from .api.deps import require_token
 from .auth import TokenFirst
 from .errors import ApiError
+from .events import ChangeFeed
 from .runtime import Runtime
 from .settings import ServiceSettings
 from .uploads import UploadTooLarge
@@ -91,9 +92,11 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         # Submissions wait for a worker to load their scene; they get threads of their own, so that a burst of
         # them never holds every thread of the pool that status requests need.
         app.state.submit_limiter = anyio.CapacityLimiter(SUBMISSION_THREADS)
+        app.state.feed = ChangeFeed(app.state.runtime.store)  # the monitor's server-sent events
         try:
             yield
         finally:
+            app.state.feed.close()
             await run_in_threadpool(app.state.runtime.close)
 
     protected_docs = settings.api_token is not None
@@ -140,4 +143,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     app.include_router(health.router)
     app.include_router(jobs.router, prefix="/v1")
     app.include_router(limits.router, prefix="/v1")
+    app.include_router(events.router, prefix="/v1")
+    app.include_router(monitor.router, prefix="/v1")
+    app.include_router(web.router)  # the job monitor's static shell (no data, no token)
     return app

@@ -1,6 +1,7 @@
 """Bearer-token authentication, checked before anything else looks at a request.
 
-With ``DRT_API_TOKEN`` set, every path but ``/healthz`` needs ``Authorization: Bearer <token>``. ``TokenFirst`` is
+With ``DRT_API_TOKEN`` set, every path but ``/healthz`` and the job monitor's static shell (``api.web.is_public``:
+the page holds no data; it asks for the token and sends it with every API call) needs ``Authorization: Bearer <token>``. ``TokenFirst`` is
 ASGI middleware, so it answers 401 before the body of a request is read (FastAPI resolves route dependencies only
 after parsing the body, so a dependency alone would let an unauthenticated client have its multipart parsed). The
 comparison is constant-time. Clients are told apart by their token, else by their address (the queue limits).
@@ -11,6 +12,7 @@ import hashlib
 import hmac
 import json
 
+from .api.web import is_public
 from .errors import UNAUTHORIZED
 
 PUBLIC_PATHS = frozenset({"/healthz"})
@@ -38,14 +40,15 @@ def client_identity(expected: str | None, authorization: str | None, address: st
 
 class TokenFirst:
     """ASGI middleware: 401 ``{"detail": ...}`` with ``WWW-Authenticate: Bearer`` for an unauthenticated request
-    to any path but ``/healthz``, before its body is read."""
+    to any path but ``/healthz`` and the monitor's static shell, before its body is read."""
 
     def __init__(self, app, token: str | None):
         self.app = app
         self.token = token
 
     async def __call__(self, scope, receive, send):
-        if scope["type"] != "http" or self.token is None or scope.get("path") in PUBLIC_PATHS:
+        path = scope.get("path")
+        if scope["type"] != "http" or self.token is None or path in PUBLIC_PATHS or is_public(path or ""):
             return await self.app(scope, receive, send)
         header = next((v for k, v in scope.get("headers") or [] if k == b"authorization"), None)
         if bearer_ok(self.token, header.decode("latin-1") if header is not None else None):

@@ -1,4 +1,5 @@
-"""``drt``: ``render`` (the renderer's own command, unchanged), ``serve``, ``submit``, ``status``, ``fetch``.
+"""``drt``: ``render`` (the renderer's own command, unchanged), ``serve``, ``submit``, ``status``, ``fetch``,
+``cancel``, ``retry``, ``delete``.
 
 Heavy imports (FastAPI, uvicorn, Dask, httpx) happen inside the commands that need them, so ``drt render`` starts
 as fast as ``python -m renderer.cli``. Exit codes as for ``drt render``: 0 success, 1 error (one line on stderr),
@@ -44,8 +45,18 @@ def cmd_serve(args: argparse.Namespace) -> int:
                  if v is not None}
     settings = ServiceSettings(**overrides)
     logging.basicConfig(level=args.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level=args.log_level,
-                timeout_graceful_shutdown=10)
+    app = create_app(settings)
+
+    class Server(uvicorn.Server):
+        def handle_exit(self, sig, frame) -> None:
+            # Open event streams (the monitor in a browser) would hold up the graceful shutdown: end them.
+            feed = getattr(app.state, "feed", None)
+            if feed is not None:
+                feed.close_threadsafe()
+            super().handle_exit(sig, frame)
+
+    Server(uvicorn.Config(app, host=args.host, port=args.port, log_level=args.log_level,
+                          timeout_graceful_shutdown=10)).run()
     return 0
 
 

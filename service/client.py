@@ -1,4 +1,5 @@
-"""The service's HTTP client (httpx) and the ``drt submit``, ``drt status``, ``drt fetch`` commands.
+"""The service's HTTP client (httpx) and the ``drt submit``, ``status``, ``fetch``, ``cancel``, ``retry``, ``delete``
+commands.
 
 The server is ``--server`` or ``DRT_SERVER`` (default ``http://127.0.0.1:8000``); the token ``--token`` or
 ``DRT_API_TOKEN``. Errors are one line: ``drt: error: <HTTP status>: <the server's detail>``.
@@ -92,6 +93,12 @@ class Client:
 
     def cancel(self, job_id: str) -> dict:
         return self._request("POST", f"/v1/jobs/{job_id}/cancel").json()
+
+    def retry(self, job_id: str) -> dict:
+        return self._request("POST", f"/v1/jobs/{job_id}/retry").json()
+
+    def delete(self, job_id: str) -> None:
+        self._request("DELETE", f"/v1/jobs/{job_id}")
 
     def wait(self, job_id: str, progress: bool = False, poll: float = 0.25, timeout: float | None = None) -> dict:
         """Poll until the job is finished; a tqdm bar on stderr when ``progress``."""
@@ -208,6 +215,13 @@ def add_commands(sub) -> None:
     f.add_argument("--quiet", action="store_true", help="no progress bar")
     add_connection(f)
 
+    for name, text in (("cancel", "cancel a queued or running job"),
+                       ("retry", "queue a failed or canceled job again (it resumes from its finished tiles)"),
+                       ("delete", "delete a finished job and its files")):
+        c = sub.add_parser(name, help=text)
+        c.add_argument("job_id")
+        add_connection(c)
+
 
 def settings_from_args(args: argparse.Namespace) -> dict:
     if args.frames is not None and args.frame is not None:
@@ -284,6 +298,14 @@ def run(args: argparse.Namespace) -> int:
             job = client.wait(args.job_id, progress=sys.stderr.isatty() and not args.quiet)
             for p in _fetch(client, job, args.output, args.frame):
                 print(f"wrote {p}")
+            return 0
+        if args.command in ("cancel", "retry"):
+            job = client.cancel(args.job_id) if args.command == "cancel" else client.retry(args.job_id)
+            print(_summary(job))
+            return 0
+        if args.command == "delete":
+            client.delete(args.job_id)
+            print(f"deleted {args.job_id}")
             return 0
         raise ClientError(f"unknown command {args.command}")
     finally:

@@ -244,6 +244,8 @@ class Store:
             values["finished_at"] = now
         if error is not None:
             values["error"] = error
+        if target == sm.QUEUED:  # a retry: a fresh run (its own start time and speed) over the same checkpoints
+            values.update(error=None, started_at=None, finished_at=None, samples_done=0)
         with self._write() as s, s.begin():
             res = s.execute(update(JobRow).where(JobRow.id == job_id,
                                                  JobRow.state.in_([x.value for x in sm.sources(target)]))
@@ -253,6 +255,8 @@ class Store:
                 if current is None:
                     raise JobNotFound(job_id)
                 raise sm.IllegalTransition(job_id, JobState(current), target)
+            if target == sm.QUEUED:  # failed attempts are forgotten, so that each tile has its retries again
+                s.execute(delete(TileRow).where(TileRow.job_id == job_id, TileRow.done.is_(False)))
         return self.get_job(job_id)
 
     def delete_job(self, job_id: str) -> JobRow:
@@ -297,6 +301,21 @@ class Store:
             for st, n in s.execute(select(JobRow.state, func.count()).group_by(JobRow.state)):
                 counts[JobState(st)] = n
         return counts
+
+    # -- change feed (server-sent events) -------------------------------------------------------------------------
+    def changed_since(self, since: float) -> list[tuple[str, float, str]]:
+        """(id, updated_at, state) of the jobs written at or after ``since`` (every write sets ``updated_at``)."""
+        with self._read() as s:
+            return [tuple(r) for r in s.execute(select(JobRow.id, JobRow.updated_at, JobRow.state)
+                                                .where(JobRow.updated_at >= since))]
+
+    def job_count(self) -> int:
+        with self._read() as s:
+            return s.scalar(select(func.count()).select_from(JobRow))
+
+    def job_ids(self) -> set[str]:
+        with self._read() as s:
+            return set(s.scalars(select(JobRow.id)))
 
     # -- tiles and frames (the scheduler's records) ---------------------------------------------------------------
     def tile_attempt(self, job_id: str, frame_idx: int, tile_idx: int, error: str | None = None) -> int:

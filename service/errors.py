@@ -19,6 +19,10 @@ def cannot_cancel(state: str) -> str:
     return f"cannot cancel a {state} job"
 
 
+def cannot_retry(state: str) -> str:
+    return f"cannot retry a {state} job; only failed or canceled jobs can be retried"
+
+
 def cannot_delete(state: str) -> str:
     return f"cannot delete a {state} job; cancel it first"
 

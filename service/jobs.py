@@ -2,6 +2,7 @@
 
     queued -> running -> succeeded | failed | canceled
     queued -> canceled | failed          (canceled before it ran; its scene vanished before it ran)
+    failed | canceled -> queued          (retry: the job resumes from its checkpointed tiles)
 
 The database applies a transition atomically (``UPDATE ... WHERE state IN sources(to)``), so two actors racing
 (the scheduler finishing a job while a user cancels it) cannot both win.
@@ -17,11 +18,11 @@ TRANSITIONS: dict[JobState, frozenset[JobState]] = {
     QUEUED: frozenset({RUNNING, CANCELED, FAILED}),
     RUNNING: frozenset({SUCCEEDED, FAILED, CANCELED}),
     SUCCEEDED: frozenset(),
-    FAILED: frozenset(),
-    CANCELED: frozenset(),
+    FAILED: frozenset({QUEUED}),
+    CANCELED: frozenset({QUEUED}),
 }
 
-TERMINAL = frozenset(s for s, targets in TRANSITIONS.items() if not targets)
+TERMINAL = frozenset({SUCCEEDED, FAILED, CANCELED})  # nothing runs; only a retry moves failed/canceled on
 ACTIVE = frozenset({QUEUED, RUNNING})
 
 

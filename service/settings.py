@@ -43,6 +43,8 @@ class ServiceSettings(BaseSettings):
     inspect_timeout: float = Field(120.0, gt=0, description="seconds to load a scene when a job is submitted")
     scene_cache_size: int = Field(2, ge=1, le=64, description="prepared scenes kept per worker process")
     poll_interval: float = Field(0.5, gt=0, description="scheduler wake-up interval, seconds")
+    dashboard_url: str | None = Field(
+        None, description="the Dask dashboard as browsers reach it (the monitor's farm page links to it)")
 
     @field_validator("data_dir")
     @classmethod
@@ -50,7 +52,7 @@ class ServiceSettings(BaseSettings):
         # Tasks carry paths into the data directory to worker processes, whose working directory may differ.
         return v.expanduser().absolute()
 
-    @field_validator("api_token", "scheduler_address", mode="before")
+    @field_validator("api_token", "scheduler_address", "dashboard_url", mode="before")
     @classmethod
     def _empty_is_unset(cls, v):
         # `DRT_API_TOKEN=` (as compose files write an unset variable) means no token, not the empty token.

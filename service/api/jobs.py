@@ -1,4 +1,4 @@
-"""``/v1/jobs``: submit, read, list, cancel, delete; frame EXRs and previews.
+"""``/v1/jobs``: submit, read, list, cancel, retry, delete; frame EXRs and previews.
 
 Status codes: 202 + ``Location`` on create (also when an Idempotency-Key replays it), 400 malformed multipart, 401
 no or a wrong token, 404 unknown job or frame, 409 illegal state change or frame not ready, 413 upload too large,
@@ -90,6 +90,23 @@ def cancel_job(runtime: RuntimeDep, job_id: str):
     except sm.IllegalTransition as e:
         raise ApiError(409, errors.cannot_cancel(e.current.value)) from None
     runtime.scheduler.wake()  # it drops the job and signals its running tiles to stop at their next sample wave
+    return job_public(row)
+
+
+@router.post("/{job_id}/retry", response_model=JobPublic, responses=answers(404, 409))
+def retry_job(runtime: RuntimeDep, job_id: str):
+    """Queue a failed or canceled job again: it resumes from its checkpointed tiles and finished frames."""
+    row = _job(runtime.store, job_id)
+    if not sm.can_move(row.job_state, sm.QUEUED):
+        raise ApiError(409, errors.cannot_retry(row.state))
+    # No stop signal to clear: each run of a job stops through its own Dask event (service.stopping).
+    try:
+        row = runtime.store.transition(job_id, sm.QUEUED)
+    except JobNotFound:
+        raise ApiError(404, errors.JOB_NOT_FOUND) from None
+    except sm.IllegalTransition as e:
+        raise ApiError(409, errors.cannot_retry(e.current.value)) from None
+    runtime.scheduler.wake()
     return job_public(row)
 
 

@@ -1,0 +1,32 @@
+"""What the job monitor reads besides jobs: ``GET /v1/jobs/{id}/tiles`` (a job's tile map) and ``GET /v1/farm``
+(Dask's workers and the tiles each holds)."""
+from __future__ import annotations
+
+from fastapi import APIRouter
+
+from schemas import ErrorBody, Farm, TileMap
+
+from .. import errors, farm
+from ..db import JobNotFound
+from ..errors import ApiError
+from .deps import Authorized, RuntimeDep
+
+router = APIRouter(tags=["monitor"], dependencies=[Authorized], responses={401: {"model": ErrorBody}})
+
+
+@router.get("/jobs/{job_id}/tiles", response_model=TileMap, responses={404: {"model": ErrorBody}})
+def job_tiles(runtime: RuntimeDep, job_id: str):
+    """Per frame: the tiles checkpointed so far and the tiles workers hold now (row-major tile indices)."""
+    try:
+        row = runtime.store.get_job(job_id)
+    except JobNotFound:
+        raise ApiError(404, errors.JOB_NOT_FOUND) from None
+    return farm.tile_map(row, runtime.store, runtime.engine)
+
+
+@router.get("/farm", response_model=Farm)
+def get_farm(runtime: RuntimeDep):
+    """The Dask workers (threads, memory, CPU) with the drt tasks each holds, and the Dask dashboard's link."""
+    sch = runtime.scheduler
+    return farm.farm(runtime.settings, runtime.engine, runtime.store, tiles_in_flight=sch.in_flight(),
+                     tiles_pending=sch.pending_tiles(), tiles_per_second=sch.tiles_per_second())

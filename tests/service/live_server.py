@@ -1,0 +1,53 @@
+"""A real uvicorn server on a loopback port, in a thread of the test process (the app, its Dask cluster of threads
+and its scheduler included), for tests that need real HTTP: event streams, a browser, the CLI in a subprocess."""
+from __future__ import annotations
+
+import socket
+import threading
+import time
+from pathlib import Path
+
+import httpx
+
+from service_helpers import service_settings
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class LiveServer:
+    def __init__(self, data_dir: Path, **overrides):
+        import uvicorn
+
+        from service.app import create_app
+
+        self.app = create_app(service_settings(data_dir, **overrides))
+        self.port = free_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        self.server = uvicorn.Server(uvicorn.Config(self.app, host="127.0.0.1", port=self.port, log_level="warning",
+                                                    timeout_graceful_shutdown=5))
+        self.thread = threading.Thread(target=self.server.run, name="live-server", daemon=True)
+        self.thread.start()
+        deadline = time.monotonic() + 120
+        while not self.server.started:
+            assert self.thread.is_alive(), "the server thread ended before it started"
+            assert time.monotonic() < deadline, "the server did not start"
+            time.sleep(0.05)
+        token = overrides.get("api_token")
+        self.http = httpx.Client(base_url=self.url, timeout=60,
+                                 headers={"Authorization": f"Bearer {token}"} if token else {})
+
+    @property
+    def runtime(self):
+        return self.app.state.runtime
+
+    def stop(self) -> None:
+        self.http.close()
+        feed = getattr(self.app.state, "feed", None)
+        if feed is not None:
+            feed.close_threadsafe()
+        self.server.should_exit = True
+        self.thread.join(timeout=60)
