@@ -5,6 +5,7 @@ group: triangles pass through, convex polygons are fanned, concave ones are ear-
 expressed first as *corners* (positions in ``faceVertexIndices``) so that every primvar interpolation expands the
 same way: constant -> broadcast, uniform -> per face, vertex/varying -> per point, faceVarying -> per corner.
 ``orientation = leftHanded`` swaps two corners so the result is counter-clockwise seen from the front.
+Faces named in ``holeIndices`` are not drawn; triangles keep their authored face numbers throughout.
 """
 from __future__ import annotations
 
@@ -245,6 +246,24 @@ def _collapse(times: np.ndarray, keys: np.ndarray):
 # UsdGeomMesh
 
 
+def hole_indices(mesh: UsdGeom.Mesh, frame: float, num_faces: int) -> np.ndarray:
+    """The mesh's ``holeIndices`` at the frame (authored face indices, in range), possibly empty."""
+    holes = mesh.GetHoleIndicesAttr().Get(frame)
+    if holes is None or len(holes) == 0:
+        return np.zeros(0, np.int64)
+    holes = np.asarray(holes, np.int64)
+    return holes[(holes >= 0) & (holes < num_faces)]
+
+
+def drop_holes(corners: np.ndarray, tri_faces: np.ndarray, holes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Remove the triangles of hole faces. ``tri_faces`` keeps authored face numbers, so per-face data
+    (uniform primvars, GeomSubset material bindings) still lines up with the triangles that remain."""
+    if len(holes) == 0:
+        return corners, tri_faces
+    keep = ~np.isin(tri_faces, holes)
+    return corners[keep], tri_faces[keep]
+
+
 def _primvar(prim, name: str, frame: float, warn):
     """(flattened values, interpolation) of primvars:name, or None if absent/empty."""
     pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar(name)
@@ -294,8 +313,9 @@ def read_mesh(prim, shutter: Shutter, warn) -> GeomData | None:
         warn("meshes with NaN/infinite points skipped", path)
         return None
     corners, tri_faces = triangulate(counts, fvi, base)
+    corners, tri_faces = drop_holes(corners, tri_faces, hole_indices(mesh, frame, len(counts)))
     if len(corners) == 0:
-        warn("meshes with zero triangles skipped", path)
+        warn("meshes with zero triangles (or only holes) skipped", path)
         return None
     if mesh.GetOrientationAttr().Get(frame) == UsdGeom.Tokens.leftHanded:
         corners = corners[:, [0, 2, 1]]
@@ -367,6 +387,7 @@ def read_named_uvs(prim, name: str, frame: float, warn) -> np.ndarray | None:
     if int(counts.sum()) != len(fvi) or fvi.min() < 0 or fvi.max() >= len(base):
         return None
     corners, tri_faces = triangulate(counts, fvi, base)
+    corners, tri_faces = drop_holes(corners, tri_faces, hole_indices(mesh, frame, len(counts)))
     if mesh.GetOrientationAttr().Get(frame) == UsdGeom.Tokens.leftHanded:
         corners = corners[:, [0, 2, 1]]
     uvs = expand_primvar(hit[0], hit[1], corners, tri_faces, fvi, len(counts), len(base))
