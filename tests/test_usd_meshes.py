@@ -3,6 +3,7 @@ subdivision surfaces as imported and rendered."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from pxr import Gf, Sdf, UsdGeom, UsdShade, Vt
 
 import stages
@@ -75,3 +76,87 @@ def test_a_hole_renders_as_a_hole(tmp_path):
     assert np.all(a[2:14, 18:30] == 0.0), "the hole's quarter is empty"
     for q in (a[2:14, 2:14], a[18:30, 2:14], a[18:30, 18:30]):
         assert np.all(q == 1.0)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# subdivision surfaces
+
+CUBE_P = [(x, y, z) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]  # index 4x + 2y + z
+CUBE_F = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]  # outward
+
+
+def cube_cage(stage, path, left_handed=False, creased=False):
+    m = UsdGeom.Mesh.Define(stage, path)
+    m.CreatePointsAttr(Vt.Vec3fArray([Gf.Vec3f(*p) for p in CUBE_P]))
+    m.CreateFaceVertexCountsAttr([4] * 6)
+    faces = [f[::-1] for f in CUBE_F] if left_handed else CUBE_F
+    m.CreateFaceVertexIndicesAttr(sum(faces, []))
+    if left_handed:
+        m.CreateOrientationAttr(UsdGeom.Tokens.leftHanded)
+    if creased:
+        edges = sorted({tuple(sorted((f[k], f[(k + 1) % 4]))) for f in CUBE_F for k in range(4)})
+        m.CreateCreaseIndicesAttr(Vt.IntArray([int(v) for e in edges for v in e]))
+        m.CreateCreaseLengthsAttr([2] * 12)
+        m.CreateCreaseSharpnessesAttr([10.0] * 12)
+    return m  # subdivisionScheme not authored: catmullClark, USD's default
+
+
+def mesh_volume(mesh):
+    t = mesh.points[0][mesh.triangles].astype(np.float64)
+    return np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6.0
+
+
+def test_subdivided_cube_cage_imports_as_its_limit_surface(tmp_path):
+    stage = stages.new_stage(tmp_path / "cc.usda")
+    cube_cage(stage, "/World/Smooth")
+    cube_cage(stage, "/World/Left", left_handed=True)
+    cube_cage(stage, "/World/Creased", creased=True)
+    stage.Save()
+    scene = load_scene(tmp_path / "cc.usda", 0.0, subdivision_level=4)
+    meshes = {m.name.rsplit("/", 1)[1]: m for m in scene.meshes}
+    assert mesh_volume(meshes["Smooth"]) == pytest.approx(8 * 0.32747, rel=5e-3)
+    assert mesh_volume(meshes["Left"]) == pytest.approx(8 * 0.32747, rel=5e-3), "leftHanded: still outward"
+    assert mesh_volume(meshes["Creased"]) == pytest.approx(8.0, abs=1e-5)
+    for m in meshes.values():
+        centre = m.points[0][m.triangles].mean(1)
+        assert np.all(np.einsum("tij,tj->ti", m.normals, centre) > 0), "normals point out of the solid"
+        assert len(m.triangles) == 6 * 2 * 4 ** 4 and np.all(m.material_ids == m.material_ids[0])
+    assert not any("subdivision" in w for w in scene.warnings)
+
+
+def test_refinement_level_follows_the_camera(tmp_path):
+    stage = stages.new_stage(tmp_path / "lvl.usda")
+    stages.camera(stage, translate=(0, 0, 0), h_ap_mm=36.0, focal_mm=50.0)
+    for name, z in (("Near", -6.0), ("Far", -600.0)):
+        xf = UsdGeom.Xform.Define(stage, f"/World/{name}")
+        xf.AddTranslateOp().Set(Gf.Vec3d(0, 0, z))
+        cube_cage(stage, f"/World/{name}/Cage")
+    stage.Save()
+    scene = load_scene(tmp_path / "lvl.usda", 0.0, image_width=640)
+    tris = {m.name.split("/")[2]: len(m.triangles) for m in scene.meshes}
+    # near: a 2-unit edge at 6 units spans ~300 px -> level 4 (capped); far: ~3 px -> level 1
+    assert tris["Near"] == 48 * 4 ** 3 and tris["Far"] == 48
+    scene = load_scene(tmp_path / "lvl.usda", 0.0, subdivision_level=0)
+    assert {len(m.triangles) for m in scene.meshes} == {12}, "level 0 is the cage"
+    with pytest.raises(Exception, match="subdivision level"):
+        load_scene(tmp_path / "lvl.usda", 0.0, subdivision_level=9)
+
+
+def test_subdivided_silhouette_is_the_limit_surface(tmp_path):
+    """Orthographic view along -z of the Catmull-Clark cube: covered pixels = the area of the limit surface's
+    outline (from an independent level-6 refinement), clearly less than the cage's 2 x 2 square."""
+    from scipy.spatial import ConvexHull
+
+    from renderer.subdiv import SubdivOptions, subdivide
+
+    stage = stages.new_stage(tmp_path / "sil.usda")
+    stages.camera(stage, ortho=True, h_ap_mm=30.0, v_ap_mm=30.0, translate=(0, 0, 5), tenths_per_mm=1.0)
+    emit = stages.material(stage, "E", emissive=(1, 1, 1))
+    UsdShade.MaterialBindingAPI.Apply(cube_cage(stage, "/World/Cage").GetPrim()).Bind(emit)
+    stage.Save()
+    rgba, scene = render(tmp_path / "sil.usda", width=96, height=96, spp=16, filter="box")
+    covered = rgba[..., 3].sum() * (3.0 / 96) ** 2
+    ref = subdivide([4] * 6, sum(CUBE_F, []), 8, SubdivOptions(), 6)
+    outline = ConvexHull(ref.points(np.array(CUBE_P, float))[:, :2]).volume
+    assert covered == pytest.approx(outline, rel=0.015)
+    assert outline < 0.8 * 4.0

@@ -14,7 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 from pxr import Usd, UsdGeom
 
+from renderer.usd import subdiv as usd_subdiv
 from renderer.usd.motion import Shutter
+from renderer.usd.subdiv import SubdivisionDetail
 
 SPHERE_SEGMENTS = 64  # around the axis
 SPHERE_RINGS = 32  # pole to pole
@@ -33,6 +35,7 @@ class GeomData:
     normals: np.ndarray | None = None  # (T, 3, 3) float32
     uvs: np.ndarray | None = None  # (T, 3, 2) float32
     double_sided: bool = False
+    subdivision_level: int | None = None  # refinement level of a subdivision surface; None: not subdivided
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -170,18 +173,6 @@ def expand_primvar(values, interpolation: str, corners: np.ndarray, tri_faces: n
     return None
 
 
-def _smooth_vertex_normals(points: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """Area-weighted vertex normals expanded per corner (T, 3, 3): a stand-in for subdivision limit normals."""
-    p = points.astype(np.float64)
-    fn = np.cross(p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]])
-    vn = np.zeros_like(p)
-    for k in range(3):
-        np.add.at(vn, tris[:, k], fn)
-    ln = np.linalg.norm(vn, axis=1, keepdims=True)
-    vn = np.where(ln > 0, vn / np.where(ln > 0, ln, 1.0), 0.0)
-    return vn[tris].astype(np.float32)
-
-
 # ---------------------------------------------------------------------------------------------------------------
 # Point keys (deformation, velocities)
 
@@ -278,22 +269,52 @@ def _primvar(prim, name: str, frame: float, warn):
     return vals, pv.GetInterpolation()
 
 
-def _uv_primvar(prim, frame: float, warn):
-    hit = _primvar(prim, "st", frame, warn)
-    if hit is not None:
-        return hit
-    for pv in UsdGeom.PrimvarsAPI(prim).GetPrimvarsWithAuthoredValues():  # any texture-coordinate primvar
+def _uv_primvar_object(prim, frame: float, warn):
+    """The texture-coordinate primvar of a mesh: ``st``, else the first float2 texCoord primvar; or None."""
+    api = UsdGeom.PrimvarsAPI(prim)
+    pv = api.GetPrimvar("st")
+    if pv and pv.HasAuthoredValue():
+        if pv.GetElementSize() != 1:
+            warn("primvars with elementSize != 1 ignored (st)", str(prim.GetPath()))
+            return None
+        return pv
+    for pv in api.GetPrimvarsWithAuthoredValues():  # any texture-coordinate primvar
         if pv.GetElementSize() != 1:
             continue
         if str(pv.GetTypeName().role) == "TextureCoordinate" or pv.GetPrimvarName() in ("uv", "UVMap", "st0"):
-            vals = pv.ComputeFlattened(frame)
-            if vals is not None and len(vals) and np.asarray(vals).ndim == 2 and np.asarray(vals).shape[1] == 2:
-                return vals, pv.GetInterpolation()
+            v = pv.Get(frame)
+            if v is not None and len(v) and np.asarray(v).ndim == 2 and np.asarray(v).shape[1] == 2:
+                return pv
     return None
 
 
-def read_mesh(prim, shutter: Shutter, warn) -> GeomData | None:
-    """Triangulate a UsdGeomMesh at the frame (topology) with point keys over the shutter."""
+def _uv_primvar(prim, frame: float, warn):
+    pv = _uv_primvar_object(prim, frame, warn)
+    if pv is None:
+        return None
+    vals = pv.ComputeFlattened(frame)
+    if vals is None or len(vals) == 0:
+        return None
+    return vals, pv.GetInterpolation()
+
+
+def _uv_primvar_raw(prim, frame: float, warn):
+    """(values, indices or None, interpolation) of the texture coordinates, for refinement; or None."""
+    pv = _uv_primvar_object(prim, frame, warn)
+    if pv is None:
+        return None
+    vals = pv.Get(frame)
+    if vals is None or len(vals) == 0:
+        return None
+    idx = pv.GetIndices(frame) if pv.IsIndexed() else None
+    return np.asarray(vals), (None if idx is None else np.asarray(idx, np.int64)), pv.GetInterpolation()
+
+
+def read_mesh(prim, shutter: Shutter, warn, detail: SubdivisionDetail | None = None,
+              world: np.ndarray | None = None) -> GeomData | None:
+    """Triangulate a UsdGeomMesh at the frame (topology) with point keys over the shutter; subdivision surfaces
+    (any ``subdivisionScheme`` but ``none``) are refined to ``detail``'s level (``world``: the prim's row-vector
+    object-to-world matrix at the frame, for a level from the camera)."""
     mesh = UsdGeom.Mesh(prim)
     path = str(prim.GetPath())
     frame = shutter.frame
@@ -312,19 +333,27 @@ def read_mesh(prim, shutter: Shutter, warn) -> GeomData | None:
     if not np.all(np.isfinite(base)):
         warn("meshes with NaN/infinite points skipped", path)
         return None
-    corners, tri_faces = triangulate(counts, fvi, base)
-    corners, tri_faces = drop_holes(corners, tri_faces, hole_indices(mesh, frame, len(counts)))
-    if len(corners) == 0:
-        warn("meshes with zero triangles (or only holes) skipped", path)
-        return None
-    if mesh.GetOrientationAttr().Get(frame) == UsdGeom.Tokens.leftHanded:
-        corners = corners[:, [0, 2, 1]]
     keys = point_keys(mesh, shutter, len(base), warn)
     if keys is None:
         keys = (np.array([frame]), base[None])
     if not np.all(np.isfinite(keys[1])):
         warn("meshes with NaN/infinite points skipped", path)
         return None
+    holes = hole_indices(mesh, frame, len(counts))
+    left_handed = mesh.GetOrientationAttr().Get(frame) == UsdGeom.Tokens.leftHanded
+    scheme = str(mesh.GetSubdivisionSchemeAttr().Get(frame) or "catmullClark")
+    if scheme not in usd_subdiv.SUBDIV_SCHEMES and scheme != UsdGeom.Tokens.none:
+        warn(f"unknown subdivisionScheme rendered as catmullClark ({scheme})", path)
+        scheme = "catmullClark"
+    if scheme != UsdGeom.Tokens.none:
+        return _subdivided(mesh, frame, scheme, counts, fvi, keys, holes, left_handed, detail, world, warn)
+    corners, tri_faces = triangulate(counts, fvi, base)
+    corners, tri_faces = drop_holes(corners, tri_faces, holes)
+    if len(corners) == 0:
+        warn("meshes with zero triangles (or only holes) skipped", path)
+        return None
+    if left_handed:
+        corners = corners[:, [0, 2, 1]]
     nf, npnt = len(counts), len(base)
     tris = fvi[corners]
 
@@ -340,11 +369,6 @@ def read_mesh(prim, shutter: Shutter, warn) -> GeomData | None:
         if normals is None or normals.shape[-1] != 3:
             warn("normals with a size that does not match their interpolation ignored", path)
             normals = None
-    scheme = mesh.GetSubdivisionSchemeAttr().Get(frame)
-    if scheme is not None and scheme != UsdGeom.Tokens.none:
-        warn("subdivision surfaces rendered as their control cage (smooth vertex normals)", path)
-        if normals is None:
-            normals = _smooth_vertex_normals(base, tris)
 
     uvs = None
     hit = _uv_primvar(prim, frame, warn)
@@ -366,9 +390,35 @@ def read_mesh(prim, shutter: Shutter, warn) -> GeomData | None:
     )
 
 
-def read_named_uvs(prim, name: str, frame: float, warn) -> np.ndarray | None:
+def _subdivided(mesh, frame, scheme, counts, fvi, keys, holes, left_handed, detail, world, warn):
+    path = str(mesh.GetPath())
+    uv = _uv_primvar_raw(mesh.GetPrim(), frame, warn)
+    ref = usd_subdiv.refine(mesh, frame, scheme, counts, fvi, keys[1], holes, uv, detail, world, warn)
+    if ref is None:
+        warn("meshes with zero triangles (or only holes) skipped", path)
+        return None
+    tris, normals, uvs = ref.triangles, ref.normals, ref.uvs
+    if left_handed:  # the front is the clockwise side: flip the winding, and the normals with it
+        tris, normals = tris[:, [0, 2, 1]], -normals[:, [0, 2, 1]]
+        uvs = None if uvs is None else uvs[:, [0, 2, 1]]
+    return GeomData(
+        point_times=keys[0],
+        points=np.ascontiguousarray(ref.points, np.float32),
+        triangles=np.ascontiguousarray(tris, np.int32),
+        tri_faces=ref.tri_faces,
+        num_faces=len(counts),
+        normals=np.ascontiguousarray(normals, np.float32),
+        uvs=None if uvs is None else np.ascontiguousarray(uvs, np.float32),
+        double_sided=bool(mesh.GetDoubleSidedAttr().Get(frame)),
+        subdivision_level=ref.level,
+    )
+
+
+def read_named_uvs(prim, name: str, frame: float, warn, level: int | None = None) -> np.ndarray | None:
     """Per-corner values (T, 3, 2) float32 of the float2 primvar ``name`` of a Mesh, on the triangles ``read_mesh``
-    makes (same triangulation and winding); None if the prim is not a Mesh or the primvar is absent or mis-sized.
+    makes (same triangulation, holes and winding; for a subdivision surface pass ``level``, the
+    ``GeomData.subdivision_level`` it was refined to); None if the prim is not a Mesh or the primvar is absent or
+    mis-sized.
 
     For materials whose UsdPrimvarReader_float2 names a primvar other than the one ``read_mesh`` picks (``st``,
     else the first texCoord2f primvar).
@@ -386,9 +436,22 @@ def read_named_uvs(prim, name: str, frame: float, warn) -> np.ndarray | None:
     base = np.asarray(pts, np.float32).reshape(-1, 3)
     if int(counts.sum()) != len(fvi) or fvi.min() < 0 or fvi.max() >= len(base):
         return None
+    holes = hole_indices(mesh, frame, len(counts))
+    left_handed = mesh.GetOrientationAttr().Get(frame) == UsdGeom.Tokens.leftHanded
+    scheme = str(mesh.GetSubdivisionSchemeAttr().Get(frame) or "catmullClark")
+    if scheme != UsdGeom.Tokens.none:
+        scheme = scheme if scheme in usd_subdiv.SUBDIV_SCHEMES else "catmullClark"
+        pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar(name)
+        idx = pv.GetIndices(frame) if pv.IsIndexed() else None
+        uv = (np.asarray(pv.Get(frame)), None if idx is None else np.asarray(idx, np.int64), pv.GetInterpolation())
+        detail = SubdivisionDetail(level=usd_subdiv.DEFAULT_LEVEL if level is None else level)
+        ref = usd_subdiv.refine(mesh, frame, scheme, counts, fvi, base[None], holes, uv, detail, None, warn)
+        if ref is None or ref.uvs is None or ref.uvs.shape[-1] != 2:
+            return None
+        return np.ascontiguousarray(ref.uvs[:, [0, 2, 1]] if left_handed else ref.uvs, np.float32)
     corners, tri_faces = triangulate(counts, fvi, base)
-    corners, tri_faces = drop_holes(corners, tri_faces, hole_indices(mesh, frame, len(counts)))
-    if mesh.GetOrientationAttr().Get(frame) == UsdGeom.Tokens.leftHanded:
+    corners, tri_faces = drop_holes(corners, tri_faces, holes)
+    if left_handed:
         corners = corners[:, [0, 2, 1]]
     uvs = expand_primvar(hit[0], hit[1], corners, tri_faces, fvi, len(counts), len(base))
     if uvs is None or uvs.shape[-1] != 2:
@@ -588,10 +651,11 @@ def read_primitive(prim, shutter: Shutter, warn) -> GeomData | None:
     )
 
 
-def read_geometry(prim, shutter: Shutter, warn) -> GeomData | None:
-    """GeomData for a Mesh or implicit primitive, else None."""
+def read_geometry(prim, shutter: Shutter, warn, detail: SubdivisionDetail | None = None,
+                  world: np.ndarray | None = None) -> GeomData | None:
+    """GeomData for a Mesh or implicit primitive, else None (``detail``, ``world``: see ``read_mesh``)."""
     if prim.IsA(UsdGeom.Mesh):
-        return read_mesh(prim, shutter, warn)
+        return read_mesh(prim, shutter, warn, detail, world)
     if prim.GetTypeName() in PRIMITIVE_TYPES:
         return read_primitive(prim, shutter, warn)
     return None

@@ -23,14 +23,16 @@ import os
 import re
 
 import numpy as np
-from pxr import Tf, Usd, UsdGeom, UsdRender, UsdShade
+from pxr import Gf, Tf, Usd, UsdGeom, UsdRender, UsdShade
 
 from renderer.errors import SceneError, SettingsError
 from renderer.scene import model as sc
 from renderer.usd import camera as usd_camera
 from renderer.usd import lights as usd_lights
 from renderer.usd.geometry import PRIMITIVE_TYPES, primitive_signature, read_geometry
+from renderer.subdiv import MAX_LEVEL
 from renderer.usd.materials import MaterialTable
+from renderer.usd.subdiv import SubdivisionDetail
 from renderer.usd.motion import Shutter, TransformSampler, motion_transforms, refine_keys
 
 _PI_ATTRS = ("positions", "orientations", "orientationsf", "scales", "velocities", "angularVelocities",
@@ -63,11 +65,14 @@ class WarningLog:
 
 
 def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_path: str | None = None,
-               shutter: tuple[float, float] | None = None, motion_blur: bool = True) -> sc.Scene:
+               shutter: tuple[float, float] | None = None, motion_blur: bool = True,
+               subdivision_level: int | None = None, image_width: int | None = None) -> sc.Scene:
     """Load one frame of a USD stage as a ``Scene``.
 
     ``frame`` defaults to the stage's startTimeCode (0 if no range is authored). The shutter is ``frame +``
-    the camera's (shutter:open, shutter:close), or ``frame + shutter`` when given. Raises SceneError (one-line
+    the camera's (shutter:open, shutter:close), or ``frame + shutter`` when given. Subdivision surfaces are
+    refined to ``subdivision_level`` (0..6), or by default to a level chosen from the camera for an image
+    ``image_width`` pixels wide (default: the render settings' width, else 640). Raises SceneError (one-line
     message) for a missing or malformed file or a bad camera path.
     """
     path = os.fspath(path)
@@ -78,9 +83,12 @@ def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_pa
             raise SettingsError(f"shutter must be (open, close) with open <= close, got {tuple(shutter)}")
     if frame is not None and not np.isfinite(frame):
         raise SettingsError(f"frame must be finite, got {frame}")
+    if subdivision_level is not None and not 0 <= subdivision_level <= MAX_LEVEL:
+        raise SettingsError(f"subdivision level must be between 0 and {MAX_LEVEL}, got {subdivision_level}")
     stage = _open_stage(path)
     try:
-        return _Importer(stage, path, frame, camera_path, shutter, motion_blur).run()
+        return _Importer(stage, path, frame, camera_path, shutter, motion_blur, subdivision_level,
+                         image_width).run()
     except Tf.ErrorException as e:
         raise SceneError(f"cannot read {os.path.basename(path)}: {_pxr_message(e)}") from None
 
@@ -128,7 +136,8 @@ def _open_stage(path: str) -> Usd.Stage:
 
 
 class _Importer:
-    def __init__(self, stage, source, frame, camera_path, shutter_override, motion_blur):
+    def __init__(self, stage, source, frame, camera_path, shutter_override, motion_blur, subdivision_level=None,
+                 image_width=None):
         self.stage = stage
         self.source = source
         self.warn = WarningLog()
@@ -138,6 +147,8 @@ class _Importer:
         self.camera_path = camera_path
         self.shutter_override = shutter_override
         self.motion_blur = motion_blur
+        self.subdivision_level = subdivision_level
+        self.image_width = image_width
         self.meshes: list[sc.Mesh] = []
         self.instances: list[sc.Instance] = []
         self.lights: list[sc.Light] = []
@@ -161,6 +172,7 @@ class _Importer:
         self.shutter = self._shutter(cam_prim, settings)
         self.xf = TransformSampler(self.shutter)
         self.materials = MaterialTable(self.frame, warn, self.shutter)
+        self.detail = self._subdivision_detail(cam_prim, settings)
 
         self._traverse()
         if not self._saw_render:
@@ -201,6 +213,21 @@ class _Importer:
             warnings=warn.lines(),
             source=self.source,
         )
+
+    def _subdivision_detail(self, cam_prim, settings: sc.RenderSettingsInfo) -> SubdivisionDetail:
+        """How finely subdivision surfaces are refined: the fixed level asked for, else from the camera."""
+        if self.subdivision_level is not None or cam_prim is None:
+            return SubdivisionDetail(level=self.subdivision_level)
+        cam = UsdGeom.Camera(cam_prim).GetCamera(self.frame)
+        width = self.image_width or (settings.resolution[0] if settings.resolution else 640)
+        aperture = float(cam.horizontalAperture)  # tenths of a scene unit, like the focal length
+        if not aperture > 0:
+            return SubdivisionDetail()
+        if cam.projection == Gf.Camera.Orthographic:
+            return SubdivisionDetail(pixels_per_unit=width / (aperture / 10.0))
+        eye = self.xf.world(cam_prim, [self.frame])[0][3, :3]
+        return SubdivisionDetail(camera_position=tuple(float(x) for x in eye),
+                                 pixels_per_radian=width * float(cam.focalLength) / aperture)
 
     def _up_axis(self) -> str:
         return "Z" if str(UsdGeom.GetStageUpAxis(self.stage)) == "Z" else "Y"
@@ -337,7 +364,8 @@ class _Importer:
         key = (shape, self.materials.key_of(prim))
         if key in self._mesh_cache:
             return self._mesh_cache[key]
-        geom = read_geometry(prim, self.shutter, self.warn)
+        world = self.xf.world(prim, [self.frame])[0] if prim.IsA(UsdGeom.Mesh) else None
+        geom = read_geometry(prim, self.shutter, self.warn, self.detail, world)
         index = None
         if geom is not None:
             index = len(self.meshes)

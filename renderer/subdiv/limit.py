@@ -1,0 +1,119 @@
+"""Limit surface: limit-position masks (points pushed onto the surface a refinement converges to), shading
+normals per smooth sector, and triangles of the final level.
+
+Limit masks (OpenSubdiv Sdc): Catmull-Clark on quads, smooth vertex of valence n: n/(n+5) v + 4/(n(n+5)) per
+edge neighbour + 1/(n(n+5)) per diagonal neighbour (1/36, 1/9, 4/9 when regular: the bicubic B-spline at a knot);
+Loop, valence n: (1 - n chi) v + chi per neighbour with chi = 1/(3/(8 beta) + n); crease vertices (both schemes):
+2/3 v + 1/6 per crease neighbour; corners stay put. Remaining semi-sharpness counts as sharp.
+
+Normals are those of the limit-point mesh averaged over each vertex's *smooth sector* (the faces around it
+between sharp edges), so creases, corners and boundaries keep a hard shading edge while smooth regions are smooth.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from renderer.subdiv.rules import CATMARK, CORNER, CREASE, LOOP, SMOOTH, Level, vertex_rules
+from renderer.subdiv.stencil import Stencil
+from renderer.subdiv.topology import Topology
+
+
+def limit_stencil(lv: Level, scheme: str) -> Stencil | None:
+    """Stencil from the level's vertices to their limit positions; None for the linear schemes."""
+    if scheme not in (CATMARK, LOOP):
+        return None
+    topo = lv.topo
+    nv = topo.num_vertices
+    verts = np.arange(nv)
+    rule = vertex_rules(topo, lv.vertex_sharpness, lv.edge_sharpness)
+    iv, other, ie = topo.incidences()
+    rows, cols, ws = [verts[rule == CORNER]], [verts[rule == CORNER]], [np.ones(int(np.sum(rule == CORNER)))]
+    # crease
+    cr = rule == CREASE
+    rows.append(verts[cr]), cols.append(verts[cr]), ws.append(np.full(int(cr.sum()), 2.0 / 3.0))
+    sel = cr[iv] & (lv.edge_sharpness[ie] > 0)
+    rows.append(iv[sel]), cols.append(other[sel]), ws.append(np.full(int(sel.sum()), 1.0 / 6.0))
+    # smooth
+    sm = rule == SMOOTH
+    n = topo.vertex_faces.astype(np.float64)
+    if scheme == CATMARK:
+        # valence-2 interior vertices have no smooth limit mask of their own: they stay (OpenSubdiv does the same)
+        stay = sm & (n <= 2)
+        rows.append(verts[stay]), cols.append(verts[stay]), ws.append(np.ones(int(stay.sum())))
+        sm = sm & (n > 2)
+        f = 1.0 / np.maximum(n * (n + 5.0), 1.0)
+        rows.append(verts[sm]), cols.append(verts[sm]), ws.append((n / (n + 5.0))[sm])
+        sel = sm[iv]
+        rows.append(iv[sel]), cols.append(other[sel]), ws.append(4.0 * f[iv[sel]])
+        cv = topo.indices
+        sel = sm[cv]
+        diag = topo.indices[topo.corner_next[topo.corner_next]]  # quads: the corner across the face
+        rows.append(cv[sel]), cols.append(diag[sel]), ws.append(f[cv[sel]])
+    else:
+        ne = np.maximum(topo.vertex_edges, 1).astype(np.float64)
+        beta = (0.625 - (0.375 + 0.25 * np.cos(2 * np.pi / ne)) ** 2) / ne
+        chi = 1.0 / (3.0 / (8.0 * beta) + ne)
+        rows.append(verts[sm]), cols.append(verts[sm]), ws.append((1.0 - ne * chi)[sm])
+        sel = sm[iv]
+        rows.append(iv[sel]), cols.append(other[sel]), ws.append(chi[iv[sel]])
+    return Stencil(np.concatenate(rows), np.concatenate(cols), np.concatenate(ws), nv, nv)
+
+
+def corner_sectors(topo: Topology, sharp_edge: np.ndarray) -> np.ndarray:
+    """Label per corner: corners at one vertex joined across non-sharp manifold edges share a label."""
+    nc = len(topo.indices)
+    c = np.arange(nc)
+    # each corner touches its outgoing edge and the edge coming in; across a manifold edge the corner of the
+    # other face at the same vertex has the same (vertex, edge) key
+    key = np.concatenate([topo.indices * topo.num_edges + topo.corner_edge,
+                          topo.indices * topo.num_edges + topo.corner_edge[topo.corner_prev]])
+    owner = np.concatenate([c, c])
+    edge = np.concatenate([topo.corner_edge, topo.corner_edge[topo.corner_prev]])
+    ok = ~sharp_edge[edge] & (topo.edge_faces[edge] == 2)
+    key, owner = key[ok], owner[ok]
+    order = np.argsort(key, kind="stable")
+    key, owner = key[order], owner[order]
+    pair = np.flatnonzero(key[1:] == key[:-1])
+    a, b = owner[pair], owner[pair + 1]
+    label = c.copy()
+    for _ in range(int(topo.vertex_faces.max(initial=0)) + 1):  # propagate the smallest label around
+        m = np.minimum(label[a], label[b])
+        new = label.copy()
+        np.minimum.at(new, a, m)
+        np.minimum.at(new, b, m)
+        if np.array_equal(new, label):
+            break
+        label = new
+    return label
+
+
+def face_triangles(topo: Topology) -> tuple[np.ndarray, np.ndarray]:
+    """(corners (T, 3) of a fan of every face, face of each triangle). The final levels are quads or triangles."""
+    out_c, out_f = [], []
+    for n in np.unique(topo.counts):
+        faces = np.flatnonzero(topo.counts == n)
+        start = topo.face_start[faces]
+        for k in range(1, int(n) - 1):
+            out_c.append(np.stack([start, start + k, start + k + 1], axis=1))
+            out_f.append(faces)
+    corners = np.concatenate(out_c)
+    faces = np.concatenate(out_f)
+    order = np.argsort(faces, kind="stable")
+    return corners[order], faces[order]
+
+
+def sector_normals(topo: Topology, sectors: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(C, 3) unit normal per corner: area-weighted face normals summed over the corner's sector."""
+    p = points[topo.indices]  # (C, 3)
+    q = points[topo.indices[topo.corner_next]]
+    # Newell: the face's area vector is half the sum over its corners of p x q
+    fn = np.zeros((topo.num_faces, 3))
+    np.add.at(fn, topo.corner_face, np.cross(p, q))
+    acc = np.zeros((len(topo.indices), 3))
+    np.add.at(acc, sectors, fn[topo.corner_face])
+    n = acc[sectors]
+    ln = np.linalg.norm(n, axis=1, keepdims=True)
+    fallback = fn[topo.corner_face]
+    lf = np.linalg.norm(fallback, axis=1, keepdims=True)
+    n = np.where(ln > 0, n / np.where(ln > 0, ln, 1.0), fallback / np.where(lf > 0, lf, 1.0))
+    return n
