@@ -102,15 +102,18 @@ def face_triangles(topo: Topology) -> tuple[np.ndarray, np.ndarray]:
     return corners[order], faces[order]
 
 
+def _scatter_add(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """out[i] = sum of values[k] with index[k] == i, for (K, 3) values (bincount per column: no sorting)."""
+    return np.stack([np.bincount(index, values[:, k], minlength=n) for k in range(values.shape[1])], axis=1)
+
+
 def sector_normals(topo: Topology, sectors: np.ndarray, points: np.ndarray) -> np.ndarray:
     """(C, 3) unit normal per corner: area-weighted face normals summed over the corner's sector."""
     p = points[topo.indices]  # (C, 3)
     q = points[topo.indices[topo.corner_next]]
     # Newell: the face's area vector is half the sum over its corners of p x q
-    fn = np.zeros((topo.num_faces, 3))
-    np.add.at(fn, topo.corner_face, np.cross(p, q))
-    acc = np.zeros((len(topo.indices), 3))
-    np.add.at(acc, sectors, fn[topo.corner_face])
+    fn = _scatter_add(topo.corner_face, np.cross(p, q), topo.num_faces)
+    acc = _scatter_add(sectors, fn[topo.corner_face], len(topo.indices))
     n = acc[sectors]
     ln = np.linalg.norm(n, axis=1, keepdims=True)
     fallback = fn[topo.corner_face]

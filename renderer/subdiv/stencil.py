@@ -9,24 +9,20 @@ import numpy as np
 
 
 class Stencil:
+    """Kept as plain triples (duplicates allowed): applying is a weighted histogram per channel, O(nnz), with
+    no sorting at build time."""
+
     def __init__(self, rows: np.ndarray, cols: np.ndarray, weights: np.ndarray, num_rows: int, num_cols: int):
         rows = np.asarray(rows, np.int64)
-        cols = np.asarray(cols, np.int64)
         weights = np.asarray(weights, np.float64)
         keep = weights != 0.0
-        rows, cols, weights = rows[keep], cols[keep], weights[keep]
-        # merge duplicate (row, col) pairs and sort by row: compact, and rows become contiguous runs
-        key = rows * max(num_cols, 1) + cols
-        uniq, inv = np.unique(key, return_inverse=True)
-        self.weights = np.bincount(inv.reshape(-1), weights, minlength=len(uniq))
-        self.rows = uniq // max(num_cols, 1)
-        self.cols = uniq % max(num_cols, 1)
+        self.rows = rows[keep]
+        self.cols = np.asarray(cols, np.int64)[keep]
+        self.weights = weights[keep]
         self.num_rows = int(num_rows)
         self.num_cols = int(num_cols)
-        if len(self.rows) and (np.unique(self.rows).size != self.num_rows):
+        if np.count_nonzero(np.bincount(self.rows, minlength=self.num_rows)) != self.num_rows:
             raise ValueError("subdivision stencil leaves child values undefined")
-        self._starts = np.flatnonzero(np.r_[True, self.rows[1:] != self.rows[:-1]]) if len(self.rows) else \
-            np.zeros(0, np.int64)
 
     @property
     def nnz(self) -> int:
@@ -37,10 +33,11 @@ class Stencil:
         v = np.asarray(values, np.float64)
         if len(v) != self.num_cols:
             raise ValueError(f"stencil expects {self.num_cols} values, got {len(v)}")
-        if self.num_rows == 0:
-            return np.zeros((0,) + v.shape[1:])
-        terms = v[self.cols] * self.weights.reshape((-1,) + (1,) * (v.ndim - 1))
-        return np.add.reduceat(terms, self._starts, axis=0)
+        flat = v.reshape(len(v), -1)
+        out = np.empty((self.num_rows, flat.shape[1]))
+        for k in range(flat.shape[1]):
+            out[:, k] = np.bincount(self.rows, self.weights * flat[self.cols, k], minlength=self.num_rows)
+        return out.reshape((self.num_rows,) + v.shape[1:])
 
     def row_sums(self) -> np.ndarray:
         return np.bincount(self.rows, self.weights, minlength=self.num_rows)
