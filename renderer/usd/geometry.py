@@ -207,7 +207,7 @@ def point_keys(pb: UsdGeom.PointBased, shutter: Shutter, count: int, warn) -> tu
             arrays = pb.ComputePointsAtTimes([Usd.TimeCode(float(t)) for t in times], Usd.TimeCode(frame))
             if arrays and all(len(a) == len(base) for a in arrays):
                 keys = np.stack([np.asarray(a, np.float32).reshape(-1, 3) for a in arrays])
-                return _collapse(times, keys)
+                return collapse_keys(times, keys)
             warn("velocities could not be applied (point counts differ); those prims are not deformation-blurred",
                  path)
     if not attr.ValueMightBeTimeVarying():
@@ -224,10 +224,10 @@ def point_keys(pb: UsdGeom.PointBased, shutter: Shutter, count: int, warn) -> tu
     if len(kept) < len(times):
         warn("point count changes within the shutter; deformation blur dropped for", path)
         return single
-    return _collapse(np.array(kept), np.stack(keys))
+    return collapse_keys(np.array(kept), np.stack(keys))
 
 
-def _collapse(times: np.ndarray, keys: np.ndarray):
+def collapse_keys(times: np.ndarray, keys: np.ndarray):
     if len(keys) > 1 and all(np.array_equal(keys[0], k) for k in keys[1:]):
         return times[:1], keys[:1]
     return times, keys
@@ -311,10 +311,11 @@ def _uv_primvar_raw(prim, frame: float, warn):
 
 
 def read_mesh(prim, shutter: Shutter, warn, detail: SubdivisionDetail | None = None,
-              world: np.ndarray | None = None) -> GeomData | None:
+              world: np.ndarray | None = None, keys: tuple[np.ndarray, np.ndarray] | None = None) -> GeomData | None:
     """Triangulate a UsdGeomMesh at the frame (topology) with point keys over the shutter; subdivision surfaces
     (any ``subdivisionScheme`` but ``none``) are refined to ``detail``'s level (``world``: the prim's row-vector
-    object-to-world matrix at the frame, for a level from the camera)."""
+    object-to-world matrix at the frame, for a level from the camera). ``keys`` (times, (P, V, 3) points)
+    replaces the authored points, for skinned meshes; their authored normals are then ignored."""
     mesh = UsdGeom.Mesh(prim)
     path = str(prim.GetPath())
     frame = shutter.frame
@@ -333,7 +334,12 @@ def read_mesh(prim, shutter: Shutter, warn, detail: SubdivisionDetail | None = N
     if not np.all(np.isfinite(base)):
         warn("meshes with NaN/infinite points skipped", path)
         return None
-    keys = point_keys(mesh, shutter, len(base), warn)
+    deformed = keys is not None
+    if keys is not None and (keys[1].ndim != 3 or keys[1].shape[1] != len(base)):
+        warn("deformed point keys whose size differs from the mesh ignored", path)
+        keys = None
+    if keys is None:
+        keys = point_keys(mesh, shutter, len(base), warn)
     if keys is None:
         keys = (np.array([frame]), base[None])
     if not np.all(np.isfinite(keys[1])):
@@ -364,6 +370,9 @@ def read_mesh(prim, shutter: Shutter, warn, detail: SubdivisionDetail | None = N
         n_val = n_attr.Get(frame) if n_attr.HasAuthoredValue() else None
         if n_val is not None and len(n_val):
             hit = (n_val, mesh.GetNormalsInterpolation())
+    if hit is not None and deformed:
+        warn("authored normals of skinned meshes ignored (shaded with the skinned surface's normals)", path)
+        hit = None
     if hit is not None:
         normals = expand_primvar(hit[0], hit[1], corners, tri_faces, fvi, nf, npnt)
         if normals is None or normals.shape[-1] != 3:
@@ -637,7 +646,7 @@ def read_primitive(prim, shutter: Shutter, warn) -> GeomData | None:
     if len(tris) == 0:
         warn("primitives of zero size skipped", str(prim.GetPath()))
         return None
-    times, pts = _collapse(np.asarray(times), np.stack(keys).astype(np.float32))
+    times, pts = collapse_keys(np.asarray(times), np.stack(keys).astype(np.float32))
     ds = _get(prim, "doubleSided", frame, kind == "Plane")
     return GeomData(
         point_times=times,
@@ -652,10 +661,10 @@ def read_primitive(prim, shutter: Shutter, warn) -> GeomData | None:
 
 
 def read_geometry(prim, shutter: Shutter, warn, detail: SubdivisionDetail | None = None,
-                  world: np.ndarray | None = None) -> GeomData | None:
-    """GeomData for a Mesh or implicit primitive, else None (``detail``, ``world``: see ``read_mesh``)."""
+                  world: np.ndarray | None = None, keys=None) -> GeomData | None:
+    """GeomData for a Mesh or implicit primitive, else None (``detail``, ``world``, ``keys``: see ``read_mesh``)."""
     if prim.IsA(UsdGeom.Mesh):
-        return read_mesh(prim, shutter, warn, detail, world)
+        return read_mesh(prim, shutter, warn, detail, world, keys)
     if prim.GetTypeName() in PRIMITIVE_TYPES:
         return read_primitive(prim, shutter, warn)
     return None

@@ -29,9 +29,10 @@ from renderer.errors import SceneError, SettingsError
 from renderer.scene import model as sc
 from renderer.usd import camera as usd_camera
 from renderer.usd import lights as usd_lights
-from renderer.usd.geometry import PRIMITIVE_TYPES, primitive_signature, read_geometry
+from renderer.usd.geometry import PRIMITIVE_TYPES, collapse_keys, primitive_signature, read_geometry
 from renderer.subdiv import MAX_LEVEL
 from renderer.usd.materials import MaterialTable
+from renderer.usd.skel import Skinning
 from renderer.usd.subdiv import SubdivisionDetail
 from renderer.usd.motion import Shutter, TransformSampler, motion_transforms, refine_keys
 
@@ -173,6 +174,7 @@ class _Importer:
         self.xf = TransformSampler(self.shutter)
         self.materials = MaterialTable(self.frame, warn, self.shutter)
         self.detail = self._subdivision_detail(cam_prim, settings)
+        self.skinning = Skinning(self.shutter, warn)
 
         self._traverse()
         if not self._saw_render:
@@ -315,11 +317,40 @@ class _Importer:
         if prim.IsA(UsdGeom.PointInstancer):
             self._point_instancer(prim, interval)
             return
+        skin = self.skinning.binding(prim)
+        if skin is not None and self._skinned(prim, skin, interval):
+            return
         mesh = self._mesh_index(prim)
         if mesh is None:
             return
         times, rows = self.xf.motion(prim)
         self._add_instances([mesh], [str(prim.GetPath())], times, rows[None], interval)
+
+    def _skinned(self, prim, skin, interval) -> bool:
+        """A skinned gprim: skinned points (meshes) or a skinned transform (implicit primitives) at every key,
+        placed by its Skeleton. False if UsdSkel cannot skin it (then it is drawn as authored, with a warning)."""
+        path = str(prim.GetPath())
+        times = self.skinning.key_times(prim, skin)
+        if prim.IsA(UsdGeom.Mesh):
+            keys = self.skinning.skinned_points(prim, skin, times)
+            if keys is None:
+                self.warn("skinned meshes UsdSkel cannot skin drawn unskinned", path)
+                return False
+            mesh = self._mesh_index(prim, keys=collapse_keys(times, keys), world=self.xf.world(skin.skeleton,
+                                                                                          [self.frame])[0])
+            if mesh is not None:
+                xf_times, rows = self.xf.motion(skin.skeleton)
+                self._add_instances([mesh], [path], xf_times, rows[None], interval)
+            return True
+        rel = self.skinning.skinned_transforms(skin, times)
+        if rel is None:
+            self.warn("rigidly skinned prims UsdSkel cannot skin drawn unskinned", path)
+            return False
+        mesh = self._mesh_index(prim)
+        if mesh is not None:
+            rows = rel @ self.xf.world(skin.skeleton, times)
+            self._add_instances([mesh], [path], times, rows[None], interval)
+        return True
 
     # -- visibility -----------------------------------------------------------------------------------------------
     def _visibility_chain(self, prim) -> tuple[bool, tuple[float, ...]]:
@@ -358,14 +389,19 @@ class _Importer:
         return float(s[0]), float(s[1])
 
     # -- meshes and instances -------------------------------------------------------------------------------------
-    def _mesh_index(self, prim) -> int | None:
+    def _mesh_index(self, prim, keys=None, world=None) -> int | None:
+        """The mesh of a gprim (shared by equal prims); ``keys``: deformed (skinned) point keys of this prim,
+        ``world``: the matrix that places it (default its own), for the subdivision level."""
         src = prim.GetPrimInPrototype() if prim.IsInstanceProxy() else prim
         shape = primitive_signature(prim, self.frame) or str(src.GetPath())  # equal spheres share one mesh
+        if keys is not None:
+            shape = ("skinned", str(prim.GetPath()))  # instances of a skinned mesh deform on their own
         key = (shape, self.materials.key_of(prim))
         if key in self._mesh_cache:
             return self._mesh_cache[key]
-        world = self.xf.world(prim, [self.frame])[0] if prim.IsA(UsdGeom.Mesh) else None
-        geom = read_geometry(prim, self.shutter, self.warn, self.detail, world)
+        if world is None and prim.IsA(UsdGeom.Mesh):
+            world = self.xf.world(prim, [self.frame])[0]
+        geom = read_geometry(prim, self.shutter, self.warn, self.detail, world, keys)
         index = None
         if geom is not None:
             index = len(self.meshes)
