@@ -160,3 +160,31 @@ def test_subdivided_silhouette_is_the_limit_surface(tmp_path):
     outline = ConvexHull(ref.points(np.array(CUBE_P, float))[:, :2]).volume
     assert covered == pytest.approx(outline, rel=0.015)
     assert outline < 0.8 * 4.0
+
+
+def test_subdivided_texture_coordinates_and_named_uv_sets(tmp_path):
+    """st (faceVarying, linear 'all') on a flat subdivided grid is the bilinear map of the cage: every refined
+    corner keeps uv = xy of the cage; a second set read by name for materials lines up with the same
+    triangles; varying uvs refine linearly too."""
+    from renderer.usd.geometry import read_named_uvs
+    from renderer.usd.importer import WarningLog
+
+    stage = stages.new_stage(tmp_path / "uv.usda")
+    m = grid_mesh(stage, "/World/Grid", n=2, size=2.0, scheme=UsdGeom.Tokens.catmullClark)
+    m.CreateFaceVaryingLinearInterpolationAttr("all")
+    xy = [(x, y) for y in (-1.0, 0.0, 1.0) for x in (-1.0, 0.0, 1.0)]
+    idx = list(m.GetFaceVertexIndicesAttr().Get())
+    api = UsdGeom.PrimvarsAPI(m)
+    st = api.CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying)
+    st.Set(Vt.Vec2fArray([Gf.Vec2f(*xy[i]) for i in idx]))
+    uv2 = api.CreatePrimvar("uv2", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.varying)
+    uv2.Set(Vt.Vec2fArray([Gf.Vec2f(*p) for p in xy]))
+    stage.Save()
+    scene = load_scene(tmp_path / "uv.usda", 0.0, subdivision_level=2)
+    mesh = scene.meshes[0]
+    assert mesh.uvs.shape == (len(mesh.triangles), 3, 2)
+    # the smooth surface pulls the boundary in, but the bilinear uvs sit on the dyadic grid of the cage
+    assert set(np.round(mesh.uvs.reshape(-1), 6)) <= {round(k / 4 - 1, 6) for k in range(9)}
+    prim = stage.GetPrimAtPath("/World/Grid")
+    named = read_named_uvs(prim, "uv2", 0.0, WarningLog(), level=2)
+    np.testing.assert_allclose(named, mesh.uvs, atol=1e-6)

@@ -175,6 +175,20 @@ class Refinement:
             v = v[:, None]
         return self.points(v)[self.triangles]
 
+    def varying_values(self, values: np.ndarray, base_indices: np.ndarray) -> np.ndarray:
+        """Refine per-cage-vertex data linearly (varying interpolation): (T, 3, C). ``base_indices``: the
+        face-vertex indices the refinement was built from."""
+        v = np.asarray(values, np.float64)
+        if v.ndim == 1:
+            v = v[:, None]
+        lv, _ = _base_level(self.base_counts, base_indices, len(v), SubdivOptions(),
+                            np.arange(len(self.base_counts)))
+        scheme = _linear_of(_kind(self.scheme))
+        for _ in range(self.levels):
+            lv, st = refine(lv, scheme)
+            v = st.apply(v)
+        return v[lv.topo.indices[self.tri_corners]]
+
 
 def subdivide(counts: np.ndarray, indices: np.ndarray, num_vertices: int, opts: SubdivOptions, levels: int,
               base_face: np.ndarray | None = None) -> Refinement:

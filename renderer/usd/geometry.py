@@ -402,7 +402,8 @@ def read_mesh(prim, shutter: Shutter, warn, detail: SubdivisionDetail | None = N
 def _subdivided(mesh, frame, scheme, counts, fvi, keys, holes, left_handed, detail, world, warn):
     path = str(mesh.GetPath())
     uv = _uv_primvar_raw(mesh.GetPrim(), frame, warn)
-    ref = usd_subdiv.refine(mesh, frame, scheme, counts, fvi, keys[1], holes, uv, detail, world, warn)
+    frame_key = int(np.argmin(np.abs(np.asarray(keys[0], np.float64) - frame)))
+    ref = usd_subdiv.refine(mesh, frame, scheme, counts, fvi, keys[1], holes, uv, detail, world, warn, frame_key)
     if ref is None:
         warn("meshes with zero triangles (or only holes) skipped", path)
         return None

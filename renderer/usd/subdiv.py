@@ -5,8 +5,10 @@ coordinates that ``geometry.read_mesh`` returns.
 Level: with a camera, the smallest level whose edges project to at most ``EDGE_PIXELS`` (95th percentile of the
 cage's edges, each at its own distance from the camera), between 1 and ``MAX_AUTO_LEVEL``; without one
 ``DEFAULT_LEVEL``; a fixed level when asked. Any level is lowered until the mesh stays under ``MAX_TRIANGLES``.
-Authored normals are ignored on subdivision surfaces (the schema: the surface defines its own); ``varying``
-primvars are refined like ``vertex`` ones.
+Authored normals are ignored on subdivision surfaces (the schema: the surface defines its own); shading normals
+come from the key nearest the frame. ``vertex`` texture coordinates are refined with the surface's own rules,
+``varying`` ones linearly, ``faceVarying`` ones by ``faceVaryingLinearInterpolation`` (creases are not applied
+to face-varying data).
 """
 from __future__ import annotations
 
@@ -112,11 +114,12 @@ def _face_varying_ids(values: np.ndarray, indices: np.ndarray | None, vertex_of_
 
 
 def refine(mesh: UsdGeom.Mesh, frame: float, scheme: str, counts: np.ndarray, fvi: np.ndarray, keys: np.ndarray,
-           holes: np.ndarray, uv, detail: SubdivisionDetail | None, world: np.ndarray | None, warn) -> Refined | None:
+           holes: np.ndarray, uv, detail: SubdivisionDetail | None, world: np.ndarray | None, warn,
+           frame_key: int = 0) -> Refined | None:
     """Refine a subdivision-surface mesh whose topology was checked by the caller (faces of < 3 vertices are
     left out). ``keys``: (P, V, 3) cage points per motion key. ``uv``: (values, indices or None,
     interpolation) of its texture coordinates, or None. ``world``: row-vector object-to-world matrix at the
-    frame, for the level; None: no camera-based level."""
+    frame, for the level; None: no camera-based level. ``frame_key``: the key the shading normals come from."""
     path = str(mesh.GetPath())
     opts = options(mesh, frame, scheme)
     counts = np.asarray(counts, np.int64)
@@ -137,7 +140,7 @@ def refine(mesh: UsdGeom.Mesh, frame: float, scheme: str, counts: np.ndarray, fv
     if len(sub_counts) == 0:
         return None
     edges = topology.build(sub_counts, sub_idx, len(keys[0])).edge_vertices
-    cage = keys[0].astype(np.float64)
+    cage = keys[frame_key].astype(np.float64)
     world_pts = cage if world is None else cage @ world[:3, :3] + world[3, :3]
     detail = detail or SubdivisionDetail()
     if world is None and detail.level is None:
@@ -148,7 +151,7 @@ def refine(mesh: UsdGeom.Mesh, frame: float, scheme: str, counts: np.ndarray, fv
     if not np.any(keep):
         return None
     pts = np.stack([ref.points(k) for k in keys])
-    normals = ref.normals(pts[0])[keep]
+    normals = ref.normals(pts[frame_key])[keep]
     uvs = None
     if uv is not None:
         uvs = _refine_uv(ref, uv, opts.fvar_linear, corner_map, fvi, nf, len(cage), warn, path)
@@ -195,6 +198,8 @@ def _refine_uv(ref, uv, fvar_mode: str, corner_map, fvi, num_faces: int, num_poi
         if len(values) < num_points:
             warn("texture coordinates with a size that does not match their interpolation ignored", path)
             return None
+        if interp == UsdGeom.Tokens.varying:
+            return ref.varying_values(values[:num_points], fvi[corner_map])
         return ref.vertex_values(values[:num_points])
     if interp == UsdGeom.Tokens.uniform:
         if len(values) < num_faces:
