@@ -128,20 +128,35 @@ class Refinement:
     def num_points(self) -> int:
         return self.final.topo.num_vertices
 
-    def points(self, base_points: np.ndarray) -> np.ndarray:
-        """Limit positions (V, 3) float64 of the final level's vertices for one key of the cage points."""
+    def control_points(self, base_points: np.ndarray) -> np.ndarray:
+        """The final level's control points (V, 3) float64 (before the limit projection)."""
         x = np.asarray(base_points, np.float64)
         for s in self.stencils:
             x = s.apply(x)
+        return x
+
+    def points(self, base_points: np.ndarray) -> np.ndarray:
+        """Limit positions (V, 3) float64 of the final level's vertices for one key of the cage points."""
+        x = self.control_points(base_points)
         return self.limit.apply(x) if self.limit is not None else x
 
-    def normals(self, limit_points: np.ndarray) -> np.ndarray:
-        """Per-triangle-corner unit normals (T, 3, 3) from the limit points, hard across sharp edges."""
+    def normals(self, limit_points: np.ndarray, control_points: np.ndarray | None = None) -> np.ndarray:
+        """Per-triangle-corner unit normals (T, 3, 3): exact limit normals at smooth interior vertices (from the
+        final level's ``control_points``, when given), elsewhere the limit points' face normals averaged over each
+        smooth sector, so sharp edges, corners and boundaries keep a hard shading edge."""
         sharp = self.final.edge_sharpness > 0
         if self.limit is None:  # bilinear: every edge is a facet edge
             sharp = np.ones_like(sharp)
-        sectors = _limit.corner_sectors(self.final.topo, sharp)
-        n = _limit.sector_normals(self.final.topo, sectors, np.asarray(limit_points, np.float64))
+        topo = self.final.topo
+        sectors = _limit.corner_sectors(topo, sharp)
+        n = _limit.sector_normals(topo, sectors, np.asarray(limit_points, np.float64))
+        if control_points is not None and self.limit is not None:
+            exact, valid = _limit.smooth_limit_normals(self.final, _kind(self.scheme),
+                                                       np.asarray(control_points, np.float64))
+            use = valid[topo.indices]
+            # keep the orientation of the faces (an inconsistently wound cage has no outside)
+            flip = np.einsum("ij,ij->i", exact[topo.indices], n) < 0
+            n = np.where(use[:, None], np.where(flip[:, None], -1.0, 1.0) * exact[topo.indices], n)
         return n[self.tri_corners]
 
     def face_varying(self, values: np.ndarray, fv_indices: np.ndarray, mode: str) -> np.ndarray:

@@ -6,8 +6,10 @@ edge neighbour + 1/(n(n+5)) per diagonal neighbour (1/36, 1/9, 4/9 when regular:
 Loop, valence n: (1 - n chi) v + chi per neighbour with chi = 1/(3/(8 beta) + n); crease vertices (both schemes):
 2/3 v + 1/6 per crease neighbour; corners stay put. Remaining semi-sharpness counts as sharp.
 
-Normals are those of the limit-point mesh averaged over each vertex's *smooth sector* (the faces around it
-between sharp edges), so creases, corners and boundaries keep a hard shading edge while smooth regions are smooth.
+Normals: at smooth interior vertices the exact limit normal, the cross product of the two limit tangents
+(masks of Halstead et al. 1993 for Catmull-Clark, Loop's cosine/sine masks); at crease, corner and boundary
+vertices the limit-point mesh's face normals averaged over each *smooth sector* (the faces around the vertex
+between sharp edges), so creases keep a hard shading edge.
 """
 from __future__ import annotations
 
@@ -120,3 +122,69 @@ def sector_normals(topo: Topology, sectors: np.ndarray, points: np.ndarray) -> n
     lf = np.linalg.norm(fallback, axis=1, keepdims=True)
     n = np.where(ln > 0, n / np.where(ln > 0, ln, 1.0), fallback / np.where(lf > 0, lf, 1.0))
     return n
+
+
+def _ring_positions(topo: Topology) -> tuple[np.ndarray, np.ndarray]:
+    """(position of every corner in the counter-clockwise ring of faces around its vertex, closed-ring flag
+    per vertex). Around vertex v the next corner after c is the one whose outgoing edge is c's incoming edge."""
+    nc = len(topo.indices)
+    v = topo.indices
+    out_key = v * topo.num_vertices + topo.indices[topo.corner_next]
+    in_key = v * topo.num_vertices + topo.indices[topo.corner_prev]
+    order = np.argsort(out_key, kind="stable")
+    pos = np.searchsorted(out_key[order], in_key)
+    pos = np.minimum(pos, nc - 1)
+    found = out_key[order][pos] == in_key
+    succ = np.where(found, order[pos], -1)
+    closed = np.ones(topo.num_vertices, bool)
+    closed[v[~found]] = False
+    # duplicate (v, w) keys mean a non-manifold or inconsistently wound ring: no closed ring there
+    dup = np.flatnonzero(out_key[order][1:] == out_key[order][:-1])
+    closed[v[order[dup]]] = False
+    start = np.full(topo.num_vertices, nc, np.int64)
+    np.minimum.at(start, v, np.arange(nc))
+    ring = np.full(nc, -1, np.int64)
+    cur = start[closed]
+    cur = cur[cur < nc]
+    for i in range(int(topo.vertex_faces.max(initial=0))):
+        ring[cur] = i
+        cur = succ[cur]
+        cur = cur[(cur >= 0) & (ring[np.maximum(cur, 0)] < 0)]
+        if len(cur) == 0:
+            break
+    closed &= np.bincount(v, ring >= 0, minlength=topo.num_vertices) == topo.vertex_faces
+    return ring, closed
+
+
+def smooth_limit_normals(lv: Level, scheme: str, control: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(unit limit normals (V, 3), valid (V,)) at smooth interior vertices from the limit tangent masks
+    (Catmull-Clark on quads: t = sum A_n cos(2 pi i/n) e_i + (cos(2 pi i/n) + cos(2 pi (i+1)/n)) f_i, with
+    A_n = 1 + cos(2 pi/n) + cos(pi/n) sqrt(2 (9 + cos(2 pi/n))); Loop: t = sum cos(2 pi i/n) e_i), the second
+    tangent with sines; normal = t1 x t2. Elsewhere ``valid`` is False."""
+    topo = lv.topo
+    rule = vertex_rules(topo, lv.vertex_sharpness, lv.edge_sharpness)
+    ring, closed = _ring_positions(topo)
+    n = topo.vertex_faces.astype(np.float64)
+    valid = closed & (rule == SMOOTH) & (topo.vertex_faces >= 3) & (topo.vertex_faces == topo.vertex_edges)
+    v = topo.indices
+    use = valid[v] & (ring >= 0)
+    c = np.flatnonzero(use)
+    vv = v[c]
+    nn = n[vv]
+    th = 2 * np.pi * ring[c] / nn
+    th1 = 2 * np.pi * (ring[c] + 1) / nn
+    e = control[topo.indices[topo.corner_next[c]]]
+    if scheme == CATMARK:
+        a = 1 + np.cos(2 * np.pi / nn) + np.cos(np.pi / nn) * np.sqrt(2 * (9 + np.cos(2 * np.pi / nn)))
+        f = control[topo.indices[topo.corner_next[topo.corner_next[c]]]]
+        t1 = (a * np.cos(th))[:, None] * e + (np.cos(th) + np.cos(th1))[:, None] * f
+        t2 = (a * np.sin(th))[:, None] * e + (np.sin(th) + np.sin(th1))[:, None] * f
+    else:
+        t1 = np.cos(th)[:, None] * e
+        t2 = np.sin(th)[:, None] * e
+    T1 = _scatter_add(vv, t1, topo.num_vertices)
+    T2 = _scatter_add(vv, t2, topo.num_vertices)
+    nrm = np.cross(T1, T2)
+    ln = np.linalg.norm(nrm, axis=1)
+    valid &= ln > 1e-300
+    return nrm / np.where(ln > 0, ln, 1.0)[:, None], valid

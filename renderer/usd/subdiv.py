@@ -151,7 +151,7 @@ def refine(mesh: UsdGeom.Mesh, frame: float, scheme: str, counts: np.ndarray, fv
     if not np.any(keep):
         return None
     pts = np.stack([ref.points(k) for k in keys])
-    normals = ref.normals(pts[frame_key])[keep]
+    normals = ref.normals(pts[frame_key], ref.control_points(keys[frame_key]))[keep]
     uvs = None
     if uv is not None:
         uvs = _refine_uv(ref, uv, opts.fvar_linear, corner_map, fvi, nf, len(cage), warn, path)
