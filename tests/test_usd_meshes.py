@@ -188,3 +188,15 @@ def test_subdivided_texture_coordinates_and_named_uv_sets(tmp_path):
     prim = stage.GetPrimAtPath("/World/Grid")
     named = read_named_uvs(prim, "uv2", 0.0, WarningLog(), level=2)
     np.testing.assert_allclose(named, mesh.uvs, atol=1e-6)
+
+
+def test_inconsistent_creases_are_ignored_with_a_warning(tmp_path):
+    stage = stages.new_stage(tmp_path / "bad.usda")
+    m = cube_cage(stage, "/World/Cage")
+    m.CreateCreaseIndicesAttr(Vt.IntArray([0, 1, 3]))
+    m.CreateCreaseLengthsAttr(Vt.IntArray([2]))
+    m.CreateCreaseSharpnessesAttr(Vt.FloatArray([10.0]))
+    stage.Save()
+    scene = load_scene(tmp_path / "bad.usda", 0.0, subdivision_level=3)
+    assert mesh_volume(scene.meshes[0]) == pytest.approx(2.5770, rel=1e-3), "level 3, smooth: creases ignored"
+    assert any("creases" in w and "/World/Cage" in w for w in scene.warnings)

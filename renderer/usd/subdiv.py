@@ -92,6 +92,18 @@ def options(mesh: UsdGeom.Mesh, frame: float, scheme: str) -> SubdivOptions:
     )
 
 
+def crease_problem(opts: SubdivOptions) -> str | None:
+    """What is inconsistent in the crease and corner attributes (renderer.subdiv then ignores them), or None."""
+    lengths, idx, sharp = opts.crease_lengths, opts.crease_indices, opts.crease_sharpnesses
+    if len(lengths) or len(idx) or len(sharp):
+        if np.any(lengths < 2) or int(lengths.sum()) != len(idx) or \
+                len(sharp) not in (len(lengths), int(np.sum(lengths - 1))):
+            return "creases whose creaseLengths, creaseIndices and creaseSharpnesses do not agree"
+    if len(opts.corner_indices) != len(opts.corner_sharpnesses):
+        return "corners whose cornerIndices and cornerSharpnesses differ in length"
+    return None
+
+
 @dataclass
 class Refined:
     points: np.ndarray  # (P, V, 3) float32 limit points per key
@@ -122,6 +134,9 @@ def refine(mesh: UsdGeom.Mesh, frame: float, scheme: str, counts: np.ndarray, fv
     frame, for the level; None: no camera-based level. ``frame_key``: the key the shading normals come from."""
     path = str(mesh.GetPath())
     opts = options(mesh, frame, scheme)
+    problem = crease_problem(opts)
+    if problem:
+        warn(f"subdivision {problem}: ignored", path)
     counts = np.asarray(counts, np.int64)
     fvi = np.asarray(fvi, np.int64)
     nf = len(counts)
@@ -157,11 +172,23 @@ def refine(mesh: UsdGeom.Mesh, frame: float, scheme: str, counts: np.ndarray, fv
         uvs = _refine_uv(ref, uv, opts.fvar_linear, corner_map, fvi, nf, len(cage), warn, path)
         uvs = None if uvs is None else uvs[keep]
     tris = ref.triangles[keep]
+    normals = _fill_degenerate_normals(normals, pts[frame_key][tris])
     if not np.all(np.isfinite(pts)):
         warn("subdivision produced non-finite points; mesh skipped", path)
         return None
     return Refined(pts.astype(np.float32), tris.astype(np.int32), ref.tri_faces[keep],
                    normals.astype(np.float32), None if uvs is None else uvs.astype(np.float32), level)
+
+
+def _fill_degenerate_normals(normals: np.ndarray, tri_xyz: np.ndarray) -> np.ndarray:
+    """Zero-length normals (collapsed cage faces) replaced by the triangle's own normal, else +z: never NaN."""
+    ln = np.linalg.norm(normals, axis=2)
+    if np.all(ln > 1e-12):
+        return normals
+    g = np.cross(tri_xyz[:, 1] - tri_xyz[:, 0], tri_xyz[:, 2] - tri_xyz[:, 0])
+    lg = np.linalg.norm(g, axis=1, keepdims=True)
+    g = np.where(lg > 1e-30, g / np.where(lg > 1e-30, lg, 1.0), np.array([0.0, 0.0, 1.0]))
+    return np.where((ln > 1e-12)[..., None], normals, g[:, None, :])
 
 
 def _fan(counts: np.ndarray) -> np.ndarray:
