@@ -200,3 +200,19 @@ def test_inconsistent_creases_are_ignored_with_a_warning(tmp_path):
     scene = load_scene(tmp_path / "bad.usda", 0.0, subdivision_level=3)
     assert mesh_volume(scene.meshes[0]) == pytest.approx(2.5770, rel=1e-3), "level 3, smooth: creases ignored"
     assert any("creases" in w and "/World/Cage" in w for w in scene.warnings)
+
+
+def test_level_choice_from_projected_edges_and_the_triangle_cap():
+    from renderer.usd.subdiv import SubdivisionDetail
+
+    counts = np.full(6, 4)
+    edges = np.array([[0, 1]])
+    pts = np.array([[0.0, 0.0, -10.0], [1.0, 0.0, -10.0]])
+    near = SubdivisionDetail(camera_position=(0, 0, 0), pixels_per_radian=640.0)  # the edge spans 64 px
+    assert near.edge_length_px(pts, edges) == pytest.approx(640.0 / np.hypot(10.0, 0.5))  # from its midpoint
+    assert near.choose(counts, "catmullClark", pts, edges) == 4  # 64 / 2^4 = 4 px
+    assert SubdivisionDetail(camera_position=(0, 0, 0), pixels_per_radian=64.0).choose(
+        counts, "catmullClark", pts, edges) == 1  # 6.4 px: one level (never the cage)
+    assert SubdivisionDetail(pixels_per_unit=32.0).choose(counts, "catmullClark", pts, edges) == 3
+    capped = SubdivisionDetail(level=6, max_triangles=1000)
+    assert capped.choose(counts, "catmullClark", pts, edges) == 3  # 768 triangles; level 4 would make 3072

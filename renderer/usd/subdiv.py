@@ -64,7 +64,10 @@ class SubdivisionDetail:
             else:
                 level = math.ceil(math.log2(max(px, 1e-9) / self.edge_pixels))
                 level = min(max(level, 1), MAX_AUTO_LEVEL)
-        level = min(max(level, 0), MAX_LEVEL)
+        return self.capped(counts, scheme, min(max(level, 0), MAX_LEVEL))
+
+    def capped(self, counts: np.ndarray, scheme: str, level: int) -> int:
+        """The highest level up to ``level`` that keeps the mesh under ``max_triangles``."""
         while level > 0 and triangle_count(counts, scheme, level) > self.max_triangles:
             level -= 1
         return level
@@ -161,6 +164,8 @@ def refine(mesh: UsdGeom.Mesh, frame: float, scheme: str, counts: np.ndarray, fv
     if world is None and detail.level is None:
         detail = SubdivisionDetail(level=DEFAULT_LEVEL, max_triangles=detail.max_triangles)
     level = detail.choose(sub_counts, scheme, world_pts, edges)
+    if detail.level is not None and level < detail.level:
+        warn(f"subdivision level lowered to {level} to stay under {detail.max_triangles:,} triangles", path)
     ref = subdivide(sub_counts, sub_idx, len(cage), opts, level, base_face)
     keep = ~np.isin(ref.tri_faces, holes) if len(holes) else np.ones(len(ref.tri_faces), bool)
     if not np.any(keep):
