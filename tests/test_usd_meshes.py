@@ -216,3 +216,24 @@ def test_level_choice_from_projected_edges_and_the_triangle_cap():
     assert SubdivisionDetail(pixels_per_unit=32.0).choose(counts, "catmullClark", pts, edges) == 3
     capped = SubdivisionDetail(level=6, max_triangles=1000)
     assert capped.choose(counts, "catmullClark", pts, edges) == 3  # 768 triangles; level 4 would make 3072
+
+
+def test_geom_subsets_follow_refinement_and_holes(tmp_path):
+    stage = stages.new_stage(tmp_path / "subsets.usda")
+    red = stages.material(stage, "Red", diffuse=(0.8, 0.1, 0.1))
+    blue = stages.material(stage, "Blue", diffuse=(0.1, 0.1, 0.8))
+    m = grid_mesh(stage, "/World/Grid", n=2, scheme=UsdGeom.Tokens.catmullClark)
+    m.CreateHoleIndicesAttr([0])
+    binding = UsdShade.MaterialBindingAPI.Apply(m.GetPrim())
+    binding.Bind(red)
+    sub = binding.CreateMaterialBindSubset("blue", Vt.IntArray([3]))
+    UsdShade.MaterialBindingAPI.Apply(sub.GetPrim()).Bind(blue)
+    stage.Save()
+    scene = load_scene(tmp_path / "subsets.usda", 0.0, subdivision_level=2)
+    mesh = scene.meshes[0]
+    names = np.array([scene.materials[i].name for i in mesh.material_ids])
+    assert len(mesh.triangles) == 3 * 4 * 2 * 4, "3 faces of 4 remain, each 16 quads"
+    centre = mesh.points[0][mesh.triangles].mean(1)
+    is_blue = names == "/World/Looks/Blue"
+    assert is_blue.sum() == 32 and np.all(centre[is_blue, 0] > 0) and np.all(centre[is_blue, 1] > 0)
+    assert not np.any((centre[:, 0] < 0) & (centre[:, 1] < 0)), "face 0 (x < 0, y < 0) is a hole"
