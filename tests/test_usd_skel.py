@@ -25,9 +25,9 @@ def bar_points(n=4, length=2.0, half=0.1):
     return pts, [4] * n, idx
 
 
-def skel_stage(path, *, angles={0.0: 0.0, 1.0: 90.0}, blend=False, root_offset=(0.0, 0.0, 0.0)):
+def skel_stage(path, *, angles={0.0: 0.0, 1.0: 90.0}, blend=False, root_offset=(0.0, 0.0, 0.0), axis=(0, 0, 1)):
     """A SkelRoot with a two-joint skeleton (root at the origin, 'root/tip' 1 unit along x), an animation that
-    turns the tip joint about z through ``angles`` {time: degrees}, and a bar mesh skinned to both joints
+    turns the tip joint about ``axis`` through ``angles`` {time: degrees}, and a bar mesh skinned to both joints
     (weights blending along x); with ``blend``, a blend shape lifting the bar's end, its weight animated 0 -> 1."""
     stage = stages.new_stage(path)
     root = UsdSkel.Root.Define(stage, "/World/Char")
@@ -43,7 +43,7 @@ def skel_stage(path, *, angles={0.0: 0.0, 1.0: 90.0}, blend=False, root_offset=(
     anim.CreateScalesAttr(Vt.Vec3hArray([Gf.Vec3h(1, 1, 1), Gf.Vec3h(1, 1, 1)]))
     rot = anim.CreateRotationsAttr()
     for t, deg in angles.items():
-        q = Gf.Rotation(Gf.Vec3d(0, 0, 1), deg).GetQuat()
+        q = Gf.Rotation(Gf.Vec3d(*axis), deg).GetQuat()
         rot.Set(Vt.QuatfArray([Gf.Quatf(1, 0, 0, 0), Gf.Quatf(q)]), t)
     binding = UsdSkel.BindingAPI.Apply(root.GetPrim())
     binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
@@ -126,6 +126,28 @@ def test_static_frame_and_no_blur_give_one_key(tmp_path):
     inst = [i for i in scene.instances if i.name.endswith("Bar")][0]
     m = matrix_at(inst.transform, 0.0)
     np.testing.assert_allclose(bar.points[0] @ m[:3, :3].T + m[:3, 3], baked, atol=1e-5)
+
+
+def test_authored_normals_follow_the_skinning(tmp_path):
+    """The tip joint turns the bar's end by 90 degrees about x: authored normals (+z) are carried with it and
+    agree with the skinned faces' geometric normals where the bar is rigid, and stay +z at the root."""
+    path = tmp_path / "normals.usda"
+    stage = skel_stage(path, angles={0.0: 0.0, 1.0: 90.0}, axis=(1, 0, 0))
+    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/World/Char/Bar"))
+    mesh.CreateNormalsAttr(Vt.Vec3fArray([Gf.Vec3f(0, 0, 1)] * 10))
+    mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+    stage.Save()
+    scene = load_scene(path, 1.0, motion_blur=False)
+    bar = [m for m in scene.meshes if m.name.endswith("Bar")][0]
+    p = bar.points[0][bar.triangles].astype(np.float64)
+    geo = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    geo /= np.linalg.norm(geo, axis=1, keepdims=True)
+    x = p.mean(1)[:, 0]
+    tip, root = x > 1.5, x < 0.5  # weights 1 on the tip joint / the root joint
+    np.testing.assert_allclose(bar.normals[tip], np.repeat(geo[tip][:, None], 3, axis=1), atol=1e-5)
+    np.testing.assert_allclose(bar.normals[tip][0, 0], (0, -1, 0), atol=1e-5)
+    np.testing.assert_allclose(bar.normals[root], np.tile((0, 0, 1), (root.sum(), 3, 1)), atol=1e-6)
+    assert np.allclose(np.linalg.norm(bar.normals, axis=2), 1.0, atol=1e-5)
 
 
 def test_rigidly_skinned_primitive_follows_its_joint(tmp_path):

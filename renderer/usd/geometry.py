@@ -315,7 +315,7 @@ def read_mesh(prim, shutter: Shutter, warn, detail: SubdivisionDetail | None = N
     """Triangulate a UsdGeomMesh at the frame (topology) with point keys over the shutter; subdivision surfaces
     (any ``subdivisionScheme`` but ``none``) are refined to ``detail``'s level (``world``: the prim's row-vector
     object-to-world matrix at the frame, for a level from the camera). ``keys`` (times, (P, V, 3) points)
-    replaces the authored points, for skinned meshes; their authored normals are then ignored."""
+    replaces the authored points, for skinned meshes (whose authored normals the caller then carries along)."""
     mesh = UsdGeom.Mesh(prim)
     path = str(prim.GetPath())
     frame = shutter.frame
@@ -334,7 +334,6 @@ def read_mesh(prim, shutter: Shutter, warn, detail: SubdivisionDetail | None = N
     if not np.all(np.isfinite(base)):
         warn("meshes with NaN/infinite points skipped", path)
         return None
-    deformed = keys is not None
     if keys is not None and (keys[1].ndim != 3 or keys[1].shape[1] != len(base)):
         warn("deformed point keys whose size differs from the mesh ignored", path)
         keys = None
@@ -370,9 +369,6 @@ def read_mesh(prim, shutter: Shutter, warn, detail: SubdivisionDetail | None = N
         n_val = n_attr.Get(frame) if n_attr.HasAuthoredValue() else None
         if n_val is not None and len(n_val):
             hit = (n_val, mesh.GetNormalsInterpolation())
-    if hit is not None and deformed:
-        warn("authored normals of skinned meshes ignored (shaded with the skinned surface's normals)", path)
-        hit = None
     if hit is not None:
         normals = expand_primvar(hit[0], hit[1], corners, tri_faces, fvi, nf, npnt)
         if normals is None or normals.shape[-1] != 3:

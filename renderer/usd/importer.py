@@ -337,7 +337,8 @@ class _Importer:
                 self.warn("skinned meshes UsdSkel cannot skin drawn unskinned", path)
                 return False
             mesh = self._mesh_index(prim, keys=collapse_keys(times, keys), world=self.xf.world(skin.skeleton,
-                                                                                          [self.frame])[0])
+                                                                                          [self.frame])[0],
+                                    skin=skin)
             if mesh is not None:
                 xf_times, rows = self.xf.motion(skin.skeleton)
                 self._add_instances([mesh], [path], xf_times, rows[None], interval)
@@ -389,9 +390,10 @@ class _Importer:
         return float(s[0]), float(s[1])
 
     # -- meshes and instances -------------------------------------------------------------------------------------
-    def _mesh_index(self, prim, keys=None, world=None) -> int | None:
+    def _mesh_index(self, prim, keys=None, world=None, skin=None) -> int | None:
         """The mesh of a gprim (shared by equal prims); ``keys``: deformed (skinned) point keys of this prim,
-        ``world``: the matrix that places it (default its own), for the subdivision level."""
+        ``world``: the matrix that places it (default its own), for the subdivision level; ``skin``: its
+        skinning, which carries authored normals along (subdivision surfaces make their own)."""
         src = prim.GetPrimInPrototype() if prim.IsInstanceProxy() else prim
         shape = primitive_signature(prim, self.frame) or str(src.GetPath())  # equal spheres share one mesh
         if keys is not None:
@@ -402,6 +404,8 @@ class _Importer:
         if world is None and prim.IsA(UsdGeom.Mesh):
             world = self.xf.world(prim, [self.frame])[0]
         geom = read_geometry(prim, self.shutter, self.warn, self.detail, world, keys)
+        if geom is not None and skin is not None and geom.normals is not None and geom.subdivision_level is None:
+            geom.normals = self._skinned_normals(prim, skin, geom)
         index = None
         if geom is not None:
             index = len(self.meshes)
@@ -419,6 +423,16 @@ class _Importer:
             self._mesh_bounds.append(np.stack([flat.min(axis=0), flat.max(axis=0)]).astype(np.float64))
         self._mesh_cache[key] = index
         return index
+
+    def _skinned_normals(self, prim, skin, geom) -> np.ndarray | None:
+        """Authored per-corner normals of a skinned polygon mesh carried to the skinned pose at the frame."""
+        mats = self.skinning.normal_matrices(prim, skin, self.frame)
+        if mats is None or len(mats) != geom.points.shape[1]:
+            self.warn("authored normals of skinned meshes that cannot be skinned ignored", str(prim.GetPath()))
+            return None
+        n = np.einsum("tki,tkij->tkj", geom.normals.astype(np.float64), mats[geom.triangles])
+        ln = np.linalg.norm(n, axis=2, keepdims=True)
+        return np.where(ln > 0, n / np.where(ln > 0, ln, 1.0), geom.normals).astype(np.float32)
 
     def _add_instances(self, meshes, names, times, rows, interval) -> None:
         """Instances of meshes[i] with row-vector world matrices rows[i] (N, K, 4, 4) at absolute times (K,)."""

@@ -108,6 +108,36 @@ class Skinning:
             self.warn("blend shapes that UsdSkel could not apply ignored", str(prim.GetPath()))
         return pts
 
+    def normal_matrices(self, prim, b: SkinBinding, t: float) -> np.ndarray | None:
+        """(V, 3, 3) row-vector matrices carrying each point's authored normal to its skinned normal at time t
+        (n' = n @ N, the inverse transpose of the point's linear-blend linear part), or None if not computable.
+        Dual-quaternion bindings get the same linear-blend normals (close for the rotations they blend)."""
+        xforms = b.skel_query.ComputeSkinningTransforms(float(t))
+        influences = b.query.ComputeJointInfluences(float(t))
+        if xforms is None or not influences:
+            return None
+        mapper = b.query.GetJointMapper()
+        if mapper is not None and not mapper.IsNull():
+            xforms = mapper.RemapTransforms(xforms)
+        x = np.asarray(xforms, np.float64).reshape(-1, 4, 4)[:, :3, :3]
+        idx = np.asarray(influences[0], np.int64)
+        w = np.asarray(influences[1], np.float64)
+        k = b.query.GetNumInfluencesPerComponent()
+        n = len(UsdGeom.PointBased(prim).GetPointsAttr().Get(self.shutter.frame) or [])
+        if k < 1 or len(idx) != len(w) or len(x) == 0 or idx.min(initial=0) < 0 or idx.max(initial=0) >= len(x):
+            return None
+        idx, w = idx.reshape(-1, k), w.reshape(-1, k)
+        if len(idx) == 1:  # constant interpolation: one set of influences for every point
+            idx, w = np.repeat(idx, n, axis=0), np.repeat(w, n, axis=0)
+        if len(idx) != n:
+            return None
+        bind = np.asarray(b.query.GetGeomBindTransform(float(t)), np.float64)[:3, :3]
+        lin = bind[None] @ np.einsum("pk,pkij->pij", w, x[idx])  # p' = p @ lin for the linear part
+        det = np.linalg.det(lin)
+        safe = np.abs(det) > 1e-12
+        inv = np.linalg.inv(np.where(safe[:, None, None], lin, np.eye(3)))
+        return np.swapaxes(inv, 1, 2)
+
     def skinned_transforms(self, b: SkinBinding, times: np.ndarray) -> np.ndarray | None:
         """(K, 4, 4) row-vector object-to-skeleton transforms of a rigidly skinned prim, or None."""
         out = []
