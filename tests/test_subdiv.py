@@ -263,3 +263,25 @@ def test_holes_do_not_change_their_neighbours():
     assert 4 in ref.tri_faces and keep.sum() == len(keep) - 32
     # the hole is applied after refinement (usd/subdiv.py): the surface around it is the same surface
     assert np.all(np.isfinite(p))
+
+
+def test_creases_crease_face_varying_data_too():
+    """A flat 4 x 4 grid with an infinitely sharp crease along the row y = 2 and a smooth ('none') uv set whose v
+    is 0.3 on that row and random elsewhere: along the crease v stays 0.3 (the crease rule sees only the crease);
+    without the crease it is smoothed with the rows beside it."""
+    counts, idx, pts = grid(4)
+    rng = np.random.default_rng(5)
+    uv = np.stack([pts[:, 0], rng.uniform(0, 1, len(pts))], 1)
+    row = np.flatnonzero(pts[:, 1] == 2)
+    uv[row, 1] = 0.3
+    crease = dict(crease_indices=row, crease_lengths=np.array([len(row)]), crease_sharpnesses=np.array([10.0]))
+    for opts, stays in ((crease, True), ({}, False)):
+        ref = subdivide(counts, idx, len(pts), SubdivOptions(**opts), 2)
+        p = ref.points(pts)
+        fv = ref.face_varying(uv, np.array(idx), "none").reshape(-1, 2)
+        on = np.abs(p[ref.triangles].reshape(-1, 3)[:, 1] - 2) < 1e-12
+        if stays:
+            assert on.sum() > 20
+            np.testing.assert_allclose(fv[on, 1], 0.3, atol=1e-12)
+        else:  # without the crease the limit surface still has y = 2 there by symmetry, but v is smoothed
+            assert on.sum() > 20 and np.abs(fv[on, 1] - 0.3).max() > 0.01

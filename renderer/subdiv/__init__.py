@@ -82,7 +82,8 @@ def _crease_edges(topo: Topology, opts: SubdivOptions) -> tuple[np.ndarray, np.n
 
 
 def _base_level(counts, indices, num_vertices: int, opts: SubdivOptions, base_face: np.ndarray):
-    """Level 0 with authored and boundary sharpness, and the faces that interpolateBoundary=none hides."""
+    """(level 0 with authored and boundary sharpness, the faces that interpolateBoundary=none hides, the authored
+    (edge, vertex) sharpness alone)."""
     topo = build(counts, indices, num_vertices)
     es = np.zeros(topo.num_edges)
     vs = np.zeros(topo.num_vertices)
@@ -93,6 +94,7 @@ def _base_level(counts, indices, num_vertices: int, opts: SubdivOptions, base_fa
     if len(ci) == len(cs) and len(ci):
         ok = (ci >= 0) & (ci < topo.num_vertices)
         np.maximum.at(vs, ci[ok], cs[ok])
+    authored = (normalise_sharpness(es), normalise_sharpness(vs))
     boundary_edge = topo.edge_faces != 2
     es[boundary_edge] = INFINITE  # boundary and non-manifold edges are always sharp
     on_boundary = np.zeros(topo.num_vertices, bool)
@@ -103,7 +105,7 @@ def _base_level(counts, indices, num_vertices: int, opts: SubdivOptions, base_fa
     elif opts.interpolate_boundary == "none":
         # the boundary faces only support their neighbours: no surface is made for them
         hidden = np.bincount(topo.corner_face, on_boundary[topo.indices], minlength=topo.num_faces) > 0
-    return Level(topo, normalise_sharpness(es), normalise_sharpness(vs), base_face), hidden
+    return Level(topo, normalise_sharpness(es), normalise_sharpness(vs), base_face), hidden, authored
 
 
 @dataclass
@@ -119,6 +121,7 @@ class Refinement:
     tri_faces: np.ndarray  # (T,) authored face each triangle descends from
     base_counts: np.ndarray
     hidden_faces: np.ndarray  # (F0,) bool: faces with no surface (interpolateBoundary none)
+    base: Level | None = None  # level 0 with its authored sharpness only, for face-varying data
 
     @property
     def triangles(self) -> np.ndarray:
@@ -161,18 +164,21 @@ class Refinement:
 
     def face_varying(self, values: np.ndarray, fv_indices: np.ndarray, mode: str) -> np.ndarray:
         """Refine face-varying data (one value index per authored face-corner, in ``base`` corner order) on the
-        same topology. Returns per-triangle-corner values (T, 3, C)."""
+        same topology, with the surface's creases and corners. Returns per-triangle-corner values (T, 3, C)."""
         values = np.asarray(values, np.float64)
         if values.ndim == 1:
             values = values[:, None]
         kind = _kind(self.scheme)
         linear = mode == "all" or kind not in (CATMARK, LOOP)
         fv_opts = SubdivOptions(interpolate_boundary="edgeOnly" if mode == "none" else "edgeAndCorner")
-        lv, _ = _base_level(self.base_counts, fv_indices, len(values), fv_opts, np.arange(len(self.base_counts)))
+        lv, _, _ = _base_level(self.base_counts, fv_indices, len(values), fv_opts, np.arange(len(self.base_counts)))
         if mode == "boundaries":
             on_boundary = np.zeros(lv.topo.num_vertices, bool)
             on_boundary[lv.topo.edge_vertices[lv.topo.edge_faces == 1].reshape(-1)] = True
             lv.vertex_sharpness[on_boundary] = np.inf
+        if self.base is not None and not linear:  # the surface's creases and corners crease its data too
+            np.maximum.at(lv.edge_sharpness, lv.topo.corner_edge, self.base.edge_sharpness[self.base.topo.corner_edge])
+            np.maximum.at(lv.vertex_sharpness, lv.topo.indices, self.base.vertex_sharpness[self.base.topo.indices])
         scheme = _linear_of(kind) if linear else kind
         x = values
         for _ in range(self.levels):
@@ -196,7 +202,7 @@ class Refinement:
         v = np.asarray(values, np.float64)
         if v.ndim == 1:
             v = v[:, None]
-        lv, _ = _base_level(self.base_counts, base_indices, len(v), SubdivOptions(),
+        lv, _, _ = _base_level(self.base_counts, base_indices, len(v), SubdivOptions(),
                             np.arange(len(self.base_counts)))
         scheme = _linear_of(_kind(self.scheme))
         for _ in range(self.levels):
@@ -218,7 +224,7 @@ def subdivide(counts: np.ndarray, indices: np.ndarray, num_vertices: int, opts: 
     kind = _kind(opts.scheme)
     if base_face is None:
         base_face = np.arange(len(counts), dtype=np.int64)
-    lv, hidden = _base_level(counts, indices, num_vertices, opts, np.asarray(base_face, np.int64))
+    lv, hidden, authored = _base_level(counts, indices, num_vertices, opts, np.asarray(base_face, np.int64))
     local = Level(lv.topo, lv.edge_sharpness, lv.vertex_sharpness, np.arange(len(counts), dtype=np.int64))
     stencils = []
     for _ in range(levels):
@@ -231,7 +237,7 @@ def subdivide(counts: np.ndarray, indices: np.ndarray, num_vertices: int, opts: 
     tri_corners, base_of_tri = tri_corners[keep], base_of_tri[keep]
     final = Level(local.topo, local.edge_sharpness, local.vertex_sharpness, local.base_face)
     return Refinement(opts.scheme, levels, stencils, lim, final, tri_corners, lv.base_face[base_of_tri], counts,
-                      hidden)
+                      hidden, Level(lv.topo, authored[0], authored[1], lv.base_face))
 
 
 __all__ = ["SubdivOptions", "Refinement", "subdivide", "triangle_count", "SCHEMES", "BOUNDARY_MODES",

@@ -7,8 +7,8 @@ cage's edges, each at its own distance from the camera), between 1 and ``MAX_AUT
 ``DEFAULT_LEVEL``; a fixed level when asked. Any level is lowered until the mesh stays under ``MAX_TRIANGLES``.
 Authored normals are ignored on subdivision surfaces (the schema: the surface defines its own); shading normals
 come from the key nearest the frame. ``vertex`` texture coordinates are refined with the surface's own rules,
-``varying`` ones linearly, ``faceVarying`` ones by ``faceVaryingLinearInterpolation`` (creases are not applied
-to face-varying data).
+``varying`` ones linearly, ``faceVarying`` ones by ``faceVaryingLinearInterpolation`` (with the surface's
+authored creases and corners).
 """
 from __future__ import annotations
 
