@@ -4,8 +4,8 @@
 Refines every subdivision-surface mesh of a production asset from ../shared/usd-assets (the usd-wg teapot
 layouts: ``DrawModes.usd``, 35 Catmull-Clark cages, 67,680 faces; ``Teapot.usd``, one cage of 1,236 faces) at
 each level, with limit points and normals, and prints wall time, triangles per second and the peak memory the
-refinement allocated (tracemalloc, which sees NumPy's buffers; the largest mesh's refinement sets it). Then the whole ``load_scene`` with the level chosen
-from the camera. Noise on a shared 2-core machine is large.
+refinement allocated (tracemalloc, which sees NumPy's buffers; the largest mesh's refinement sets it). Then the
+whole ``load_scene`` with the level chosen from the camera. Noise on a shared 2-core machine is large.
 """
 from __future__ import annotations
 
@@ -49,8 +49,9 @@ def refine_all(meshes, level):
     tris = 0
     for counts, idx, pts in meshes:
         ref = subdivide(counts, idx, len(pts), SubdivOptions(), level)
-        limit = ref.points(pts)
-        ref.normals(limit)
+        control = ref.control_points(pts)
+        limit = ref.limit.apply(control) if ref.limit is not None else control
+        ref.normals(limit, control)
         tris += len(ref.triangles)
     return tris
 

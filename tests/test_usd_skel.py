@@ -6,7 +6,7 @@ import shutil
 
 import numpy as np
 import pytest
-from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
+from pxr import Gf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
 
 import stages
 from renderer.motion.transform import matrix_at
