@@ -74,7 +74,7 @@ class RenderRequest:
     def load(self) -> Scene:
         """The frame as the renderer's Scene, lens overrides applied."""
         scene = load_scene(os.fspath(self.scene_path), self.frame, camera_path=self.camera, shutter=self.shutter,
-                           motion_blur=self.motion_blur_keys)
+                           motion_blur=self.motion_blur_keys, image_width=self.options.width)
         return self.lens.apply(scene)
 
     def prepare(self, device: str = "cpu") -> PreparedScene:

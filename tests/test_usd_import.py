@@ -228,14 +228,15 @@ def test_unreadable_prims_are_skipped_not_raised(tmp_path):
     assert any("invalid topology" in w and "/M" in w for w in scene.warnings)
 
 
-def test_subdivision_cage_warns_once(tmp_path):
+def test_subdivision_surfaces_are_refined_without_warnings(tmp_path):
     stage, path = new_stage(tmp_path)
     for i in range(5):
         m = add_tri(stage, f"/World/Sub{i}")
         m.GetSubdivisionSchemeAttr().Set(UsdGeom.Tokens.catmullClark)
     scene = save_and_load(stage, path)
     assert len(scene.meshes) == 5
-    assert sum("subdivision" in w for w in scene.warnings) == 1
+    assert all(len(m.triangles) > 1 and m.normals is not None for m in scene.meshes)
+    assert not any("subdivision" in w for w in scene.warnings), scene.warnings
 
 
 def test_purpose_visibility_and_proxies(tmp_path):

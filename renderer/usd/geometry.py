@@ -5,6 +5,7 @@ group: triangles pass through, convex polygons are fanned, concave ones are ear-
 expressed first as *corners* (positions in ``faceVertexIndices``) so that every primvar interpolation expands the
 same way: constant -> broadcast, uniform -> per face, vertex/varying -> per point, faceVarying -> per corner.
 ``orientation = leftHanded`` swaps two corners so the result is counter-clockwise seen from the front.
+Faces named in ``holeIndices`` are not drawn; triangles keep their authored face numbers throughout.
 """
 from __future__ import annotations
 
@@ -13,7 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 from pxr import Usd, UsdGeom
 
+from renderer.usd import subdiv as usd_subdiv
 from renderer.usd.motion import Shutter
+from renderer.usd.subdiv import SubdivisionDetail
 
 SPHERE_SEGMENTS = 64  # around the axis
 SPHERE_RINGS = 32  # pole to pole
@@ -32,6 +35,7 @@ class GeomData:
     normals: np.ndarray | None = None  # (T, 3, 3) float32
     uvs: np.ndarray | None = None  # (T, 3, 2) float32
     double_sided: bool = False
+    subdivision_level: int | None = None  # refinement level of a subdivision surface; None: not subdivided
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -169,18 +173,6 @@ def expand_primvar(values, interpolation: str, corners: np.ndarray, tri_faces: n
     return None
 
 
-def _smooth_vertex_normals(points: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """Area-weighted vertex normals expanded per corner (T, 3, 3): a stand-in for subdivision limit normals."""
-    p = points.astype(np.float64)
-    fn = np.cross(p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]])
-    vn = np.zeros_like(p)
-    for k in range(3):
-        np.add.at(vn, tris[:, k], fn)
-    ln = np.linalg.norm(vn, axis=1, keepdims=True)
-    vn = np.where(ln > 0, vn / np.where(ln > 0, ln, 1.0), 0.0)
-    return vn[tris].astype(np.float32)
-
-
 # ---------------------------------------------------------------------------------------------------------------
 # Point keys (deformation, velocities)
 
@@ -215,7 +207,7 @@ def point_keys(pb: UsdGeom.PointBased, shutter: Shutter, count: int, warn) -> tu
             arrays = pb.ComputePointsAtTimes([Usd.TimeCode(float(t)) for t in times], Usd.TimeCode(frame))
             if arrays and all(len(a) == len(base) for a in arrays):
                 keys = np.stack([np.asarray(a, np.float32).reshape(-1, 3) for a in arrays])
-                return _collapse(times, keys)
+                return collapse_keys(times, keys)
             warn("velocities could not be applied (point counts differ); those prims are not deformation-blurred",
                  path)
     if not attr.ValueMightBeTimeVarying():
@@ -232,10 +224,10 @@ def point_keys(pb: UsdGeom.PointBased, shutter: Shutter, count: int, warn) -> tu
     if len(kept) < len(times):
         warn("point count changes within the shutter; deformation blur dropped for", path)
         return single
-    return _collapse(np.array(kept), np.stack(keys))
+    return collapse_keys(np.array(kept), np.stack(keys))
 
 
-def _collapse(times: np.ndarray, keys: np.ndarray):
+def collapse_keys(times: np.ndarray, keys: np.ndarray):
     if len(keys) > 1 and all(np.array_equal(keys[0], k) for k in keys[1:]):
         return times[:1], keys[:1]
     return times, keys
@@ -243,6 +235,24 @@ def _collapse(times: np.ndarray, keys: np.ndarray):
 
 # ---------------------------------------------------------------------------------------------------------------
 # UsdGeomMesh
+
+
+def hole_indices(mesh: UsdGeom.Mesh, frame: float, num_faces: int) -> np.ndarray:
+    """The mesh's ``holeIndices`` at the frame (authored face indices, in range), possibly empty."""
+    holes = mesh.GetHoleIndicesAttr().Get(frame)
+    if holes is None or len(holes) == 0:
+        return np.zeros(0, np.int64)
+    holes = np.asarray(holes, np.int64)
+    return holes[(holes >= 0) & (holes < num_faces)]
+
+
+def drop_holes(corners: np.ndarray, tri_faces: np.ndarray, holes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Remove the triangles of hole faces. ``tri_faces`` keeps authored face numbers, so per-face data
+    (uniform primvars, GeomSubset material bindings) still lines up with the triangles that remain."""
+    if len(holes) == 0:
+        return corners, tri_faces
+    keep = ~np.isin(tri_faces, holes)
+    return corners[keep], tri_faces[keep]
 
 
 def _primvar(prim, name: str, frame: float, warn):
@@ -259,22 +269,53 @@ def _primvar(prim, name: str, frame: float, warn):
     return vals, pv.GetInterpolation()
 
 
-def _uv_primvar(prim, frame: float, warn):
-    hit = _primvar(prim, "st", frame, warn)
-    if hit is not None:
-        return hit
-    for pv in UsdGeom.PrimvarsAPI(prim).GetPrimvarsWithAuthoredValues():  # any texture-coordinate primvar
+def _uv_primvar_object(prim, frame: float, warn):
+    """The texture-coordinate primvar of a mesh: ``st``, else the first float2 texCoord primvar; or None."""
+    api = UsdGeom.PrimvarsAPI(prim)
+    pv = api.GetPrimvar("st")
+    if pv and pv.HasAuthoredValue():
+        if pv.GetElementSize() != 1:
+            warn("primvars with elementSize != 1 ignored (st)", str(prim.GetPath()))
+            return None
+        return pv
+    for pv in api.GetPrimvarsWithAuthoredValues():  # any texture-coordinate primvar
         if pv.GetElementSize() != 1:
             continue
         if str(pv.GetTypeName().role) == "TextureCoordinate" or pv.GetPrimvarName() in ("uv", "UVMap", "st0"):
-            vals = pv.ComputeFlattened(frame)
-            if vals is not None and len(vals) and np.asarray(vals).ndim == 2 and np.asarray(vals).shape[1] == 2:
-                return vals, pv.GetInterpolation()
+            v = pv.Get(frame)
+            if v is not None and len(v) and np.asarray(v).ndim == 2 and np.asarray(v).shape[1] == 2:
+                return pv
     return None
 
 
-def read_mesh(prim, shutter: Shutter, warn) -> GeomData | None:
-    """Triangulate a UsdGeomMesh at the frame (topology) with point keys over the shutter."""
+def _uv_primvar(prim, frame: float, warn):
+    pv = _uv_primvar_object(prim, frame, warn)
+    if pv is None:
+        return None
+    vals = pv.ComputeFlattened(frame)
+    if vals is None or len(vals) == 0:
+        return None
+    return vals, pv.GetInterpolation()
+
+
+def _uv_primvar_raw(prim, frame: float, warn):
+    """(values, indices or None, interpolation) of the texture coordinates, for refinement; or None."""
+    pv = _uv_primvar_object(prim, frame, warn)
+    if pv is None:
+        return None
+    vals = pv.Get(frame)
+    if vals is None or len(vals) == 0:
+        return None
+    idx = pv.GetIndices(frame) if pv.IsIndexed() else None
+    return np.asarray(vals), (None if idx is None else np.asarray(idx, np.int64)), pv.GetInterpolation()
+
+
+def read_mesh(prim, shutter: Shutter, warn, detail: SubdivisionDetail | None = None,
+              world: np.ndarray | None = None, keys: tuple[np.ndarray, np.ndarray] | None = None) -> GeomData | None:
+    """Triangulate a UsdGeomMesh at the frame (topology) with point keys over the shutter; subdivision surfaces
+    (any ``subdivisionScheme`` but ``none``) are refined to ``detail``'s level (``world``: the prim's row-vector
+    object-to-world matrix at the frame, for a level from the camera). ``keys`` (times, (P, V, 3) points)
+    replaces the authored points, for skinned meshes (whose authored normals the caller then carries along)."""
     mesh = UsdGeom.Mesh(prim)
     path = str(prim.GetPath())
     frame = shutter.frame
@@ -293,18 +334,31 @@ def read_mesh(prim, shutter: Shutter, warn) -> GeomData | None:
     if not np.all(np.isfinite(base)):
         warn("meshes with NaN/infinite points skipped", path)
         return None
-    corners, tri_faces = triangulate(counts, fvi, base)
-    if len(corners) == 0:
-        warn("meshes with zero triangles skipped", path)
-        return None
-    if mesh.GetOrientationAttr().Get(frame) == UsdGeom.Tokens.leftHanded:
-        corners = corners[:, [0, 2, 1]]
-    keys = point_keys(mesh, shutter, len(base), warn)
+    if keys is not None and (keys[1].ndim != 3 or keys[1].shape[1] != len(base)):
+        warn("deformed point keys whose size differs from the mesh ignored", path)
+        keys = None
+    if keys is None:
+        keys = point_keys(mesh, shutter, len(base), warn)
     if keys is None:
         keys = (np.array([frame]), base[None])
     if not np.all(np.isfinite(keys[1])):
         warn("meshes with NaN/infinite points skipped", path)
         return None
+    holes = hole_indices(mesh, frame, len(counts))
+    left_handed = mesh.GetOrientationAttr().Get(frame) == UsdGeom.Tokens.leftHanded
+    scheme = str(mesh.GetSubdivisionSchemeAttr().Get(frame) or "catmullClark")
+    if scheme not in usd_subdiv.SUBDIV_SCHEMES and scheme != UsdGeom.Tokens.none:
+        warn(f"unknown subdivisionScheme rendered as catmullClark ({scheme})", path)
+        scheme = "catmullClark"
+    if scheme != UsdGeom.Tokens.none:
+        return _subdivided(mesh, frame, scheme, counts, fvi, keys, holes, left_handed, detail, world, warn)
+    corners, tri_faces = triangulate(counts, fvi, base)
+    corners, tri_faces = drop_holes(corners, tri_faces, holes)
+    if len(corners) == 0:
+        warn("meshes with zero triangles (or only holes) skipped", path)
+        return None
+    if left_handed:
+        corners = corners[:, [0, 2, 1]]
     nf, npnt = len(counts), len(base)
     tris = fvi[corners]
 
@@ -320,11 +374,6 @@ def read_mesh(prim, shutter: Shutter, warn) -> GeomData | None:
         if normals is None or normals.shape[-1] != 3:
             warn("normals with a size that does not match their interpolation ignored", path)
             normals = None
-    scheme = mesh.GetSubdivisionSchemeAttr().Get(frame)
-    if scheme is not None and scheme != UsdGeom.Tokens.none:
-        warn("subdivision surfaces rendered as their control cage (smooth vertex normals)", path)
-        if normals is None:
-            normals = _smooth_vertex_normals(base, tris)
 
     uvs = None
     hit = _uv_primvar(prim, frame, warn)
@@ -346,9 +395,36 @@ def read_mesh(prim, shutter: Shutter, warn) -> GeomData | None:
     )
 
 
-def read_named_uvs(prim, name: str, frame: float, warn) -> np.ndarray | None:
+def _subdivided(mesh, frame, scheme, counts, fvi, keys, holes, left_handed, detail, world, warn):
+    path = str(mesh.GetPath())
+    uv = _uv_primvar_raw(mesh.GetPrim(), frame, warn)
+    frame_key = int(np.argmin(np.abs(np.asarray(keys[0], np.float64) - frame)))
+    ref = usd_subdiv.refine(mesh, frame, scheme, counts, fvi, keys[1], holes, uv, detail, world, warn, frame_key)
+    if ref is None:
+        warn("meshes with zero triangles (or only holes) skipped", path)
+        return None
+    tris, normals, uvs = ref.triangles, ref.normals, ref.uvs
+    if left_handed:  # the front is the clockwise side: flip the winding, and the normals with it
+        tris, normals = tris[:, [0, 2, 1]], -normals[:, [0, 2, 1]]
+        uvs = None if uvs is None else uvs[:, [0, 2, 1]]
+    return GeomData(
+        point_times=keys[0],
+        points=np.ascontiguousarray(ref.points, np.float32),
+        triangles=np.ascontiguousarray(tris, np.int32),
+        tri_faces=ref.tri_faces,
+        num_faces=len(counts),
+        normals=np.ascontiguousarray(normals, np.float32),
+        uvs=None if uvs is None else np.ascontiguousarray(uvs, np.float32),
+        double_sided=bool(mesh.GetDoubleSidedAttr().Get(frame)),
+        subdivision_level=ref.level,
+    )
+
+
+def read_named_uvs(prim, name: str, frame: float, warn, level: int | None = None) -> np.ndarray | None:
     """Per-corner values (T, 3, 2) float32 of the float2 primvar ``name`` of a Mesh, on the triangles ``read_mesh``
-    makes (same triangulation and winding); None if the prim is not a Mesh or the primvar is absent or mis-sized.
+    makes (same triangulation, holes and winding; for a subdivision surface pass ``level``, the
+    ``GeomData.subdivision_level`` it was refined to); None if the prim is not a Mesh or the primvar is absent or
+    mis-sized.
 
     For materials whose UsdPrimvarReader_float2 names a primvar other than the one ``read_mesh`` picks (``st``,
     else the first texCoord2f primvar).
@@ -366,8 +442,22 @@ def read_named_uvs(prim, name: str, frame: float, warn) -> np.ndarray | None:
     base = np.asarray(pts, np.float32).reshape(-1, 3)
     if int(counts.sum()) != len(fvi) or fvi.min() < 0 or fvi.max() >= len(base):
         return None
+    holes = hole_indices(mesh, frame, len(counts))
+    left_handed = mesh.GetOrientationAttr().Get(frame) == UsdGeom.Tokens.leftHanded
+    scheme = str(mesh.GetSubdivisionSchemeAttr().Get(frame) or "catmullClark")
+    if scheme != UsdGeom.Tokens.none:
+        scheme = scheme if scheme in usd_subdiv.SUBDIV_SCHEMES else "catmullClark"
+        pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar(name)
+        idx = pv.GetIndices(frame) if pv.IsIndexed() else None
+        uv = (np.asarray(pv.Get(frame)), None if idx is None else np.asarray(idx, np.int64), pv.GetInterpolation())
+        detail = SubdivisionDetail(level=usd_subdiv.DEFAULT_LEVEL if level is None else level)
+        ref = usd_subdiv.refine(mesh, frame, scheme, counts, fvi, base[None], holes, uv, detail, None, warn)
+        if ref is None or ref.uvs is None or ref.uvs.shape[-1] != 2:
+            return None
+        return np.ascontiguousarray(ref.uvs[:, [0, 2, 1]] if left_handed else ref.uvs, np.float32)
     corners, tri_faces = triangulate(counts, fvi, base)
-    if mesh.GetOrientationAttr().Get(frame) == UsdGeom.Tokens.leftHanded:
+    corners, tri_faces = drop_holes(corners, tri_faces, holes)
+    if left_handed:
         corners = corners[:, [0, 2, 1]]
     uvs = expand_primvar(hit[0], hit[1], corners, tri_faces, fvi, len(counts), len(base))
     if uvs is None or uvs.shape[-1] != 2:
@@ -553,7 +643,7 @@ def read_primitive(prim, shutter: Shutter, warn) -> GeomData | None:
     if len(tris) == 0:
         warn("primitives of zero size skipped", str(prim.GetPath()))
         return None
-    times, pts = _collapse(np.asarray(times), np.stack(keys).astype(np.float32))
+    times, pts = collapse_keys(np.asarray(times), np.stack(keys).astype(np.float32))
     ds = _get(prim, "doubleSided", frame, kind == "Plane")
     return GeomData(
         point_times=times,
@@ -567,10 +657,11 @@ def read_primitive(prim, shutter: Shutter, warn) -> GeomData | None:
     )
 
 
-def read_geometry(prim, shutter: Shutter, warn) -> GeomData | None:
-    """GeomData for a Mesh or implicit primitive, else None."""
+def read_geometry(prim, shutter: Shutter, warn, detail: SubdivisionDetail | None = None,
+                  world: np.ndarray | None = None, keys=None) -> GeomData | None:
+    """GeomData for a Mesh or implicit primitive, else None (``detail``, ``world``, ``keys``: see ``read_mesh``)."""
     if prim.IsA(UsdGeom.Mesh):
-        return read_mesh(prim, shutter, warn)
+        return read_mesh(prim, shutter, warn, detail, world, keys)
     if prim.GetTypeName() in PRIMITIVE_TYPES:
         return read_primitive(prim, shutter, warn)
     return None

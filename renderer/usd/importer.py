@@ -23,14 +23,17 @@ import os
 import re
 
 import numpy as np
-from pxr import Tf, Usd, UsdGeom, UsdRender, UsdShade
+from pxr import Gf, Tf, Usd, UsdGeom, UsdRender, UsdShade
 
 from renderer.errors import SceneError, SettingsError
 from renderer.scene import model as sc
 from renderer.usd import camera as usd_camera
 from renderer.usd import lights as usd_lights
-from renderer.usd.geometry import PRIMITIVE_TYPES, primitive_signature, read_geometry
+from renderer.usd.geometry import PRIMITIVE_TYPES, collapse_keys, primitive_signature, read_geometry
+from renderer.subdiv import MAX_LEVEL
 from renderer.usd.materials import MaterialTable
+from renderer.usd.skel import Skinning
+from renderer.usd.subdiv import SubdivisionDetail
 from renderer.usd.motion import Shutter, TransformSampler, motion_transforms, refine_keys
 
 _PI_ATTRS = ("positions", "orientations", "orientationsf", "scales", "velocities", "angularVelocities",
@@ -63,11 +66,14 @@ class WarningLog:
 
 
 def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_path: str | None = None,
-               shutter: tuple[float, float] | None = None, motion_blur: bool = True) -> sc.Scene:
+               shutter: tuple[float, float] | None = None, motion_blur: bool = True,
+               subdivision_level: int | None = None, image_width: int | None = None) -> sc.Scene:
     """Load one frame of a USD stage as a ``Scene``.
 
     ``frame`` defaults to the stage's startTimeCode (0 if no range is authored). The shutter is ``frame +``
-    the camera's (shutter:open, shutter:close), or ``frame + shutter`` when given. Raises SceneError (one-line
+    the camera's (shutter:open, shutter:close), or ``frame + shutter`` when given. Subdivision surfaces are
+    refined to ``subdivision_level`` (0..6), or by default to a level chosen from the camera for an image
+    ``image_width`` pixels wide (default: the render settings' width, else 640). Raises SceneError (one-line
     message) for a missing or malformed file or a bad camera path.
     """
     path = os.fspath(path)
@@ -78,9 +84,12 @@ def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_pa
             raise SettingsError(f"shutter must be (open, close) with open <= close, got {tuple(shutter)}")
     if frame is not None and not np.isfinite(frame):
         raise SettingsError(f"frame must be finite, got {frame}")
+    if subdivision_level is not None and not 0 <= subdivision_level <= MAX_LEVEL:
+        raise SettingsError(f"subdivision level must be between 0 and {MAX_LEVEL}, got {subdivision_level}")
     stage = _open_stage(path)
     try:
-        return _Importer(stage, path, frame, camera_path, shutter, motion_blur).run()
+        return _Importer(stage, path, frame, camera_path, shutter, motion_blur, subdivision_level,
+                         image_width).run()
     except Tf.ErrorException as e:
         raise SceneError(f"cannot read {os.path.basename(path)}: {_pxr_message(e)}") from None
 
@@ -128,7 +137,8 @@ def _open_stage(path: str) -> Usd.Stage:
 
 
 class _Importer:
-    def __init__(self, stage, source, frame, camera_path, shutter_override, motion_blur):
+    def __init__(self, stage, source, frame, camera_path, shutter_override, motion_blur, subdivision_level=None,
+                 image_width=None):
         self.stage = stage
         self.source = source
         self.warn = WarningLog()
@@ -138,6 +148,8 @@ class _Importer:
         self.camera_path = camera_path
         self.shutter_override = shutter_override
         self.motion_blur = motion_blur
+        self.subdivision_level = subdivision_level
+        self.image_width = image_width
         self.meshes: list[sc.Mesh] = []
         self.instances: list[sc.Instance] = []
         self.lights: list[sc.Light] = []
@@ -161,6 +173,8 @@ class _Importer:
         self.shutter = self._shutter(cam_prim, settings)
         self.xf = TransformSampler(self.shutter)
         self.materials = MaterialTable(self.frame, warn, self.shutter)
+        self.detail = self._subdivision_detail(cam_prim, settings)
+        self.skinning = Skinning(self.shutter, warn)
 
         self._traverse()
         if not self._saw_render:
@@ -201,6 +215,21 @@ class _Importer:
             warnings=warn.lines(),
             source=self.source,
         )
+
+    def _subdivision_detail(self, cam_prim, settings: sc.RenderSettingsInfo) -> SubdivisionDetail:
+        """How finely subdivision surfaces are refined: the fixed level asked for, else from the camera."""
+        if self.subdivision_level is not None or cam_prim is None:
+            return SubdivisionDetail(level=self.subdivision_level)
+        cam = UsdGeom.Camera(cam_prim).GetCamera(self.frame)
+        width = self.image_width or (settings.resolution[0] if settings.resolution else 640)
+        aperture = float(cam.horizontalAperture)  # tenths of a scene unit, like the focal length
+        if not aperture > 0:
+            return SubdivisionDetail()
+        if cam.projection == Gf.Camera.Orthographic:
+            return SubdivisionDetail(pixels_per_unit=width / (aperture / 10.0))
+        eye = self.xf.world(cam_prim, [self.frame])[0][3, :3]
+        return SubdivisionDetail(camera_position=tuple(float(x) for x in eye),
+                                 pixels_per_radian=width * float(cam.focalLength) / aperture)
 
     def _up_axis(self) -> str:
         return "Z" if str(UsdGeom.GetStageUpAxis(self.stage)) == "Z" else "Y"
@@ -288,11 +317,41 @@ class _Importer:
         if prim.IsA(UsdGeom.PointInstancer):
             self._point_instancer(prim, interval)
             return
+        skin = self.skinning.binding(prim)
+        if skin is not None and self._skinned(prim, skin, interval):
+            return
         mesh = self._mesh_index(prim)
         if mesh is None:
             return
         times, rows = self.xf.motion(prim)
         self._add_instances([mesh], [str(prim.GetPath())], times, rows[None], interval)
+
+    def _skinned(self, prim, skin, interval) -> bool:
+        """A skinned gprim: skinned points (meshes) or a skinned transform (implicit primitives) at every key,
+        placed by its Skeleton. False if UsdSkel cannot skin it (then it is drawn as authored, with a warning)."""
+        path = str(prim.GetPath())
+        times = self.skinning.key_times(prim, skin)
+        if prim.IsA(UsdGeom.Mesh):
+            keys = self.skinning.skinned_points(prim, skin, times)
+            if keys is None:
+                self.warn("skinned meshes UsdSkel cannot skin drawn unskinned", path)
+                return False
+            mesh = self._mesh_index(prim, keys=collapse_keys(times, keys), world=self.xf.world(skin.skeleton,
+                                                                                          [self.frame])[0],
+                                    skin=skin)
+            if mesh is not None:
+                xf_times, rows = self.xf.motion(skin.skeleton)
+                self._add_instances([mesh], [path], xf_times, rows[None], interval)
+            return True
+        rel = self.skinning.skinned_transforms(skin, times)
+        if rel is None:
+            self.warn("rigidly skinned prims UsdSkel cannot skin drawn unskinned", path)
+            return False
+        mesh = self._mesh_index(prim)
+        if mesh is not None:
+            rows = rel @ self.xf.world(skin.skeleton, times)
+            self._add_instances([mesh], [path], times, rows[None], interval)
+        return True
 
     # -- visibility -----------------------------------------------------------------------------------------------
     def _visibility_chain(self, prim) -> tuple[bool, tuple[float, ...]]:
@@ -331,13 +390,22 @@ class _Importer:
         return float(s[0]), float(s[1])
 
     # -- meshes and instances -------------------------------------------------------------------------------------
-    def _mesh_index(self, prim) -> int | None:
+    def _mesh_index(self, prim, keys=None, world=None, skin=None) -> int | None:
+        """The mesh of a gprim (shared by equal prims); ``keys``: deformed (skinned) point keys of this prim,
+        ``world``: the matrix that places it (default its own), for the subdivision level; ``skin``: its
+        skinning, which carries authored normals along (subdivision surfaces make their own)."""
         src = prim.GetPrimInPrototype() if prim.IsInstanceProxy() else prim
         shape = primitive_signature(prim, self.frame) or str(src.GetPath())  # equal spheres share one mesh
+        if keys is not None:
+            shape = ("skinned", str(prim.GetPath()))  # instances of a skinned mesh deform on their own
         key = (shape, self.materials.key_of(prim))
         if key in self._mesh_cache:
             return self._mesh_cache[key]
-        geom = read_geometry(prim, self.shutter, self.warn)
+        if world is None and prim.IsA(UsdGeom.Mesh):
+            world = self.xf.world(prim, [self.frame])[0]
+        geom = read_geometry(prim, self.shutter, self.warn, self.detail, world, keys)
+        if geom is not None and skin is not None and geom.normals is not None and geom.subdivision_level is None:
+            geom.normals = self._skinned_normals(prim, skin, geom)
         index = None
         if geom is not None:
             index = len(self.meshes)
@@ -355,6 +423,16 @@ class _Importer:
             self._mesh_bounds.append(np.stack([flat.min(axis=0), flat.max(axis=0)]).astype(np.float64))
         self._mesh_cache[key] = index
         return index
+
+    def _skinned_normals(self, prim, skin, geom) -> np.ndarray | None:
+        """Authored per-corner normals of a skinned polygon mesh carried to the skinned pose at the frame."""
+        mats = self.skinning.normal_matrices(prim, skin, self.frame)
+        if mats is None or len(mats) != geom.points.shape[1]:
+            self.warn("authored normals of skinned meshes that cannot be skinned ignored", str(prim.GetPath()))
+            return None
+        n = np.einsum("tki,tkij->tkj", geom.normals.astype(np.float64), mats[geom.triangles])
+        ln = np.linalg.norm(n, axis=2, keepdims=True)
+        return np.where(ln > 0, n / np.where(ln > 0, ln, 1.0), geom.normals).astype(np.float32)
 
     def _add_instances(self, meshes, names, times, rows, interval) -> None:
         """Instances of meshes[i] with row-vector world matrices rows[i] (N, K, 4, 4) at absolute times (K,)."""
