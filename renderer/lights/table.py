@@ -38,7 +38,7 @@ from renderer.scene.model import (
 class Lights:
     count: int
     kind: wp.array(dtype=wp.int32)
-    radiance: wp.array(dtype=wp.vec3)  # emitted radiance (distant of angle 0: irradiance; point: intensity)
+    radiance: wp.array(dtype=wp.vec3)  # emitted radiance, nits (distant of angle 0: irradiance; point: intensity)
     size: wp.array(dtype=wp.vec4)  # rect (width, height), disk/sphere (_, _, radius), cylinder (length, _,
     #                                radius), distant (cos of the half apex angle), dome (1 = textured)
     xf_off: wp.array(dtype=wp.int32)
@@ -124,9 +124,8 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
             half = math.radians(max(0.0, light.angle) * 0.5)
             cos_max = math.cos(half) if half > 1e-6 else 1.0
             sz = (cos_max, 0.0, 0.0, 0.0)
-            power = lum  # the irradiance it delivers
-            if cos_max < 1.0:  # the disk of directions' radiance that gives the irradiance at normal incidence
-                rad = rad / (math.pi * math.sin(half) ** 2)
+            # the irradiance it delivers at normal incidence: radiance times the disk's pi sin^2 (delta: held)
+            power = lum * (math.pi * (1.0 - cos_max * cos_max) if cos_max < 1.0 else 1.0)
         elif light.kind == LIGHT_DOME:
             dome_visible |= int(light.visible_to_camera)
             texture = getattr(light, "texture", None)

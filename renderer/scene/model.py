@@ -161,9 +161,10 @@ class Light:
     dome: radiance from every direction: constant, or a lat-long ``texture``;
     mesh: emissive geometry, ``instance`` index, sampled by triangle area.
 
-    ``radiance`` is the final emitted radiance (intensity * 2^exposure * color * blackbody, already divided by
-    the world-space area when ``normalize`` is on), except for ``distant`` where it is the irradiance on a
-    surface facing the light (the sun convention of Cycles/Karma), converted to radiance by the renderer.
+    ``radiance`` is the final emitted radiance in nits (intensity * 2^exposure * color * blackbody, already
+    divided by usdLux's sizeFactor when ``normalize`` is on), except for a point light (sphere of radius 0) where
+    it is the intensity (cd) and a distant light of angle 0 where it is the irradiance (lux) on a surface
+    facing it.
     """
 
     kind: int

@@ -1,8 +1,14 @@
 """Light import: UsdLux lights to ``scene.Light``, emissive geometry lights, and the default light.
 
-Radiance = intensity * 2^exposure * color * (blackbody(colorTemperature) if enableColorTemperature), divided by
-the light's world-space surface area at the frame when ``normalize`` is on (rect, disk, sphere, cylinder). For a
-DistantLight ``radiance`` holds the irradiance-like value intensity * 2^exposure * color (the renderer converts).
+Units follow usdLux's schema.usda ("Quantities and Units", ``inputs:normalize``): every light's emitted radiance
+(nits) is L = intensity * 2^exposure * color * (blackbody(colorTemperature) if enableColorTemperature) / sizeFactor,
+sizeFactor = 1 unless ``normalize`` is on; then it is the light's world-space surface area at the frame (rect,
+disk, sphere, cylinder side), pi sin^2(theta) for a DistantLight of half angle theta = angle/2 (pi (2 - sin^2
+theta) past 90 degrees), and 1 for domes. So an unnormalized DistantLight delivers the irradiance
+E = L pi sin^2(angle/2) to a surface facing it, a normalized one E = intensity * 2^exposure * color (lux). A
+DistantLight of angle 0 is a delta direction: its sizeFactor is 1 and L is taken as the irradiance. A
+SphereLight with ``treatAsPoint`` becomes a point light of the same far-field intensity (L pi r^2, cd); the
+``treatAsLine`` hint is disregarded (the cylinder keeps its radius, as the schema allows).
 Both the current ``inputs:`` attribute names and the legacy names without the prefix are read. Light parameters
 are taken at the frame; the light's transform moves over the shutter like any prim's.
 
@@ -28,8 +34,8 @@ from renderer.usd.motion import TransformSampler, motion_transform
 # Row-vector matrix of a +90 degree turn about X: the dome's +Y pole to +Z (UsdLuxDomeLight.OrientToStageUpAxis).
 _POLE_Z_ROW = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
 
-DEFAULT_LIGHT_IRRADIANCE = float(np.pi)
-DEFAULT_LIGHT_ANGLE = 0.53
+DEFAULT_LIGHT_IRRADIANCE = float(np.pi)  # lux: a white Lambertian surface facing it has radiance 1
+DEFAULT_LIGHT_ANGLE = 0.53  # degrees
 DEFAULT_LIGHT = f"""The default light, used when a stage has no UsdLux light and no emissive material.
 
 A single white DistantLight (a "key light", sun-sized: angle {DEFAULT_LIGHT_ANGLE} degrees) with irradiance pi
@@ -100,14 +106,19 @@ def read_light(prim, sampler: TransformSampler, warn) -> sc.Light | None:
         light.radius = float(get("radius", 0.5))
         area = np.pi * light.radius**2 * sx * sy
     elif kind == sc.LIGHT_SPHERE:
-        light.radius = 0.0 if bool(get("treatAsPoint", False)) else float(get("radius", 0.5))
-        area = 4.0 * np.pi * light.radius**2 * (sx * sy + sy * sz + sz * sx) / 3.0
+        r = float(get("radius", 0.5))
+        area = 4.0 * np.pi * r**2 * (sx * sy + sy * sz + sz * sx) / 3.0
+        light.radius = r
+        if bool(get("treatAsPoint", False)):  # a point of the sphere's far-field intensity L pi r^2 (cd)
+            light.radius = 0.0
+            radiance = radiance * (np.pi * r * r * sx * sy if r > 0.0 else 1.0)
     elif kind == sc.LIGHT_CYLINDER:
         light.length = float(get("length", 1.0))
-        light.radius = 0.0 if bool(get("treatAsLine", False)) else float(get("radius", 0.5))
+        light.radius = float(get("radius", 0.5))
         area = 2.0 * np.pi * light.radius * light.length * sx * 0.5 * (sy + sz)
     elif kind == sc.LIGHT_DISTANT:
         light.angle = float(get("angle", 0.53))
+        area = distant_size_factor(light.angle)
     elif kind == sc.LIGHT_DOME:
         radiance = _dome_texture(prim, light, radiance, frame, warn)
     if prim.HasAPI(UsdLux.ShapingAPI) or prim.HasAPI(UsdLux.ShadowAPI):
@@ -119,6 +130,16 @@ def read_light(prim, sampler: TransformSampler, warn) -> sc.Light | None:
         return None
     light.radiance = tuple(float(x) for x in radiance)
     return light
+
+
+def distant_size_factor(angle_deg: float) -> float:
+    """usdLux's sizeFactor of a DistantLight of apex ``angle_deg``: the irradiance a unit-radiance disk of
+    directions delivers at normal incidence (pi sin^2 theta_max), 1 for a delta direction (schema.usda)."""
+    theta = min(max(np.radians(angle_deg) / 2.0, 0.0), np.pi)
+    if theta <= 0.0:
+        return 1.0
+    s2 = np.sin(theta) ** 2
+    return float(np.pi * s2) if theta <= np.pi / 2 else float(np.pi * (2.0 - s2))
 
 
 def dome_pole_is_z(prim) -> bool:
@@ -201,7 +222,7 @@ def default_light(camera_row: np.ndarray | None, up_axis: str) -> sc.Light:
     return sc.Light(
         kind=sc.LIGHT_DISTANT,
         name="default key light",
-        radiance=(DEFAULT_LIGHT_IRRADIANCE,) * 3,
+        radiance=(DEFAULT_LIGHT_IRRADIANCE / distant_size_factor(DEFAULT_LIGHT_ANGLE),) * 3,  # nits
         transform=sc.MotionTransform.static(col),
         angle=DEFAULT_LIGHT_ANGLE,
     )
