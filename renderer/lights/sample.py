@@ -19,6 +19,7 @@ from renderer.accel.intersect import (
 )
 from renderer.accel.occlusion import hit_uv
 from renderer.lights.envmap import env_pdf, env_radiance, env_sample
+from renderer.lights.shaping import shaping_eval
 from renderer.lights.table import Lights
 from renderer.motion.kernels import keys_matrix
 from renderer.sampling.warps import (
@@ -111,6 +112,21 @@ def light_matrix(lights: Lights, li: int, s: float):
 
 
 @wp.func
+def light_shaping(lights: Lights, li: int, emit_dir: wp.vec3, s: float):
+    """ShapingAPI colour of light li for the unit world direction ``emit_dir`` leaving it, at time s."""
+    sh0 = lights.shape0[li]
+    if sh0[3] == 0.0:
+        return wp.vec3(1.0)
+    sh = sh0 * (1.0 - s) + lights.shape1[li] * s
+    m = light_matrix(lights, li, s)
+    ax = wp.normalize(wp.transform_vector(m, wp.vec3(1.0, 0.0, 0.0)))
+    ay = wp.normalize(wp.transform_vector(m, wp.vec3(0.0, 1.0, 0.0)))
+    az = wp.normalize(wp.transform_vector(m, wp.vec3(0.0, 0.0, 1.0)))
+    dl = wp.normalize(wp.vec3(wp.dot(emit_dir, ax), wp.dot(emit_dir, ay), wp.dot(emit_dir, az)))
+    return shaping_eval(sh, lights.focus_tint[li], lights.ies_table, lights.ies_off[li], lights.ies_param[li], dl)
+
+
+@wp.func
 def rect_frame(lights: Lights, li: int, s: float):
     """World corner, edge vectors and emitting normal of a rect light at time s."""
     m = light_matrix(lights, li, s)
@@ -168,13 +184,13 @@ def sample_light(lights: Lights, geo: Geometry, mats: Materials, tex: Textures, 
         corner, ex, ey, front = rect_frame(lights, li, s)
         g = sample_rect(p, corner, ex, ey, u)
         if g.pdf > 0.0 and wp.dot(g.dir, front) < 0.0:
-            return g.dir, g.dist, Le, g.pdf, False
+            return g.dir, g.dist, wp.cw_mul(Le, light_shaping(lights, li, -g.dir, s)), g.pdf, False
         return zero, 0.0, zero, 0.0, False
     if kind == LIGHT_DISK:
         c, front, r = disk_frame(lights, li, s)
         g = sample_disk_light(p, c, front, r, u)
         if g.pdf > 0.0 and wp.dot(g.dir, front) < 0.0:
-            return g.dir, g.dist, Le, g.pdf, False
+            return g.dir, g.dist, wp.cw_mul(Le, light_shaping(lights, li, -g.dir, s)), g.pdf, False
         return zero, 0.0, zero, 0.0, False
     if kind == LIGHT_SPHERE:
         c, r = sphere_frame(lights, li, s)
@@ -183,16 +199,16 @@ def sample_light(lights: Lights, geo: Geometry, mats: Materials, tex: Textures, 
             dist = wp.length(d)
             if dist <= 0.0:
                 return zero, 0.0, zero, 0.0, True
-            return d / dist, dist, Le / (dist * dist), 1.0, True
+            return d / dist, dist, wp.cw_mul(Le, light_shaping(lights, li, -d / dist, s)) / (dist * dist), 1.0, True
         g = sample_sphere_light(p, c, r, u)
         if g.pdf > 0.0:
-            return g.dir, g.dist, Le, g.pdf, False
+            return g.dir, g.dist, wp.cw_mul(Le, light_shaping(lights, li, -g.dir, s)), g.pdf, False
         return zero, 0.0, zero, 0.0, False
     if kind == LIGHT_CYLINDER:
         c, axis, length, r = cylinder_frame(lights, li, s)
         g = sample_cylinder_light(p, c, axis, length, r, u)
         if g.pdf > 0.0 and wp.dot(g.dir, g.normal) < 0.0:
-            return g.dir, g.dist, Le, g.pdf, False
+            return g.dir, g.dist, wp.cw_mul(Le, light_shaping(lights, li, -g.dir, s)), g.pdf, False
         return zero, 0.0, zero, 0.0, False
     if kind == LIGHT_DISTANT:
         to_light = distant_axis(lights, li, s)
@@ -253,14 +269,14 @@ def area_light_hit(lights: Lights, li: int, ro: wp.vec3, rd: wp.vec3, tmax: floa
         if t > 0.0 and t < tmax and wp.dot(rd, front) < 0.0:
             pdf = rect_pdf(ro, rd, corner, ex, ey)
             if pdf > 0.0:
-                return t, lights.radiance[li], pdf
+                return t, wp.cw_mul(lights.radiance[li], light_shaping(lights, li, -rd, s)), pdf
     elif kind == LIGHT_DISK:
         c, front, r = disk_frame(lights, li, s)
         t = plane_hit(ro, rd, c, front)
         if t > 0.0 and t < tmax and wp.dot(rd, front) < 0.0:
             pdf = disk_light_pdf(ro, rd, c, front, r)
             if pdf > 0.0:
-                return t, lights.radiance[li], pdf
+                return t, wp.cw_mul(lights.radiance[li], light_shaping(lights, li, -rd, s)), pdf
     elif kind == LIGHT_SPHERE:
         c, r = sphere_frame(lights, li, s)
         if r > 0.0:
@@ -274,7 +290,7 @@ def area_light_hit(lights: Lights, li: int, ro: wp.vec3, rd: wp.vec3, tmax: floa
                 if t > 0.0 and t < tmax:
                     pdf = sphere_light_pdf(ro, rd, c, r)
                     if pdf > 0.0:
-                        return t, lights.radiance[li], pdf
+                        return t, wp.cw_mul(lights.radiance[li], light_shaping(lights, li, -rd, s)), pdf
     elif kind == LIGHT_CYLINDER:
         c, axis, length, r = cylinder_frame(lights, li, s)
         o = ro - c
@@ -290,7 +306,7 @@ def area_light_hit(lights: Lights, li: int, ro: wp.vec3, rd: wp.vec3, tmax: floa
                 if t > 0.0 and t < tmax and wp.abs(wp.dot(o + t * rd, axis)) <= 0.5 * length:
                     pdf = cylinder_light_pdf(ro, rd, c, axis, length, r)
                     if pdf > 0.0:
-                        return t, lights.radiance[li], pdf
+                        return t, wp.cw_mul(lights.radiance[li], light_shaping(lights, li, -rd, s)), pdf
     return float(BIG), zero, 0.0
 
 

@@ -20,6 +20,7 @@ import numpy as np
 import warp as wp
 
 from renderer.lights.envmap import EnvMap, upload_envmap
+from renderer.lights.shaping import mean_shaping
 from renderer.motion.kernels import MotionKeys, upload_keys
 from renderer.motion.transform import matrix_at
 from renderer.scene.model import (
@@ -31,6 +32,7 @@ from renderer.scene.model import (
     LIGHT_RECT,
     LIGHT_SPHERE,
     Scene,
+    Shaping,
 )
 
 
@@ -53,6 +55,12 @@ class Lights:
     tri_count: wp.array(dtype=wp.int32)  # mesh lights: number of emitting triangles
     cdf: wp.array(dtype=wp.float32)  # mesh lights: cumulative triangle power, concatenated
     cdf_off: wp.array(dtype=wp.int32)
+    shape0: wp.array(dtype=wp.vec4)  # ShapingAPI at s = 0: (cone angle rad, softness, focus, 1 = shaped)
+    shape1: wp.array(dtype=wp.vec4)  # ... at s = 1 (blended linearly by the sample's time)
+    focus_tint: wp.array(dtype=wp.vec3)
+    ies_off: wp.array(dtype=wp.int32)  # offset of the light's IES grid in ies_table, -1 none
+    ies_param: wp.array(dtype=wp.vec2)  # (ies:angleScale, 1 / profile power or 1)
+    ies_table: wp.array(dtype=wp.float32)  # IES grids (IES_THETA x IES_PHI candela each), concatenated
     env: EnvMap  # the textured dome, if any (size[0] == 1 marks its light)
     dome_visible: int  # 1 when camera rays see a dome (alpha 1 there)
 
@@ -90,9 +98,46 @@ def _axis_scales(xf) -> np.ndarray:
     return np.linalg.norm(m[:3, :3], axis=0)
 
 
+def _shape_keys(sh: Shaping) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    return tuple((math.radians(sh.cone_angle[k]), sh.cone_softness[k], sh.focus[k], 1.0) for k in (0, 1))
+
+
+def _shaped_fraction(sh: Shaping, one_sided: bool) -> float:
+    """Share of a light's power its shaping lets out (at the shutter's open), for light selection."""
+    k0, _ = _shape_keys(sh)
+    ies = (sh.ies_angle_scale, sh.ies_scale)
+    return max(mean_shaping(k0, sh.focus_tint, sh.ies_grid, ies, cosine_weighted=one_sided), 1e-6)
+
+
+def _upload_shaping(lt: Lights, shapes: list, device: str) -> None:
+    no = (math.pi, 0.0, 0.0, 0.0)
+    s0, s1, tint, offs, params, grids = [], [], [], [], [], []
+    at = 0
+    for sh in shapes:
+        if sh is None:
+            s0.append(no), s1.append(no), tint.append((0.0, 0.0, 0.0)), offs.append(-1), params.append((0.0, 1.0))
+            continue
+        k0, k1 = _shape_keys(sh)
+        s0.append(k0), s1.append(k1), tint.append(sh.focus_tint)
+        params.append((sh.ies_angle_scale, sh.ies_scale))
+        if sh.ies_grid is None:
+            offs.append(-1)
+        else:
+            offs.append(at)
+            grids.append(np.asarray(sh.ies_grid, np.float32).ravel())
+            at += grids[-1].size
+    v4 = lambda a: wp.array(np.array(a or [no], np.float32), dtype=wp.vec4, device=device)  # noqa: E731
+    lt.shape0, lt.shape1 = v4(s0), v4(s1)
+    lt.focus_tint = wp.array(np.array(tint or [(0, 0, 0)], np.float32), dtype=wp.vec3, device=device)
+    lt.ies_off = wp.array(np.array(offs or [-1], np.int32), dtype=wp.int32, device=device)
+    lt.ies_param = wp.array(np.array(params or [(0, 1)], np.float32), dtype=wp.vec2, device=device)
+    lt.ies_table = wp.array(np.concatenate(grids) if grids else np.zeros(1, np.float32), dtype=wp.float32,
+                            device=device)
+
+
 def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
     """Lights of a scene for the kernels; returns the struct and the number of lights."""
-    kinds, radiance, size, insts, cdfs, bases, counts, powers, transforms = ([] for _ in range(9))
+    kinds, radiance, size, insts, cdfs, bases, counts, powers, transforms, shapes = ([] for _ in range(10))
     centre, radius = scene_sphere(scene)
     env_image, env_xf = None, np.eye(4)
     dome_visible = 0
@@ -157,8 +202,11 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
             point = light.kind == LIGHT_SPHERE and light.radius <= 0  # radiance holds an intensity: no cap
             power = delivered_irradiance(phi, math.inf if point else lum, matrix_at(light.transform, 0.0)[:3, 3],
                                          centre, radius)
+        if light.shaping is not None:
+            power *= _shaped_fraction(light.shaping, one_sided=light.kind in (LIGHT_RECT, LIGHT_DISK))
         if not np.isfinite(rad).all() or (rad <= 0).all() or not power > 0:
             continue
+        shapes.append(light.shaping)
         kinds.append(light.kind)
         radiance.append(rad)
         size.append(sz)
@@ -200,6 +248,7 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
     lt.cdf = wp.array(np.concatenate(cdfs) if cdfs else np.zeros(1, np.float32), dtype=wp.float32,
                       device=device)
     lt.cdf_off = i32(np.cumsum([0] + lens[:-1]), [0])
+    _upload_shaping(lt, shapes, device)
     lt.env = upload_envmap(env_image, env_xf, device)
     lt.dome_visible = int(dome_visible)
     return lt, n

@@ -150,6 +150,21 @@ class Material:
 
 
 @dataclass
+class Shaping:
+    """usdLux ShapingAPI of a light (see ``lights.shaping``). Animated values are keyed at the shutter's open
+    and close (s = 0, s = 1) and blended linearly by the sample's time."""
+
+    cone_angle: tuple[float, float] = (90.0, 90.0)  # degrees off the light's -Z axis
+    cone_softness: tuple[float, float] = (0.0, 0.0)  # [0, 1]
+    focus: tuple[float, float] = (0.0, 0.0)  # exponent; <= 0 off
+    focus_tint: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    ies_grid: np.ndarray | None = None  # (IES_THETA, IES_PHI) float32 candela at theta = 0..180, phi = 0..360 deg
+    ies_angle_scale: float = 0.0
+    ies_scale: float = 1.0  # 1 / profile power with ies:normalize, else 1
+    ies_name: str = ""
+
+
+@dataclass
 class Light:
     """A UsdLux light. Geometry is in the light's local frame (USD conventions):
 
@@ -186,6 +201,7 @@ class Light:
     # (including DomeLight_1's poleAxis turn). ``radiance`` then holds the texture's mean over the sphere.
     texture: np.ndarray | None = None
     texture_name: str = ""  # resolved file, for messages
+    shaping: Shaping | None = None  # ShapingAPI (cone, focus, IES); None: emits evenly
 
 
 @dataclass

@@ -24,8 +24,9 @@ texture's mean over the sphere.
 from __future__ import annotations
 
 import numpy as np
-from pxr import UsdGeom, UsdLux
+from pxr import Ar, UsdGeom, UsdLux
 
+from renderer.lights import ies
 from renderer.scene import model as sc
 from renderer.shading.textures import ImageError, latlong_mean
 from renderer.usd.materials import read_asset_image, resolve_asset
@@ -121,8 +122,12 @@ def read_light(prim, sampler: TransformSampler, warn) -> sc.Light | None:
         area = distant_size_factor(light.angle)
     elif kind == sc.LIGHT_DOME:
         radiance = _dome_texture(prim, light, radiance, frame, warn)
-    if prim.HasAPI(UsdLux.ShapingAPI) or prim.HasAPI(UsdLux.ShadowAPI):
-        warn("light shaping/shadow controls (spot cones, IES profiles, shadow colour) ignored", path)
+    if kind not in (sc.LIGHT_DISTANT, sc.LIGHT_DOME):
+        light.shaping = read_shaping(prim, sampler.shutter, warn)
+    elif _has_shaping(prim):
+        warn("light shaping on distant and dome lights ignored (the schema shapes local lights)", path)
+    if prim.HasAPI(UsdLux.ShadowAPI):
+        warn("light shadow controls (shadow colour, distance, falloff) ignored", path)
     if bool(get("normalize", False)) and area > 0.0:
         radiance = radiance / area
     if not np.all(np.isfinite(radiance)):
@@ -130,6 +135,66 @@ def read_light(prim, sampler: TransformSampler, warn) -> sc.Light | None:
         return None
     light.radiance = tuple(float(x) for x in radiance)
     return light
+
+
+_SHAPING_NAMES = ("shaping:cone:angle", "shaping:cone:softness", "shaping:focus", "shaping:focusTint",
+                  "shaping:ies:file", "shaping:ies:angleScale", "shaping:ies:normalize")
+
+
+def _has_shaping(prim) -> bool:
+    if prim.HasAPI(UsdLux.ShapingAPI):
+        return True
+    return any((prim.GetAttribute("inputs:" + n) and prim.GetAttribute("inputs:" + n).HasAuthoredValue())
+               or (prim.GetAttribute(n) and prim.GetAttribute(n).HasAuthoredValue()) for n in _SHAPING_NAMES)
+
+
+def read_shaping(prim, shutter, warn) -> sc.Shaping | None:
+    """ShapingAPI of a light (None when it has none): cone, softness and focus at the shutter's open and close
+    (an animated cone blurs), focus tint and IES profile at the frame."""
+    if not _has_shaping(prim):
+        return None
+    path = str(prim.GetPath())
+    at = lambda n, d, t: float(_value(prim, n, t, d))  # noqa: E731
+    ends = (shutter.open, shutter.close)
+    sh = sc.Shaping(
+        cone_angle=tuple(at("shaping:cone:angle", 90.0, t) for t in ends),
+        cone_softness=tuple(at("shaping:cone:softness", 0.0, t) for t in ends),
+        focus=tuple(at("shaping:focus", 0.0, t) for t in ends),
+        focus_tint=tuple(float(x) for x in _value(prim, "shaping:focusTint", shutter.frame, (0.0, 0.0, 0.0))),
+    )
+    attr = None
+    for name in ("inputs:shaping:ies:file", "shaping:ies:file"):
+        a = prim.GetAttribute(name)
+        if a and a.HasAuthoredValue():
+            attr = a
+            break
+    value = attr.Get(shutter.frame) if attr is not None else None
+    if value is not None and str(getattr(value, "path", value) or "").strip():
+        resolved, _ = resolve_asset(attr, value)
+        try:
+            profile = ies.parse_ies(read_asset_text(resolved))
+        except (ies.IesError, OSError, UnicodeDecodeError) as e:
+            warn("IES profiles missing or unreadable: those lights emit without a profile",
+                 f"{resolved} ({' '.join(str(e).split())[:160]}; {path})")
+        else:
+            sh.ies_grid = profile.grid()
+            sh.ies_angle_scale = float(_value(prim, "shaping:ies:angleScale", shutter.frame, 0.0))
+            if bool(_value(prim, "shaping:ies:normalize", shutter.frame, False)):
+                power = profile.power()
+                sh.ies_scale = 1.0 / power if power > 0 else 0.0
+            sh.ies_name = resolved
+    return sh
+
+
+def read_asset_text(resolved: str) -> str:
+    """A text asset's contents (plain files and files inside .usdz packages)."""
+    if Ar.IsPackageRelativePath(resolved):
+        asset = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(resolved))
+        if asset is None:
+            raise OSError(f"cannot open {resolved}")
+        return bytes(asset.GetBuffer()).decode("latin-1")
+    with open(resolved, encoding="latin-1") as f:
+        return f.read()
 
 
 def distant_size_factor(angle_deg: float) -> float:
