@@ -29,7 +29,14 @@ from renderer.accel.intersect import (
 from renderer.accel.occlusion import hit_uv, transmittance
 from renderer.camera import CameraParams, camera_ray
 from renderer.film.film import SampleBuffer
-from renderer.lights.sample import area_light_hit, choose_light, infinite_light_eval, mesh_light_pdf, sample_light
+from renderer.lights.sample import (
+    area_light_hit,
+    choose_light,
+    emitting_side,
+    infinite_light_eval,
+    mesh_light_pdf,
+    sample_light,
+)
 from renderer.lights.table import Lights
 from renderer.options import TIME_FILTERS
 from renderer.sampling.sobol import (
@@ -303,7 +310,7 @@ def trace_wave_kernel(
                     rays += 1
                     alpha = 1.0 - transmittance(geo, mats, tex, origin, rd, t_far, s)
             # emission seen along the path
-            Le = ms.emissive_color
+            Le = ms.emissive_color * emitting_side(lights, hit.inst, sp.front)
             if Le[0] > 0.0 or Le[1] > 0.0 or Le[2] > 0.0:
                 w = float(1.0)
                 li = lights.inst_light[hit.inst]

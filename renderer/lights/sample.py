@@ -14,6 +14,7 @@ from renderer.accel.intersect import (
     Geometry,
     instance_object_to_world,
     instance_visible,
+    instance_world_to_object,
     mesh_keys_at,
     triangle_points,
 )
@@ -237,6 +238,10 @@ def sample_light(lights: Lights, geo: Geometry, mats: Materials, tex: Textures, 
     o2w = instance_object_to_world(geo, inst, s)
     g = sample_triangle_light(p, wp.transform_point(o2w, p0), wp.transform_point(o2w, p1),
                               wp.transform_point(o2w, p2), u)
+    if lights.one_sided[li] != 0:  # a MeshLightAPI mesh emits from its front faces (normal as surface_at's)
+        w2o_t = wp.transpose(instance_world_to_object(geo, inst, s))
+        if wp.dot(wp.transform_vector(w2o_t, wp.cross(p1 - p0, p2 - p0)), g.dir) >= 0.0:
+            return zero, 0.0, zero, 0.0, False
     if g.pdf > 0.0:
         # the emission where the point landed (emissive textures): its barycentrics are the warp's
         b = square_to_uniform_triangle(u)
@@ -244,6 +249,16 @@ def sample_light(lights: Lights, geo: Geometry, mats: Materials, tex: Textures, 
         uv = hit_uv(geo, mesh, tg, b[1], 1.0 - b[0] - b[1])
         return g.dir, g.dist, eval_emission(mats, tex, geo.tri_material[tg], uv), g.pdf * p_tri, False
     return zero, 0.0, zero, 0.0, False
+
+
+@wp.func
+def emitting_side(lights: Lights, inst: int, front: int):
+    """1 when emission leaves the side of instance ``inst`` a ray hit (``front``: its winding's front), else 0:
+    one-sided mesh lights are dark from behind."""
+    li = lights.inst_light[inst]
+    if li >= 0 and front == 0 and lights.one_sided[li] != 0:
+        return 0.0
+    return 1.0
 
 
 @wp.func

@@ -51,6 +51,7 @@ class Lights:
     select_pdf: wp.array(dtype=wp.float32)  # (count,) probability of choosing each light
     instance: wp.array(dtype=wp.int32)  # mesh lights: the emissive instance
     inst_light: wp.array(dtype=wp.int32)  # per instance: its mesh light, or -1
+    one_sided: wp.array(dtype=wp.int32)  # mesh lights: 1 = emits from its triangles' front faces only
     tri_base: wp.array(dtype=wp.int32)  # mesh lights: first emitting triangle of the instance's mesh
     tri_count: wp.array(dtype=wp.int32)  # mesh lights: number of emitting triangles
     cdf: wp.array(dtype=wp.float32)  # mesh lights: cumulative triangle power, concatenated
@@ -137,7 +138,7 @@ def _upload_shaping(lt: Lights, shapes: list, device: str) -> None:
 
 def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
     """Lights of a scene for the kernels; returns the struct and the number of lights."""
-    kinds, radiance, size, insts, cdfs, bases, counts, powers, transforms, shapes = ([] for _ in range(10))
+    kinds, radiance, size, insts, cdfs, bases, counts, powers, transforms, shapes, sided = ([] for _ in range(11))
     centre, radius = scene_sphere(scene)
     env_image, env_xf = None, np.eye(4)
     dome_visible = 0
@@ -163,7 +164,8 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
                 continue
             cdf = (np.cumsum(tri_power) / tri_power.sum()).astype(np.float32)
             cdf[-1] = 1.0
-            power = delivered_irradiance(2.0 * math.pi * tri_power.sum(),  # both faces emit
+            faces = 1.0 if light.one_sided else 2.0
+            power = delivered_irradiance(faces * math.pi * tri_power.sum(),  # pi L A per emitting face
                                          float(emis.max()), tri.mean((0, 1)), centre, radius)
         elif light.kind == LIGHT_DISTANT:
             half = math.radians(max(0.0, light.angle) * 0.5)
@@ -207,6 +209,7 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
         if not np.isfinite(rad).all() or (rad <= 0).all() or not power > 0:
             continue
         shapes.append(light.shaping)
+        sided.append(int(light.one_sided))
         kinds.append(light.kind)
         radiance.append(rad)
         size.append(sz)
@@ -242,6 +245,7 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
         if k == LIGHT_MESH:
             inst_light[inst] = li
     lt.inst_light = wp.array(inst_light, dtype=wp.int32, device=device)
+    lt.one_sided = i32(sided, [0])
     lt.tri_base = i32(bases, [0])
     lt.tri_count = i32(counts, [0])
     lens = [len(c) for c in cdfs] or [1]

@@ -202,6 +202,7 @@ class Light:
     texture: np.ndarray | None = None
     texture_name: str = ""  # resolved file, for messages
     shaping: Shaping | None = None  # ShapingAPI (cone, focus, IES); None: emits evenly
+    one_sided: bool = False  # LIGHT_MESH: emits only from its triangles' front faces (a MeshLightAPI mesh)
 
 
 @dataclass

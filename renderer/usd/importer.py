@@ -29,6 +29,7 @@ from renderer.errors import SceneError, SettingsError
 from renderer.scene import model as sc
 from renderer.usd import camera as usd_camera
 from renderer.usd import lights as usd_lights
+from renderer.usd.mesh_lights import apply_mesh_light
 from renderer.usd.geometry import PRIMITIVE_TYPES, primitive_signature, read_geometry
 from renderer.usd.materials import MaterialTable
 from renderer.usd.motion import Shutter, TransformSampler, motion_transforms, refine_keys
@@ -148,6 +149,9 @@ class _Importer:
         self._vis_chain: dict[str, tuple[bool, tuple[float, ...]]] = {}
         self._proxies: list = []
         self._saw_render = False
+        self._proto_lights: dict = {}  # path -> (index, light prim) of lights met in PointInstancer prototypes
+        self._mesh_lights: list = []  # (MeshLightAPI prim, its instance indices)
+        self._mesh_light_instances: set[int] = set()
 
     # -- top level ------------------------------------------------------------------------------------------------
     def run(self) -> sc.Scene:
@@ -180,6 +184,10 @@ class _Importer:
             camera, cam_row = usd_camera.auto_camera(bounds, self._up_axis(), settings)
             warn("no camera in stage: framing the scene bounds automatically")
 
+        for prim, insts in self._mesh_lights:
+            apply_mesh_light(prim, insts, self.meshes, self.instances, self.materials.materials,
+                             float(self.shutter.normalise([self.frame])[0]), self.frame, self.warn)
+            self._mesh_light_instances.update(insts)
         self._emissive_lights()
         if not self.lights:
             self.lights.append(usd_lights.default_light(cam_row, self._up_axis()))
@@ -246,10 +254,11 @@ class _Importer:
                     self._guarded(self._visit_gprim, prim, purpose)
             elif prim.IsA(UsdGeom.Mesh) or prim.GetTypeName() in PRIMITIVE_TYPES:
                 it.PruneChildren()
+                first = len(self.instances)
                 if purpose != "guide":
                     self._guarded(self._visit_gprim, prim, purpose)
-                if usd_lights.is_light(prim):
-                    self.warn("mesh lights (MeshLightAPI) are rendered as plain geometry", str(prim.GetPath()))
+                if usd_lights.is_light(prim):  # MeshLightAPI: its instances become emitters (see mesh_lights)
+                    self._mesh_lights.append((prim, list(range(first, len(self.instances)))))
             elif usd_lights.is_light(prim):
                 self._guarded(self._light, prim)
             elif prim.IsA(UsdGeom.Gprim):
@@ -387,7 +396,16 @@ class _Importer:
             return
         if len(times) > 1:
             times, rows = refine_keys(lambda ts: self._pi_placements(prim, ts)[2], times)
-        self._add_instances(meshes, names, times, rows, interval)
+        is_light = np.asarray(meshes) < 0
+        self._proto_light_prims = [p for _, p in sorted(self._proto_lights.values(), key=lambda ip: ip[0])]
+        for j in np.nonzero(is_light)[0]:  # one light per instance of a light in a prototype
+            light = usd_lights.read_light(self._proto_light_prims[-meshes[j] - 1], self.xf, self.warn,
+                                          placement=(times, rows[j]), name=names[j])
+            if light is not None:
+                self.lights.append(light)
+        keep = np.nonzero(~is_light)[0]
+        if len(keep):
+            self._add_instances([meshes[j] for j in keep], [names[j] for j in keep], times, rows[keep], interval)
 
     def _pi_key_times(self, prim) -> np.ndarray:
         sh = self.shutter
@@ -510,8 +528,13 @@ class _Importer:
                     meshes.append(mesh)
                     names.append(str(prim.GetPath()))
                     rows.append(self.xf.world(prim, times)[None])
-            elif usd_lights.is_light(prim):
-                self.warn("lights inside PointInstancer prototypes ignored", str(prim.GetPath()))
+            elif usd_lights.is_light(prim):  # placed like geometry, told apart by a negative index
+                key = str(prim.GetPath())
+                if key not in self._proto_lights:
+                    self._proto_lights[key] = (len(self._proto_lights), prim)
+                meshes.append(-1 - self._proto_lights[key][0])
+                names.append(str(prim.GetPath()))
+                rows.append(self.xf.world(prim, times)[None])
         if not meshes:
             return [], [], np.zeros((0, len(times), 4, 4))
         return meshes, names, np.concatenate(rows)
@@ -540,7 +563,8 @@ class _Importer:
             if em is not None:
                 self.lights.append(sc.Light(kind=sc.LIGHT_MESH, name=inst.name or self.meshes[inst.mesh].name,
                                             radiance=tuple(float(x) for x in em), transform=inst.transform,
-                                            instance=i))
+                                            instance=i, one_sided=i in self._mesh_light_instances
+                                            and not self.meshes[inst.mesh].double_sided))
 
 
 __all__ = ["load_scene", "WarningLog"]

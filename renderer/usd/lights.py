@@ -78,8 +78,24 @@ def _axis_lengths(row_matrix: np.ndarray) -> np.ndarray:
     return np.linalg.norm(np.asarray(row_matrix)[:3, :3], axis=1)
 
 
-def read_light(prim, sampler: TransformSampler, warn) -> sc.Light | None:
-    """A UsdLux light prim to a Light (None for unsupported kinds, with a warning)."""
+def base_emission(prim, frame: float) -> np.ndarray:
+    """intensity * 2^exposure * color * blackbody (if enabled): the radiance before sizeFactor, nits (RGB)."""
+    get = lambda n, d: _value(prim, n, frame, d)  # noqa: E731
+    color = np.asarray(get("color", (1.0, 1.0, 1.0)), np.float64)[:3]
+    radiance = float(get("intensity", 1.0)) * 2.0 ** float(get("exposure", 0.0)) * color
+    if bool(get("enableColorTemperature", False)):
+        radiance = radiance * np.asarray(UsdLux.BlackbodyTemperatureAsRgb(float(get("colorTemperature", 6500.0))))
+    return radiance
+
+
+def normalized(prim, frame: float) -> bool:
+    return bool(_value(prim, "normalize", frame, False))
+
+
+def read_light(prim, sampler: TransformSampler, warn, placement=None, name: str | None = None) -> sc.Light | None:
+    """A UsdLux light prim to a Light (None for unsupported kinds, with a warning). ``placement`` (absolute
+    times (K,), row-vector world matrices (K, 4, 4)) places one instance of a light in a PointInstancer
+    prototype, ``name`` naming it."""
     kind_name = prim.GetTypeName()
     path = str(prim.GetPath())
     kind = _KINDS.get(kind_name)
@@ -88,16 +104,18 @@ def read_light(prim, sampler: TransformSampler, warn) -> sc.Light | None:
         return None
     frame = sampler.shutter.frame
     get = lambda n, d: _value(prim, n, frame, d)  # noqa: E731
-    color = np.asarray(get("color", (1.0, 1.0, 1.0)), np.float64)[:3]
-    radiance = float(get("intensity", 1.0)) * 2.0 ** float(get("exposure", 0.0)) * color
-    if bool(get("enableColorTemperature", False)):
-        radiance = radiance * np.asarray(UsdLux.BlackbodyTemperatureAsRgb(float(get("colorTemperature", 6500.0))))
-    times, rows = sampler.motion(prim)
+    radiance = base_emission(prim, frame)
+    if placement is None:
+        times, rows = sampler.motion(prim)
+        frame_row = sampler.world(prim, [frame])[0]
+    else:  # a light inside a PointInstancer prototype: this instance's world matrices
+        times, rows = placement
+        times, rows = np.asarray(times, np.float64), np.asarray(rows, np.float64)
+        frame_row = rows[int(np.argmin(np.abs(times - frame)))]
     if kind == sc.LIGHT_DOME and dome_pole_is_z(prim):
         rows = _POLE_Z_ROW[None] @ np.asarray(rows, np.float64)
-    light = sc.Light(kind=kind, name=path, radiance=(0.0, 0.0, 0.0),
+    light = sc.Light(kind=kind, name=name or path, radiance=(0.0, 0.0, 0.0),
                      transform=motion_transform(sampler.shutter.normalise(times), rows))
-    frame_row = sampler.world(prim, [frame])[0]
     sx, sy, sz = _axis_lengths(frame_row)
     area = 0.0
     if kind == sc.LIGHT_RECT:
