@@ -76,3 +76,31 @@ def test_sphere_light_normalize_divides_by_its_area_and_treat_as_point_keeps_its
     assert results["plain"] == pytest.approx(E / math.pi, rel=0.02)
     assert results["point"] == pytest.approx(E / math.pi, rel=0.02)
     assert results["norm"] == pytest.approx(E / math.pi / (4 * math.pi * r * r), rel=0.02)
+
+
+def test_rect_light_texture_follows_the_schema_orientation(tmp_path):
+    """usdLux RectLight: the texture's first texel (top left) at local (+X, +Y), its last at (-X, -Y). A 2x2
+    image (red, green / blue, white) on a rect 2 cm above the floor lights each floor quadrant with its texel."""
+    from PIL import Image
+    img = np.array([[[255, 0, 0], [0, 255, 0]], [[0, 0, 255], [255, 255, 255]]], np.uint8)
+    Image.fromarray(img).save(tmp_path / "quad.png")
+    stage = stages.new_stage(tmp_path / "tex.usda")
+    stages.camera(stage, ortho=True, h_ap_mm=8.0, v_ap_mm=8.0, translate=(0, 0.5, 0), rotate_x=-90.0,
+                  tenths_per_mm=1.0)  # 0.8 m square; image right = +X, image top = -Z
+    stages.rect_xz(stage, "/World/Floor", -10, 10, -10, 10, 0.0, stages.material(stage, "White", (1, 1, 1)))
+    rect = UsdLux.RectLight.Define(stage, "/World/Panel")
+    rect.CreateWidthAttr(1.0)
+    rect.CreateHeightAttr(1.0)
+    rect.CreateTextureFileAttr("quad.png")
+    xf = UsdGeom.Xformable(rect)
+    xf.AddTranslateOp().Set(Gf.Vec3d(0, 0.02, 0))
+    xf.AddRotateXOp().Set(-90.0)  # emits down; local +Y is world -Z (image top), local +X world +X
+    stage.Save()
+    rgb, _ = render_rgb(tmp_path / "tex.usda", width=8, height=8, spp=16, max_depth=1)
+    quads = {"top_right": rgb[1:3, 5:7], "top_left": rgb[1:3, 1:3], "bottom_right": rgb[5:7, 5:7],
+             "bottom_left": rgb[5:7, 1:3]}
+    mean = {k: v.reshape(-1, 3).mean(0) for k, v in quads.items()}
+    assert np.argmax(mean["top_right"]) == 0 and mean["top_right"][0] > 3 * mean["top_right"][1:].max()  # red
+    assert np.argmax(mean["top_left"]) == 1 and mean["top_left"][1] > 3 * mean["top_left"][[0, 2]].max()  # green
+    assert np.argmax(mean["bottom_right"]) == 2 and mean["bottom_right"][2] > 3 * mean["bottom_right"][:2].max()
+    assert mean["bottom_left"].min() > 0.8 * mean["bottom_left"].max()  # white

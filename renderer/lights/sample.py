@@ -128,6 +128,22 @@ def light_shaping(lights: Lights, li: int, emit_dir: wp.vec3, s: float):
 
 
 @wp.func
+def rect_texel(lights: Lights, li: int, corner: wp.vec3, ex: wp.vec3, ey: wp.vec3, q: wp.vec3):
+    """A rect light's texture at world point q on it (white without one): texel (0, 0) at the (+X, +Y) corner,
+    the image's last at (-X, -Y) (usdLux RectLight), nearest texel."""
+    off = lights.img_off[li]
+    if off < 0:
+        return wp.vec3(1.0)
+    a = wp.clamp(wp.dot(q - corner, ex) / wp.dot(ex, ex), 0.0, 1.0)  # 0 at -X, 1 at +X
+    b = wp.clamp(wp.dot(q - corner, ey) / wp.dot(ey, ey), 0.0, 1.0)  # 0 at -Y, 1 at +Y
+    w = lights.img_w[li]
+    h = lights.img_h[li]
+    col = wp.min(int((1.0 - a) * float(w)), w - 1)
+    row = wp.min(int((1.0 - b) * float(h)), h - 1)
+    return lights.img[off + row * w + col]
+
+
+@wp.func
 def rect_frame(lights: Lights, li: int, s: float):
     """World corner, edge vectors and emitting normal of a rect light at time s."""
     m = light_matrix(lights, li, s)
@@ -185,6 +201,7 @@ def sample_light(lights: Lights, geo: Geometry, mats: Materials, tex: Textures, 
         corner, ex, ey, front = rect_frame(lights, li, s)
         g = sample_rect(p, corner, ex, ey, u)
         if g.pdf > 0.0 and wp.dot(g.dir, front) < 0.0:
+            Le = wp.cw_mul(Le, rect_texel(lights, li, corner, ex, ey, p + g.dir * g.dist))
             return g.dir, g.dist, wp.cw_mul(Le, light_shaping(lights, li, -g.dir, s)), g.pdf, False
         return zero, 0.0, zero, 0.0, False
     if kind == LIGHT_DISK:
@@ -284,7 +301,8 @@ def area_light_hit(lights: Lights, li: int, ro: wp.vec3, rd: wp.vec3, tmax: floa
         if t > 0.0 and t < tmax and wp.dot(rd, front) < 0.0:
             pdf = rect_pdf(ro, rd, corner, ex, ey)
             if pdf > 0.0:
-                return t, wp.cw_mul(lights.radiance[li], light_shaping(lights, li, -rd, s)), pdf
+                Le = wp.cw_mul(lights.radiance[li], rect_texel(lights, li, corner, ex, ey, ro + rd * t))
+                return t, wp.cw_mul(Le, light_shaping(lights, li, -rd, s)), pdf
     elif kind == LIGHT_DISK:
         c, front, r = disk_frame(lights, li, s)
         t = plane_hit(ro, rd, c, front)

@@ -62,6 +62,10 @@ class Lights:
     ies_off: wp.array(dtype=wp.int32)  # offset of the light's IES grid in ies_table, -1 none
     ies_param: wp.array(dtype=wp.vec2)  # (ies:angleScale, 1 / profile power or 1)
     ies_table: wp.array(dtype=wp.float32)  # IES grids (IES_THETA x IES_PHI candela each), concatenated
+    img_off: wp.array(dtype=wp.int32)  # rect lights: first texel of its texture in img, -1 none
+    img_w: wp.array(dtype=wp.int32)
+    img_h: wp.array(dtype=wp.int32)
+    img: wp.array(dtype=wp.vec3)  # rect light textures, rows top to bottom, concatenated
     env: EnvMap  # the textured dome, if any (size[0] == 1 marks its light)
     dome_visible: int  # 1 when camera rays see a dome (alpha 1 there)
 
@@ -136,9 +140,25 @@ def _upload_shaping(lt: Lights, shapes: list, device: str) -> None:
                             device=device)
 
 
+def _upload_images(lt: Lights, images: list, device: str) -> None:
+    offs, ws, hs, data = [], [], [], []
+    at = 0
+    for im in images:
+        if im is None:
+            offs.append(-1), ws.append(0), hs.append(0)
+            continue
+        im = np.asarray(im, np.float32)
+        offs.append(at), ws.append(im.shape[1]), hs.append(im.shape[0])
+        data.append(im.reshape(-1, 3))
+        at += len(data[-1])
+    i32 = lambda a, d: wp.array(np.array(a or [d], np.int32), dtype=wp.int32, device=device)  # noqa: E731
+    lt.img_off, lt.img_w, lt.img_h = i32(offs, -1), i32(ws, 0), i32(hs, 0)
+    lt.img = wp.array(np.concatenate(data) if data else np.zeros((1, 3), np.float32), dtype=wp.vec3, device=device)
+
+
 def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
     """Lights of a scene for the kernels; returns the struct and the number of lights."""
-    kinds, radiance, size, insts, cdfs, bases, counts, powers, transforms, shapes, sided = ([] for _ in range(11))
+    kinds, radiance, size, insts, cdfs, bases, counts, powers, transforms, shapes, sided, images = ([] for _ in range(12))
     centre, radius = scene_sphere(scene)
     env_image, env_xf = None, np.eye(4)
     dome_visible = 0
@@ -192,6 +212,8 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
             power = math.pi * mean  # irradiance of a uniform dome of the mean radiance
         else:
             if light.kind == LIGHT_RECT:
+                if light.texture is not None:  # the texture's mean scales the power
+                    lum *= _luminance(np.asarray(light.texture, np.float64).reshape(-1, 3).mean(0))
                 phi = lum * light.width * light.height * sx * sy * math.pi
             elif light.kind == LIGHT_DISK:
                 phi = lum * math.pi * (light.radius * sx) ** 2 * math.pi
@@ -209,6 +231,7 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
         if not np.isfinite(rad).all() or (rad <= 0).all() or not power > 0:
             continue
         shapes.append(light.shaping)
+        images.append(light.texture if light.kind == LIGHT_RECT else None)
         sided.append(int(light.one_sided))
         kinds.append(light.kind)
         radiance.append(rad)
@@ -253,6 +276,7 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
                       device=device)
     lt.cdf_off = i32(np.cumsum([0] + lens[:-1]), [0])
     _upload_shaping(lt, shapes, device)
+    _upload_images(lt, images, device)
     lt.env = upload_envmap(env_image, env_xf, device)
     lt.dome_visible = int(dome_visible)
     return lt, n

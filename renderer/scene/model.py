@@ -200,6 +200,8 @@ class Light:
     # (OpenEXR lat-long: v = 0 is +Y, u = 0.5 is +Z, u = 0.25 is +X); ``transform`` carries dome-local to world
     # (including DomeLight_1's poleAxis turn). ``radiance`` then holds the texture's mean over the sphere.
     texture: np.ndarray | None = None
+    # LIGHT_RECT with ``texture:file``: (H, W, 3) float32 linear RGB multiplying ``radiance``, row 0 the top; texel
+    # (0, 0) sits at the rect's (+X, +Y) corner, the last at (-X, -Y) (usdLux RectLight).
     texture_name: str = ""  # resolved file, for messages
     shaping: Shaping | None = None  # ShapingAPI (cone, focus, IES); None: emits evenly
     one_sided: bool = False  # LIGHT_MESH: emits only from its triangles' front faces (a MeshLightAPI mesh)

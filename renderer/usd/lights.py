@@ -12,6 +12,10 @@ SphereLight with ``treatAsPoint`` becomes a point light of the same far-field in
 Both the current ``inputs:`` attribute names and the legacy names without the prefix are read. Light parameters
 are taken at the frame; the light's transform moves over the shutter like any prim's.
 
+A RectLight's ``texture:file`` multiplies its emission; by the schema the image's first texel (top left) is at
+the rect's (+X, +Y) corner and its last at (-X, -Y), so the image reads unmirrored from the side the light
+shines towards (husk and kick once showed it mirrored).
+
 DomeLight textures (``inputs:texture:file``, OpenEXR/HDR/any OpenImageIO format, resolved relative to the
 authoring layer) become ``Light.texture``: linear radiance (the image times intensity * 2^exposure * color *
 blackbody), rows top to bottom, in the OpenEXR lat-long layout UsdLux specifies (``textures.latlong_to_direction``:
@@ -140,6 +144,10 @@ def read_light(prim, sampler: TransformSampler, warn, placement=None, name: str 
         area = distant_size_factor(light.angle)
     elif kind == sc.LIGHT_DOME:
         radiance = _dome_texture(prim, light, radiance, frame, warn)
+    if kind == sc.LIGHT_RECT:
+        image = _light_image(prim, frame, warn)
+        if image is not None:
+            light.texture, light.texture_name = image
     if kind not in (sc.LIGHT_DISTANT, sc.LIGHT_DOME):
         light.shaping = read_shaping(prim, sampler.shutter, warn)
     elif _has_shaping(prim):
@@ -234,6 +242,33 @@ def dome_pole_is_z(prim) -> bool:
     if pole == "scene":
         return str(UsdGeom.GetStageUpAxis(prim.GetStage())) == "Z"
     return pole == "Z"
+
+
+def _light_image(prim, frame: float, warn) -> tuple[np.ndarray, str] | None:
+    """A RectLight's ``texture:file`` as (H, W, 3) float32 linear RGB, rows top to bottom, and its path."""
+    path = str(prim.GetPath())
+    attr = None
+    for name in ("inputs:texture:file", "texture:file"):
+        a = prim.GetAttribute(name)
+        if a and a.HasAuthoredValue():
+            attr = a
+            break
+    value = attr.Get(frame) if attr is not None else None
+    if value is None or not str(getattr(value, "path", value) or "").strip():
+        return None
+    resolved, tiles = resolve_asset(attr, value)
+    if tiles is not None:
+        warn("UDIM light textures ignored: those lights use their constant color", path)
+        return None
+    try:
+        loaded = read_asset_image(resolved, "auto", keep_top_down=True)
+    except (ImageError, OSError, RuntimeError) as e:
+        warn("light textures missing or unreadable: those lights use their constant color",
+             f"{resolved} ({' '.join(str(e).split())[:160]}; {path})")
+        return None
+    img = loaded.top_down
+    rgb = np.repeat(img[..., :1], 3, -1) if img.shape[-1] < 3 else img[..., :3]
+    return np.ascontiguousarray(rgb, np.float32), resolved
 
 
 def _dome_texture(prim, light: sc.Light, radiance: np.ndarray, frame: float, warn) -> np.ndarray:
