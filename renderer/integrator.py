@@ -32,7 +32,7 @@ from renderer.film.film import SampleBuffer
 from renderer.lights.sample import (
     area_light_hit,
     choose_light,
-    emitting_side,
+    emission_mis_light,
     infinite_light_eval,
     mesh_light_pdf,
     sample_light,
@@ -310,10 +310,10 @@ def trace_wave_kernel(
                     rays += 1
                     alpha = 1.0 - transmittance(geo, mats, tex, origin, rd, t_far, s)
             # emission seen along the path
-            Le = ms.emissive_color * emitting_side(lights, hit.inst, sp.front)
+            Le = ms.emissive_color
             if Le[0] > 0.0 or Le[1] > 0.0 or Le[2] > 0.0:
                 w = float(1.0)
-                li = lights.inst_light[hit.inst]
+                li = emission_mis_light(lights, hit.inst)
                 if prev_delta == 0 and li >= 0:
                     pdf_l = lights.select_pdf[li] * mesh_light_pdf(lights, geo, li, hit.inst, hit.tri, origin,
                                                                      sp.p, s)

@@ -79,11 +79,13 @@ def test_mesh_light_emits_from_its_front_face_only(tmp_path):
     assert floor_value(tmp_path / "up.usda", spp=16).min() > 0.1
 
 
-@pytest.mark.parametrize("mode,expect_glow,expect_diffuse", [
-    ("materialGlowTintsLight", (2.0, 1.0, 0.5), (0.5, 0.5, 0.5)),
-    ("independent", (4.0, 2.0, 2.0), (0.5, 0.5, 0.5)),
-    ("noMaterialResponse", (4.0, 2.0, 2.0), (0.0, 0.0, 0.0))])
-def test_material_sync_modes(tmp_path, mode, expect_glow, expect_diffuse):
+@pytest.mark.parametrize("mode,expect_light,expect_glow,expect_diffuse", [
+    ("materialGlowTintsLight", (2.0, 1.0, 0.5), (0.5, 0.5, 0.25), (0.5, 0.5, 0.5)),
+    ("independent", (4.0, 2.0, 2.0), (0.5, 0.5, 0.25), (0.5, 0.5, 0.5)),
+    ("noMaterialResponse", (4.0, 2.0, 2.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))])
+def test_material_sync_modes(tmp_path, mode, expect_light, expect_glow, expect_diffuse):
+    """Light rays carry L (tinted by the glow in materialGlowTintsLight); rays hitting the mesh see its material
+    (its glow), or nothing at all with noMaterialResponse."""
     stage = stages.new_stage(tmp_path / "s.usda")
     mat = stages.material(stage, "Glow", diffuse=(0.5, 0.5, 0.5), emissive=(0.5, 0.5, 0.25))
     m = down_quad(stage, "/World/Panel", 1, 1, H, mat)
@@ -100,7 +102,8 @@ def test_material_sync_modes(tmp_path, mode, expect_glow, expect_diffuse):
     assert mat_out.emissive_color == pytest.approx(expect_glow)
     assert mat_out.diffuse_color == pytest.approx(expect_diffuse)
     (light_out,) = scene.lights
-    assert light_out.kind == sc.LIGHT_MESH and light_out.one_sided
+    assert light_out.kind == sc.LIGHT_MESH and light_out.one_sided and light_out.uniform
+    assert light_out.radiance == pytest.approx(expect_light)
     assert not any("MeshLightAPI" in w for w in scene.warnings)
 
 

@@ -259,6 +259,8 @@ def sample_light(lights: Lights, geo: Geometry, mats: Materials, tex: Textures, 
         w2o_t = wp.transpose(instance_world_to_object(geo, inst, s))
         if wp.dot(wp.transform_vector(w2o_t, wp.cross(p1 - p0, p2 - p0)), g.dir) >= 0.0:
             return zero, 0.0, zero, 0.0, False
+    if g.pdf > 0.0 and lights.uniform[li] != 0:  # MeshLightAPI: light rays only, so no MIS partner
+        return g.dir, g.dist, lights.radiance[li], g.pdf * p_tri, True
     if g.pdf > 0.0:
         # the emission where the point landed (emissive textures): its barycentrics are the warp's
         b = square_to_uniform_triangle(u)
@@ -269,13 +271,13 @@ def sample_light(lights: Lights, geo: Geometry, mats: Materials, tex: Textures, 
 
 
 @wp.func
-def emitting_side(lights: Lights, inst: int, front: int):
-    """1 when emission leaves the side of instance ``inst`` a ray hit (``front``: its winding's front), else 0:
-    one-sided mesh lights are dark from behind."""
+def emission_mis_light(lights: Lights, inst: int):
+    """The mesh light whose sampling also finds the emission seen on instance ``inst`` (for the MIS weight), or
+    -1: none, or a MeshLightAPI light (its L reaches surfaces by light sampling only; hits see the glow)."""
     li = lights.inst_light[inst]
-    if li >= 0 and front == 0 and lights.one_sided[li] != 0:
-        return 0.0
-    return 1.0
+    if li >= 0 and lights.uniform[li] != 0:
+        return -1
+    return li
 
 
 @wp.func

@@ -52,6 +52,7 @@ class Lights:
     instance: wp.array(dtype=wp.int32)  # mesh lights: the emissive instance
     inst_light: wp.array(dtype=wp.int32)  # per instance: its mesh light, or -1
     one_sided: wp.array(dtype=wp.int32)  # mesh lights: 1 = emits from its triangles' front faces only
+    uniform: wp.array(dtype=wp.int32)  # mesh lights: 1 = MeshLightAPI (radiance[li] everywhere, light rays only)
     tri_base: wp.array(dtype=wp.int32)  # mesh lights: first emitting triangle of the instance's mesh
     tri_count: wp.array(dtype=wp.int32)  # mesh lights: number of emitting triangles
     cdf: wp.array(dtype=wp.float32)  # mesh lights: cumulative triangle power, concatenated
@@ -158,7 +159,7 @@ def _upload_images(lt: Lights, images: list, device: str) -> None:
 
 def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
     """Lights of a scene for the kernels; returns the struct and the number of lights."""
-    kinds, radiance, size, insts, cdfs, bases, counts, powers, transforms, shapes, sided, images = ([] for _ in range(12))
+    kinds, radiance, size, insts, cdfs, bases, counts, powers, transforms, shapes, sided, images, uniform = ([] for _ in range(13))
     centre, radius = scene_sphere(scene)
     env_image, env_xf = None, np.eye(4)
     dome_visible = 0
@@ -178,7 +179,11 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
             pts = mesh.points[0].astype(np.float64) @ m[:3, :3].T + m[:3, 3]
             tri = pts[mesh.triangles[first:end]]
             area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-            emis = np.array([_luminance(scene.materials[k].emissive_color) for k in mesh.material_ids[first:end]])
+            if light.uniform:  # MeshLightAPI: its own radiance, the same everywhere
+                emis = np.full(count, lum)
+            else:
+                emis = np.array([_luminance(scene.materials[k].emissive_color)
+                                 for k in mesh.material_ids[first:end]])
             tri_power = area * np.maximum(emis, 0.0)
             if count == 0 or not np.isfinite(tri_power).all() or tri_power.sum() <= 0:
                 continue
@@ -233,6 +238,7 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
         shapes.append(light.shaping)
         images.append(light.texture if light.kind == LIGHT_RECT else None)
         sided.append(int(light.one_sided))
+        uniform.append(int(light.kind == LIGHT_MESH and light.uniform))
         kinds.append(light.kind)
         radiance.append(rad)
         size.append(sz)
@@ -269,6 +275,7 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
             inst_light[inst] = li
     lt.inst_light = wp.array(inst_light, dtype=wp.int32, device=device)
     lt.one_sided = i32(sided, [0])
+    lt.uniform = i32(uniform, [0])
     lt.tri_base = i32(bases, [0])
     lt.tri_count = i32(counts, [0])
     lens = [len(c) for c in cdfs] or [1]

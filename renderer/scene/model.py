@@ -205,6 +205,16 @@ class Light:
     texture_name: str = ""  # resolved file, for messages
     shaping: Shaping | None = None  # ShapingAPI (cone, focus, IES); None: emits evenly
     one_sided: bool = False  # LIGHT_MESH: emits only from its triangles' front faces (a MeshLightAPI mesh)
+    # LIGHT_MESH of MeshLightAPI: emits ``radiance`` uniformly, through light sampling only (rays hitting the mesh
+    # see its material's glow instead); False: an emissive material's own emission, sampled with MIS.
+    uniform: bool = False
+    # Light linking (``usd.linking``): per Scene.instances, does this light illuminate it / does it cast shadows
+    # from this light; None = every instance.
+    illuminates: np.ndarray | None = None
+    casts_shadow: np.ndarray | None = None
+    shadow_enable: bool = True
+    shadow_color: tuple[float, float, float] = (0.0, 0.0, 0.0)  # replaces fully shadowed light
+    shadow_distance: float = -1.0  # scene units from the shaded point within which occluders shadow; <= 0 all
 
 
 @dataclass

@@ -29,6 +29,7 @@ from renderer.errors import SceneError, SettingsError
 from renderer.scene import model as sc
 from renderer.usd import camera as usd_camera
 from renderer.usd import lights as usd_lights
+from renderer.usd.linking import apply_linking
 from renderer.usd.mesh_lights import apply_mesh_light
 from renderer.usd.geometry import PRIMITIVE_TYPES, primitive_signature, read_geometry
 from renderer.usd.materials import MaterialTable
@@ -151,7 +152,8 @@ class _Importer:
         self._saw_render = False
         self._proto_lights: dict = {}  # path -> (index, light prim) of lights met in PointInstancer prototypes
         self._mesh_lights: list = []  # (MeshLightAPI prim, its instance indices)
-        self._mesh_light_instances: set[int] = set()
+        self._mesh_light_instances: dict[int, object] = {}  # instance index -> its MeshLightAPI prim
+        self._light_prims: list = []  # (Light, the prim it came from), for linking
 
     # -- top level ------------------------------------------------------------------------------------------------
     def run(self) -> sc.Scene:
@@ -185,10 +187,14 @@ class _Importer:
             warn("no camera in stage: framing the scene bounds automatically")
 
         for prim, insts in self._mesh_lights:
-            apply_mesh_light(prim, insts, self.meshes, self.instances, self.materials.materials,
-                             float(self.shutter.normalise([self.frame])[0]), self.frame, self.warn)
-            self._mesh_light_instances.update(insts)
+            for light in apply_mesh_light(prim, insts, self.meshes, self.instances, self.materials.materials,
+                                          float(self.shutter.normalise([self.frame])[0]), self.frame, self.warn):
+                self.lights.append(light)
+                self._light_prims.append((light, prim))
+            self._mesh_light_instances.update({i: prim for i in insts})
         self._emissive_lights()
+        for light, prim in self._light_prims:
+            apply_linking(light, prim, self.instances, self.frame, self.warn)
         if not self.lights:
             self.lights.append(usd_lights.default_light(cam_row, self._up_axis()))
             warn(usd_lights.default_light_warning())
@@ -403,6 +409,7 @@ class _Importer:
                                           placement=(times, rows[j]), name=names[j])
             if light is not None:
                 self.lights.append(light)
+                self._light_prims.append((light, self._proto_light_prims[-meshes[j] - 1]))
         keep = np.nonzero(~is_light)[0]
         if len(keep):
             self._add_instances([meshes[j] for j in keep], [names[j] for j in keep], times, rows[keep], interval)
@@ -546,12 +553,15 @@ class _Importer:
         light = usd_lights.read_light(prim, self.xf, self.warn)
         if light is not None:
             self.lights.append(light)
+            self._light_prims.append((light, prim))
 
     def _emissive_lights(self) -> None:
         """A LIGHT_MESH light for every instance whose mesh uses a material with non-zero emissive_color."""
         mats = self.materials.materials
         emission: dict[int, tuple | None] = {}
         for i, inst in enumerate(self.instances):
+            if i in self._mesh_light_instances:  # a MeshLightAPI light already; its glow is seen, not sampled
+                continue
             if inst.mesh not in emission:
                 used = np.unique(self.meshes[inst.mesh].material_ids)
                 em = [mats[m].emissive_color for m in used if max(mats[m].emissive_color) > 0]
@@ -563,8 +573,7 @@ class _Importer:
             if em is not None:
                 self.lights.append(sc.Light(kind=sc.LIGHT_MESH, name=inst.name or self.meshes[inst.mesh].name,
                                             radiance=tuple(float(x) for x in em), transform=inst.transform,
-                                            instance=i, one_sided=i in self._mesh_light_instances
-                                            and not self.meshes[inst.mesh].double_sided))
+                                            instance=i))
 
 
 __all__ = ["load_scene", "WarningLog"]

@@ -2,17 +2,15 @@
 
 The light's emission L = intensity * 2^exposure * color * blackbody, divided by the mesh's world-space surface
 area at the frame when ``normalize`` is on (so a mesh light of area A emits the power of a rect light of area A
-with the same inputs). It emits from the front face of its triangles (the side their winding faces), like a
-rect light, unless the mesh is ``doubleSided``. ``light:materialSyncMode`` (MeshLightAPI's fallback is
-materialGlowTintsLight):
+with the same inputs). It emits uniformly from the front face of its triangles (the side their winding faces),
+like a rect light, unless the mesh is ``doubleSided``. L reaches surfaces through light sampling only ("light
+rays" in the schema's words); rays that hit the mesh see its material. ``light:materialSyncMode``
+(MeshLightAPI's fallback is materialGlowTintsLight):
 
-- materialGlowTintsLight: L is multiplied by the bound material's emissive colour (its glow); a material that
-  does not glow leaves L untinted (so a mesh light with a plain material still lights the scene);
-- independent: L as authored; the material's glow is replaced by it;
-- noMaterialResponse: L as authored, and the surface reflects nothing (no diffuse, specular or transmission).
-
-One emission serves every ray: camera rays see the light's L as well (the schema lets primary rays see the
-material's own glow in the first two modes; we show what lights the scene).
+- materialGlowTintsLight: rays see the material's glow (emissiveColor); L is multiplied by that glow colour
+  (a material that does not glow leaves L untinted, so a mesh light with a plain material still lights);
+- independent: rays see the material's glow; L as authored;
+- noMaterialResponse: the surface has no material response at all (no reflection, no glow); L as authored.
 """
 from __future__ import annotations
 
@@ -44,42 +42,46 @@ def world_area(mesh: sc.Mesh, inst: sc.Instance, s: float) -> float:
     return float(0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
 
 
-def light_material(base: sc.Material, emission, mode: str) -> sc.Material:
-    """The material a mesh light's triangles render with: ``base`` emitting ``emission`` per ``mode``."""
-    glow = np.asarray(base.emissive_color, np.float64)
-    if mode == "materialGlowTintsLight" and glow.max() > 0:
-        emission = emission * glow
-    textures = {k: v for k, v in base.textures.items() if k != "emissiveColor"}
-    mat = dataclasses.replace(base, name=base.name + " (mesh light)",
-                              emissive_color=tuple(float(x) for x in emission), textures=textures)
-    if mode == "noMaterialResponse":
-        mat = dataclasses.replace(mat, diffuse_color=(0.0, 0.0, 0.0), specular_color=(0.0, 0.0, 0.0),
-                                  use_specular_workflow=True, metallic=0.0, clearcoat=0.0,
-                                  textures={k: v for k, v in textures.items() if k in ("opacity",)})
-    return mat
+def light_material(base: sc.Material) -> sc.Material:
+    """noMaterialResponse: the surface as if no material were bound: no reflection, no glow."""
+    return dataclasses.replace(base, name=base.name + " (no material response)", diffuse_color=(0.0, 0.0, 0.0),
+                               specular_color=(0.0, 0.0, 0.0), emissive_color=(0.0, 0.0, 0.0),
+                               use_specular_workflow=True, metallic=0.0, clearcoat=0.0,
+                               textures={k: v for k, v in base.textures.items() if k == "opacity"})
 
 
 def apply_mesh_light(prim, instances: list[int], scene_meshes: list[sc.Mesh], scene_instances: list[sc.Instance],
-                     materials: list[sc.Material], frame_s: float, frame: float, warn) -> None:
-    """Turn the instances of a MeshLightAPI prim into emitters: each gets a copy of its mesh whose triangles use
-    light materials (appended to ``materials``; ``scene_meshes`` grows by one mesh per instance)."""
+                     materials: list[sc.Material], frame_s: float, frame: float, warn) -> list[sc.Light]:
+    """The lights of a MeshLightAPI prim's instances (one LIGHT_MESH each, emitting L uniformly over its area).
+    With noMaterialResponse, each instance gets a copy of its mesh whose triangles reflect nothing."""
     mode = sync_mode(prim, warn)
     emission = base_emission(prim, frame)
     norm = normalized(prim, frame)
+    lights = []
     for i in instances:
         inst = scene_instances[i]
         mesh = scene_meshes[inst.mesh]
-        e = emission
+        bases = [materials[int(k)] if int(k) < len(materials) else sc.Material(name="default grey")
+                 for k in np.unique(mesh.material_ids)]
+        e = np.asarray(emission, np.float64)
+        if mode == "materialGlowTintsLight":
+            glow = max((np.asarray(m.emissive_color, np.float64) for m in bases), key=lambda c: c.sum())
+            if glow.max() > 0:
+                e = e * glow
         if norm:
             area = world_area(mesh, inst, frame_s)
             if area <= 0:
                 continue
             e = e / area
-        remap: dict[int, int] = {}
-        for old in np.unique(mesh.material_ids):
-            base = materials[int(old)] if int(old) < len(materials) else sc.Material(name="default grey")
-            remap[int(old)] = len(materials)
-            materials.append(light_material(base, e, mode))
-        ids = np.array([remap[int(k)] for k in mesh.material_ids], np.int32)
-        scene_meshes.append(dataclasses.replace(mesh, name=mesh.name, material_ids=ids))
-        inst.mesh = len(scene_meshes) - 1
+        if mode == "noMaterialResponse":
+            remap: dict[int, int] = {}
+            for old, base in zip(np.unique(mesh.material_ids), bases):
+                remap[int(old)] = len(materials)
+                materials.append(light_material(base))
+            ids = np.array([remap[int(k)] for k in mesh.material_ids], np.int32)
+            scene_meshes.append(dataclasses.replace(mesh, material_ids=ids))
+            inst.mesh = len(scene_meshes) - 1
+        lights.append(sc.Light(kind=sc.LIGHT_MESH, name=inst.name or str(prim.GetPath()),
+                               radiance=tuple(float(x) for x in e), transform=inst.transform, instance=i,
+                               one_sided=not scene_meshes[inst.mesh].double_sided, uniform=True))
+    return lights
