@@ -37,6 +37,7 @@ from renderer.lights.sample import (
     mesh_light_pdf,
     sample_light,
 )
+from renderer.lights.linking import lit_by, shadow_factor
 from renderer.lights.table import Lights
 from renderer.options import TIME_FILTERS
 from renderer.sampling.sobol import (
@@ -257,6 +258,7 @@ def trace_wave_kernel(
     prev_delta = int(1)  # the camera ray: what it sees directly gets no MIS weight
     prev_pdf = float(0.0)
     prev_n = wp.vec3(0.0)
+    prev_inst = int(-1)  # instance the path last left (light linking of what it finds)
     sigma = wp.vec3(0.0)  # absorption coefficient of the solid the path is inside (1/scene unit)
     see_through = int(1)  # so far only straight pass-through events: domes hidden from the camera stay hidden
     bounce = int(0)
@@ -269,7 +271,7 @@ def trace_wave_kernel(
             for li in range(lights.count):
                 if is_area_light(lights.kind[li]):
                     t_l, Le, pdf_l = area_light_hit(lights, li, origin, rd, hit.t, s)
-                    if t_l < BIG:
+                    if t_l < BIG and lit_by(lights.links, li, prev_inst):
                         w = float(1.0)
                         if prev_delta == 0:
                             w = power_heuristic(prev_pdf, lights.select_pdf[li] * pdf_l)
@@ -278,8 +280,8 @@ def trace_wave_kernel(
             for li in range(lights.count):
                 kind = lights.kind[li]
                 # domes hidden from the camera stay hidden behind pass-through surfaces too
-                if is_infinite_light(kind) and not (see_through != 0 and kind == LIGHT_DOME and
-                                                    lights.dome_visible == 0):
+                if is_infinite_light(kind) and lit_by(lights.links, li, prev_inst) and not (
+                        see_through != 0 and kind == LIGHT_DOME and lights.dome_visible == 0):
                     Le, pdf_l = infinite_light_eval(lights, li, rd, prev_n, s)
                     w = float(1.0)
                     if prev_delta == 0:
@@ -331,7 +333,8 @@ def trace_wave_kernel(
                     wi, dist, Le_l, pdf_l, delta = sample_light(
                         lights, geo, mats, tex, li, origin_l, ns, s, u_tri,
                         sample_2d(seed, pixel, index, dim + wp.uint32(BOUNCE_LIGHT_POSITION)))
-                    if pdf_l > 0.0 and (Le_l[0] > 0.0 or Le_l[1] > 0.0 or Le_l[2] > 0.0):
+                    if pdf_l > 0.0 and (Le_l[0] > 0.0 or Le_l[1] > 0.0 or Le_l[2] > 0.0) and lit_by(
+                            lights.links, li, hit.inst):
                         f = lobes_eval(lobes, wi)
                         if f[0] > 0.0 or f[1] > 0.0 or f[2] > 0.0:
                             # shadow rays start on the side of the surface the light is on
@@ -339,13 +342,14 @@ def trace_wave_kernel(
                             if wp.dot(wi, sp.ng) < 0.0:
                                 o_sh = offset_origin(sp.p, -sp.ng)
                             rays += 1
-                            tr = transmittance(geo, mats, tex, o_sh, wi, dist * (1.0 - 1.0e-4), s)
-                            if tr > 0.0:
+                            # light/shadow linking and shadow controls (lights.linking)
+                            tr = shadow_factor(geo, mats, tex, lights.links, li, o_sh, wi, dist * (1.0 - 1.0e-4), s)
+                            if tr[0] > 0.0 or tr[1] > 0.0 or tr[2] > 0.0:
                                 w = float(1.0)
                                 if not delta:
                                     w = power_heuristic(p_sel * pdf_l, lobes_pdf(lobes, wi))
                                 cos_i = wp.abs(wp.dot(ns, wi))
-                                L += wp.cw_mul(wp.cw_mul(beta, f), Le_l) * (cos_i * tr * w / (p_sel * pdf_l))
+                                L += wp.cw_mul(wp.cw_mul(wp.cw_mul(beta, f), Le_l), tr) * (cos_i * w / (p_sel * pdf_l))
                 # --- the BSDF's own direction continues the path
                 wi, weight, pdf, flags = lobes_sample(lobes, sample_1d(seed, pixel, index, dim + wp.uint32(BOUNCE_LOBE)),
                                                       sample_2d(seed, pixel, index, dim + wp.uint32(BOUNCE_DIRECTION)))
@@ -356,6 +360,7 @@ def trace_wave_kernel(
                     prev_delta = flags & FLAG_DELTA
                     prev_pdf = pdf
                     prev_n = ns
+                    prev_inst = hit.inst
                     passthrough = (flags & FLAG_TRANSMISSION) != 0 and thin != 0 and (flags & FLAG_DELTA) != 0
                     if not passthrough:
                         see_through = 0

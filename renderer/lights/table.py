@@ -20,6 +20,7 @@ import numpy as np
 import warp as wp
 
 from renderer.lights.envmap import EnvMap, upload_envmap
+from renderer.lights.linking import Links, upload_links
 from renderer.lights.shaping import mean_shaping
 from renderer.motion.kernels import MotionKeys, upload_keys
 from renderer.motion.transform import matrix_at
@@ -67,6 +68,7 @@ class Lights:
     img_w: wp.array(dtype=wp.int32)
     img_h: wp.array(dtype=wp.int32)
     img: wp.array(dtype=wp.vec3)  # rect light textures, rows top to bottom, concatenated
+    links: Links  # light/shadow linking and shadow controls (``linking``)
     env: EnvMap  # the textured dome, if any (size[0] == 1 marks its light)
     dome_visible: int  # 1 when camera rays see a dome (alpha 1 there)
 
@@ -157,9 +159,9 @@ def _upload_images(lt: Lights, images: list, device: str) -> None:
     lt.img = wp.array(np.concatenate(data) if data else np.zeros((1, 3), np.float32), dtype=wp.vec3, device=device)
 
 
-def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
+def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None) -> tuple[Lights, int]:
     """Lights of a scene for the kernels; returns the struct and the number of lights."""
-    kinds, radiance, size, insts, cdfs, bases, counts, powers, transforms, shapes, sided, images, uniform = ([] for _ in range(13))
+    kinds, radiance, size, insts, cdfs, bases, counts, powers, transforms, shapes, sided, images, uniform, kept = ([] for _ in range(14))
     centre, radius = scene_sphere(scene)
     env_image, env_xf = None, np.eye(4)
     dome_visible = 0
@@ -238,6 +240,7 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
         shapes.append(light.shaping)
         images.append(light.texture if light.kind == LIGHT_RECT else None)
         sided.append(int(light.one_sided))
+        kept.append(light)
         uniform.append(int(light.kind == LIGHT_MESH and light.uniform))
         kinds.append(light.kind)
         radiance.append(rad)
@@ -284,6 +287,7 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
     lt.cdf_off = i32(np.cumsum([0] + lens[:-1]), [0])
     _upload_shaping(lt, shapes, device)
     _upload_images(lt, images, device)
+    lt.links = upload_links(kept, len(scene.instances), device, warn)
     lt.env = upload_envmap(env_image, env_xf, device)
     lt.dome_visible = int(dome_visible)
     return lt, n
