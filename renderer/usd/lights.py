@@ -19,8 +19,9 @@ shines towards (husk and kick once showed it mirrored).
 DomeLight textures (``inputs:texture:file``, OpenEXR/HDR/any OpenImageIO format, resolved relative to the
 authoring layer) become ``Light.texture``: linear radiance (the image times intensity * 2^exposure * color *
 blackbody), rows top to bottom, in the OpenEXR lat-long layout UsdLux specifies (``textures.latlong_to_direction``:
-top row +Y, image centre +Z, u = 0.25 +X, in the dome's frame). ``texture:format`` automatic and latlong are
-lat-long; other formats warn and light with the image's mean. A DomeLight_1 whose ``poleAxis`` is Z, or "scene"
+top row +Y, image centre +Z, u = 0.25 +X, in the dome's frame). ``texture:format`` mirroredBall, angular and
+cubeMapVerticalCross are resampled to lat-long when loaded (``lights.dome_formats``); automatic picks by the
+image's shape (2:1 lat-long, 3:4 cross, square angular). ``guideRadius`` is a viewport guide: ignored. A DomeLight_1 whose ``poleAxis`` is Z, or "scene"
 on a Z-up stage, is turned +90 degrees about X before its own transform (USD's OrientToStageUpAxis rotation), so
 its pole is +Z; a plain DomeLight always has its pole on local +Y. ``Light.radiance`` of a textured dome is the
 texture's mean over the sphere.
@@ -30,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 from pxr import Ar, UsdGeom, UsdLux
 
-from renderer.lights import ies
+from renderer.lights import dome_formats, ies
 from renderer.scene import model as sc
 from renderer.shading.textures import ImageError, latlong_mean
 from renderer.usd.materials import read_asset_image, resolve_asset
@@ -301,14 +302,18 @@ def _dome_texture(prim, light: sc.Light, radiance: np.ndarray, frame: float, war
     rgb = (rgb.astype(np.float64) * np.asarray(radiance, np.float64)).astype(np.float32)
     if loaded.downsampled:
         warn("large textures downsampled to at most 4096 texels a side", f"{resolved} {loaded.original_size}")
-    mean = latlong_mean(rgb)
-    if fmt not in ("automatic", "latlong"):
-        warn("DomeLight texture formats other than latlong: those domes use the image's mean color",
-             f"{path} ({fmt})")
-        return mean
     h, w = rgb.shape[:2]
-    if fmt == "automatic" and w != 2 * h:
-        warn("DomeLight textures (format automatic) that are not 2:1 are read as latlong", f"{path} ({w}x{h})")
+    if fmt == "automatic":  # by the image's shape, as UsdLux's "automatic" asks
+        fmt = "latlong" if w == 2 * h else "cubeMapVerticalCross" if 4 * w == 3 * h else \
+            "angular" if w == h else "latlong"
+        if fmt == "latlong" and w != 2 * h:
+            warn("DomeLight textures (format automatic) of no recognised shape are read as latlong",
+                 f"{path} ({w}x{h})")
+    if fmt in dome_formats.FORMATS:
+        rgb = dome_formats.to_latlong(rgb, fmt)
+    elif fmt != "latlong":
+        warn("unknown DomeLight texture formats read as latlong", f"{path} ({fmt})")
+    mean = latlong_mean(rgb)
     light.texture = np.ascontiguousarray(rgb)
     light.texture_name = resolved
     return mean
