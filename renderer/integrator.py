@@ -31,13 +31,13 @@ from renderer.camera import CameraParams, camera_ray
 from renderer.film.film import SampleBuffer
 from renderer.lights.sample import (
     area_light_hit,
-    choose_light,
     emission_mis_light,
     infinite_light_eval,
     mesh_light_pdf,
     sample_light,
 )
 from renderer.lights.linking import lit_by, shadow_factor
+from renderer.lights.select import select_light, select_pdf
 from renderer.lights.table import Lights
 from renderer.options import TIME_FILTERS
 from renderer.sampling.sobol import (
@@ -259,6 +259,7 @@ def trace_wave_kernel(
     prev_pdf = float(0.0)
     prev_n = wp.vec3(0.0)
     prev_inst = int(-1)  # instance the path last left (light linking of what it finds)
+    prev_p = wp.vec3(0.0)  # where the path last chose a light (the selection pdf of what it finds)
     sigma = wp.vec3(0.0)  # absorption coefficient of the solid the path is inside (1/scene unit)
     see_through = int(1)  # so far only straight pass-through events: domes hidden from the camera stay hidden
     bounce = int(0)
@@ -274,7 +275,7 @@ def trace_wave_kernel(
                     if t_l < BIG and lit_by(lights.links, li, prev_inst):
                         w = float(1.0)
                         if prev_delta == 0:
-                            w = power_heuristic(prev_pdf, lights.select_pdf[li] * pdf_l)
+                            w = power_heuristic(prev_pdf, select_pdf(lights.select, li, prev_p) * pdf_l)
                         L += wp.cw_mul(beta, Le) * w
         if hit.inst < 0:
             for li in range(lights.count):
@@ -285,7 +286,7 @@ def trace_wave_kernel(
                     Le, pdf_l = infinite_light_eval(lights, li, rd, prev_n, s)
                     w = float(1.0)
                     if prev_delta == 0:
-                        w = power_heuristic(prev_pdf, lights.select_pdf[li] * pdf_l)
+                        w = power_heuristic(prev_pdf, select_pdf(lights.select, li, prev_p) * pdf_l)
                     L += wp.cw_mul(beta, Le) * w
             if bounce == 0 and lights.dome_visible != 0:
                 alpha = 1.0
@@ -317,7 +318,7 @@ def trace_wave_kernel(
                 w = float(1.0)
                 li = emission_mis_light(lights, hit.inst)
                 if prev_delta == 0 and li >= 0:
-                    pdf_l = lights.select_pdf[li] * mesh_light_pdf(lights, geo, li, hit.inst, hit.tri, origin,
+                    pdf_l = select_pdf(lights.select, li, prev_p) * mesh_light_pdf(lights, geo, li, hit.inst, hit.tri, origin,
                                                                      sp.p, s)
                     w = power_heuristic(prev_pdf, pdf_l)
                 L += wp.cw_mul(beta, Le) * (w * ms.opacity)  # emission covers what the surface covers
@@ -327,8 +328,8 @@ def trace_wave_kernel(
                 dim = wp.uint32(DIM_LIGHT_BASE + bounce * DIMS_PER_BOUNCE)
                 # --- next-event estimation: one light by power, one point on it, one shadow ray
                 if lights.count > 0:
-                    li, p_sel, u_tri = choose_light(
-                        lights, sample_1d(seed, pixel, index, dim + wp.uint32(BOUNCE_LIGHT_CHOICE)))
+                    li, p_sel, u_tri = select_light(
+                        lights.select, sp.p, sample_1d(seed, pixel, index, dim + wp.uint32(BOUNCE_LIGHT_CHOICE)))
                     origin_l = offset_origin(sp.p, sp.ng)
                     wi, dist, Le_l, pdf_l, delta = sample_light(
                         lights, geo, mats, tex, li, origin_l, ns, s, u_tri,
@@ -361,6 +362,7 @@ def trace_wave_kernel(
                     prev_pdf = pdf
                     prev_n = ns
                     prev_inst = hit.inst
+                    prev_p = sp.p
                     passthrough = (flags & FLAG_TRANSMISSION) != 0 and thin != 0 and (flags & FLAG_DELTA) != 0
                     if not passthrough:
                         see_through = 0

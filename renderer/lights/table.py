@@ -5,12 +5,10 @@ lights from their outer surface; a distant light arrives along its local -Z with
 a dome light from every direction (a constant colour or a lat-long texture, see ``envmap``); emissive meshes
 from both faces (as Cycles does).
 
-A shading point samples ONE light, chosen with probability proportional to the irradiance it can deliver to
-the scene: a distant light its irradiance, a dome pi times its mean radiance, a finite light its power spread
-over a sphere reaching the scene's centre (at least the scene's radius away), never more than pi times its
-radiance (no light outshines a dome of its own radiance). Raw power (pbrt's power light sampler) would let a
-huge or far-away light starve a small bright one, or an HDR dome's sun. The sampling routines are in
-``light_sample``.
+A shading point samples ONE light, chosen by ``select`` in proportion to the irradiance each can deliver at that
+point (spatial clusters of finite lights, each infinite light alone; see ``select``). ``select_pdf`` /
+``select_cdf`` keep the scene-wide estimate (delivered at the scene's centre, capped at pi times the radiance) for
+tools and tests. The sampling routines are in ``sample``.
 """
 from __future__ import annotations
 
@@ -21,6 +19,7 @@ import warp as wp
 
 from renderer.lights.envmap import EnvMap, upload_envmap
 from renderer.lights.linking import Links, upload_links
+from renderer.lights.select import SelectEstimate, Selection, upload_selection
 from renderer.lights.shaping import mean_shaping
 from renderer.motion.kernels import MotionKeys, upload_keys
 from renderer.motion.transform import matrix_at
@@ -69,6 +68,7 @@ class Lights:
     img_h: wp.array(dtype=wp.int32)
     img: wp.array(dtype=wp.vec3)  # rect light textures, rows top to bottom, concatenated
     links: Links  # light/shadow linking and shadow controls (``linking``)
+    select: Selection  # which light a shading point samples (``select``)
     env: EnvMap  # the textured dome, if any (size[0] == 1 marks its light)
     dome_visible: int  # 1 when camera rays see a dome (alpha 1 there)
 
@@ -159,14 +159,18 @@ def _upload_images(lt: Lights, images: list, device: str) -> None:
     lt.img = wp.array(np.concatenate(data) if data else np.zeros((1, 3), np.float32), dtype=wp.vec3, device=device)
 
 
-def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None) -> tuple[Lights, int]:
+def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
+                  clusters: bool = True) -> tuple[Lights, int]:
     """Lights of a scene for the kernels; returns the struct and the number of lights."""
-    kinds, radiance, size, insts, cdfs, bases, counts, powers, transforms, shapes, sided, images, uniform, kept = ([] for _ in range(14))
+    kinds, radiance, size, insts, cdfs, bases, counts, powers, transforms, shapes, sided, images, uniform, kept, estimates = (
+        [] for _ in range(15))
     centre, radius = scene_sphere(scene)
     env_image, env_xf = None, np.eye(4)
     dome_visible = 0
     for light in scene.lights:
         rad = np.asarray(light.radiance, np.float64)
+        phi = cap = ext = 0.0
+        pos = np.zeros(3)
         lum = _luminance(rad)
         cdf = np.zeros(1, np.float32)
         first, count = 0, 0
@@ -192,8 +196,10 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None) -> tu
             cdf = (np.cumsum(tri_power) / tri_power.sum()).astype(np.float32)
             cdf[-1] = 1.0
             faces = 1.0 if light.one_sided else 2.0
-            power = delivered_irradiance(faces * math.pi * tri_power.sum(),  # pi L A per emitting face
-                                         float(emis.max()), tri.mean((0, 1)), centre, radius)
+            phi = faces * math.pi * tri_power.sum()  # pi L A per emitting face
+            cap, pos = float(emis.max()), tri.mean((0, 1))
+            ext = 0.5 * float(np.linalg.norm(tri.reshape(-1, 3).max(0) - tri.reshape(-1, 3).min(0)))
+            power = delivered_irradiance(phi, cap, pos, centre, radius)
         elif light.kind == LIGHT_DISTANT:
             half = math.radians(max(0.0, light.angle) * 0.5)
             cos_max = math.cos(half) if half > 1e-6 else 1.0
@@ -231,10 +237,14 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None) -> tu
                 sz = (light.length, 0.0, light.radius, 0.0)
                 phi = lum * 2.0 * math.pi * light.radius * sy * light.length * sx * math.pi
             point = light.kind == LIGHT_SPHERE and light.radius <= 0  # radiance holds an intensity: no cap
-            power = delivered_irradiance(phi, math.inf if point else lum, matrix_at(light.transform, 0.0)[:3, 3],
-                                         centre, radius)
+            cap, pos = (math.inf if point else lum), matrix_at(light.transform, 0.0)[:3, 3]
+            ext = max(light.width * sx, light.height * sy) * 0.5 if light.kind == LIGHT_RECT else \
+                light.length * sx * 0.5 if light.kind == LIGHT_CYLINDER else light.radius * sx
+            power = delivered_irradiance(phi, cap, pos, centre, radius)
         if light.shaping is not None:
-            power *= _shaped_fraction(light.shaping, one_sided=light.kind in (LIGHT_RECT, LIGHT_DISK))
+            frac = _shaped_fraction(light.shaping, one_sided=light.kind in (LIGHT_RECT, LIGHT_DISK))
+            power *= frac
+            phi *= frac
         if not np.isfinite(rad).all() or (rad <= 0).all() or not power > 0:
             continue
         shapes.append(light.shaping)
@@ -242,6 +252,10 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None) -> tu
         sided.append(int(light.one_sided))
         kept.append(light)
         uniform.append(int(light.kind == LIGHT_MESH and light.uniform))
+        finite = light.kind not in (LIGHT_DISTANT, LIGHT_DOME)
+        estimates.append(SelectEstimate(finite, phi if finite else power, cap if finite else math.inf,
+                                        np.asarray(pos if finite else np.zeros(3), np.float64),
+                                        float(ext) if finite else 0.0))
         kinds.append(light.kind)
         radiance.append(rad)
         size.append(sz)
@@ -288,6 +302,7 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None) -> tu
     _upload_shaping(lt, shapes, device)
     _upload_images(lt, images, device)
     lt.links = upload_links(kept, len(scene.instances), device, warn)
+    lt.select = upload_selection(estimates, device, clusters=clusters)
     lt.env = upload_envmap(env_image, env_xf, device)
     lt.dome_visible = int(dome_visible)
     return lt, n
