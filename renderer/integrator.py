@@ -318,8 +318,8 @@ def trace_wave_kernel(
                 w = float(1.0)
                 li = emission_mis_light(lights, hit.inst)
                 if prev_delta == 0 and li >= 0:
-                    pdf_l = select_pdf(lights.select, li, prev_p) * mesh_light_pdf(lights, geo, li, hit.inst, hit.tri, origin,
-                                                                     sp.p, s)
+                    pdf_l = select_pdf(lights.select, li, prev_p) * mesh_light_pdf(
+                        lights, geo, li, hit.inst, hit.tri, origin, sp.p, s)
                     w = power_heuristic(prev_pdf, pdf_l)
                 L += wp.cw_mul(beta, Le) * (w * ms.opacity)  # emission covers what the surface covers
             if bounce >= settings.max_depth:
@@ -344,7 +344,8 @@ def trace_wave_kernel(
                                 o_sh = offset_origin(sp.p, -sp.ng)
                             rays += 1
                             # light/shadow linking and shadow controls (lights.linking)
-                            tr = shadow_factor(geo, mats, tex, lights.links, li, o_sh, wi, dist * (1.0 - 1.0e-4), s)
+                            tr = shadow_factor(geo, mats, tex, lights.links, li, o_sh, wi, dist * (1.0 - 1.0e-4),
+                                               s)
                             if tr[0] > 0.0 or tr[1] > 0.0 or tr[2] > 0.0:
                                 w = float(1.0)
                                 if not delta:

@@ -66,7 +66,8 @@ def test_selection_kernel_frequencies_match_its_pdf():
     lt, n = upload_lights(unit_scene(lights))
 
     @wp.kernel
-    def run(sel: Selection, p: wp.vec3, picks: wp.array(dtype=wp.int32), probs: wp.array(dtype=wp.float32), pdfs: wp.array(dtype=wp.float32)):
+    def run(sel: Selection, p: wp.vec3, picks: wp.array(dtype=wp.int32), probs: wp.array(dtype=wp.float32),
+            pdfs: wp.array(dtype=wp.float32)):
         i = wp.tid()
         u = (float(i) + 0.5) / float(picks.shape[0])
         li, pr, _ = select_light(sel, p, u)

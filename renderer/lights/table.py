@@ -162,8 +162,8 @@ def _upload_images(lt: Lights, images: list, device: str) -> None:
 def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
                   clusters: bool = True) -> tuple[Lights, int]:
     """Lights of a scene for the kernels; returns the struct and the number of lights."""
-    kinds, radiance, size, insts, cdfs, bases, counts, powers, transforms, shapes, sided, images, uniform, kept, estimates = (
-        [] for _ in range(15))
+    (kinds, radiance, size, insts, cdfs, bases, counts, powers, transforms, shapes, sided, images, uniform, kept,
+     estimates) = ([] for _ in range(15))
     centre, radius = scene_sphere(scene)
     env_image, env_xf = None, np.eye(4)
     dome_visible = 0

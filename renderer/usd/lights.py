@@ -21,7 +21,8 @@ authoring layer) become ``Light.texture``: linear radiance (the image times inte
 blackbody), rows top to bottom, in the OpenEXR lat-long layout UsdLux specifies (``textures.latlong_to_direction``:
 top row +Y, image centre +Z, u = 0.25 +X, in the dome's frame). ``texture:format`` mirroredBall, angular and
 cubeMapVerticalCross are resampled to lat-long when loaded (``lights.dome_formats``); automatic picks by the
-image's shape (2:1 lat-long, 3:4 cross, square angular). ``guideRadius`` is a viewport guide: ignored. A DomeLight_1 whose ``poleAxis`` is Z, or "scene"
+image's shape (2:1 lat-long, 3:4 cross, square angular). ``guideRadius`` is a viewport guide: ignored.
+A DomeLight_1 whose ``poleAxis`` is Z, or "scene"
 on a Z-up stage, is turned +90 degrees about X before its own transform (USD's OrientToStageUpAxis rotation), so
 its pole is +Z; a plain DomeLight always has its pole on local +Y. ``Light.radiance`` of a textured dome is the
 texture's mean over the sphere.
@@ -153,8 +154,8 @@ def read_light(prim, sampler: TransformSampler, warn, placement=None, name: str 
         light.shaping = read_shaping(prim, sampler.shutter, warn)
     elif _has_shaping(prim):
         warn("light shaping on distant and dome lights ignored (the schema shapes local lights)", path)
-    if prim.HasAPI(UsdLux.ShadowAPI):
-        warn("light shadow controls (shadow colour, distance, falloff) ignored", path)
+    if float(get("diffuse", 1.0)) != 1.0 or float(get("specular", 1.0)) != 1.0:
+        warn("per-light diffuse/specular multipliers other than 1 ignored (the BSDF is not split by lobe)", path)
     if bool(get("normalize", False)) and area > 0.0:
         radiance = radiance / area
     if not np.all(np.isfinite(radiance)):
