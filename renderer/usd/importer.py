@@ -531,6 +531,9 @@ class _Importer:
             elif prim.IsA(UsdGeom.Mesh) or prim.GetTypeName() in PRIMITIVE_TYPES:
                 it.PruneChildren()
                 mesh = self._mesh_index(prim)
+                if usd_lights.is_light(prim):
+                    self.warn("mesh lights (MeshLightAPI) inside PointInstancer prototypes render as plain geometry",
+                              str(prim.GetPath()))
                 if mesh is not None:
                     meshes.append(mesh)
                     names.append(str(prim.GetPath()))
