@@ -29,7 +29,15 @@ from renderer.accel.intersect import (
 from renderer.accel.occlusion import hit_uv, transmittance
 from renderer.camera import CameraParams, camera_ray
 from renderer.film.film import SampleBuffer
-from renderer.lights.sample import area_light_hit, choose_light, infinite_light_eval, mesh_light_pdf, sample_light
+from renderer.lights.sample import (
+    area_light_hit,
+    emission_mis_light,
+    infinite_light_eval,
+    mesh_light_pdf,
+    sample_light,
+)
+from renderer.lights.linking import lit_by, shadow_factor
+from renderer.lights.select import select_light, select_pdf
 from renderer.lights.table import Lights
 from renderer.options import TIME_FILTERS
 from renderer.sampling.sobol import (
@@ -250,6 +258,8 @@ def trace_wave_kernel(
     prev_delta = int(1)  # the camera ray: what it sees directly gets no MIS weight
     prev_pdf = float(0.0)
     prev_n = wp.vec3(0.0)
+    prev_inst = int(-1)  # instance the path last left (light linking of what it finds)
+    prev_p = wp.vec3(0.0)  # where the path last chose a light (the selection pdf of what it finds)
     sigma = wp.vec3(0.0)  # absorption coefficient of the solid the path is inside (1/scene unit)
     see_through = int(1)  # so far only straight pass-through events: domes hidden from the camera stay hidden
     bounce = int(0)
@@ -262,21 +272,21 @@ def trace_wave_kernel(
             for li in range(lights.count):
                 if is_area_light(lights.kind[li]):
                     t_l, Le, pdf_l = area_light_hit(lights, li, origin, rd, hit.t, s)
-                    if t_l < BIG:
+                    if t_l < BIG and lit_by(lights.links, li, prev_inst):
                         w = float(1.0)
                         if prev_delta == 0:
-                            w = power_heuristic(prev_pdf, lights.select_pdf[li] * pdf_l)
+                            w = power_heuristic(prev_pdf, select_pdf(lights.select, li, prev_p) * pdf_l)
                         L += wp.cw_mul(beta, Le) * w
         if hit.inst < 0:
             for li in range(lights.count):
                 kind = lights.kind[li]
                 # domes hidden from the camera stay hidden behind pass-through surfaces too
-                if is_infinite_light(kind) and not (see_through != 0 and kind == LIGHT_DOME and
-                                                    lights.dome_visible == 0):
+                if is_infinite_light(kind) and lit_by(lights.links, li, prev_inst) and not (
+                        see_through != 0 and kind == LIGHT_DOME and lights.dome_visible == 0):
                     Le, pdf_l = infinite_light_eval(lights, li, rd, prev_n, s)
                     w = float(1.0)
                     if prev_delta == 0:
-                        w = power_heuristic(prev_pdf, lights.select_pdf[li] * pdf_l)
+                        w = power_heuristic(prev_pdf, select_pdf(lights.select, li, prev_p) * pdf_l)
                     L += wp.cw_mul(beta, Le) * w
             if bounce == 0 and lights.dome_visible != 0:
                 alpha = 1.0
@@ -306,10 +316,10 @@ def trace_wave_kernel(
             Le = ms.emissive_color
             if Le[0] > 0.0 or Le[1] > 0.0 or Le[2] > 0.0:
                 w = float(1.0)
-                li = lights.inst_light[hit.inst]
+                li = emission_mis_light(lights, hit.inst)
                 if prev_delta == 0 and li >= 0:
-                    pdf_l = lights.select_pdf[li] * mesh_light_pdf(lights, geo, li, hit.inst, hit.tri, origin,
-                                                                     sp.p, s)
+                    pdf_l = select_pdf(lights.select, li, prev_p) * mesh_light_pdf(
+                        lights, geo, li, hit.inst, hit.tri, origin, sp.p, s)
                     w = power_heuristic(prev_pdf, pdf_l)
                 L += wp.cw_mul(beta, Le) * (w * ms.opacity)  # emission covers what the surface covers
             if bounce >= settings.max_depth:
@@ -318,13 +328,14 @@ def trace_wave_kernel(
                 dim = wp.uint32(DIM_LIGHT_BASE + bounce * DIMS_PER_BOUNCE)
                 # --- next-event estimation: one light by power, one point on it, one shadow ray
                 if lights.count > 0:
-                    li, p_sel, u_tri = choose_light(
-                        lights, sample_1d(seed, pixel, index, dim + wp.uint32(BOUNCE_LIGHT_CHOICE)))
+                    li, p_sel, u_tri = select_light(
+                        lights.select, sp.p, sample_1d(seed, pixel, index, dim + wp.uint32(BOUNCE_LIGHT_CHOICE)))
                     origin_l = offset_origin(sp.p, sp.ng)
                     wi, dist, Le_l, pdf_l, delta = sample_light(
                         lights, geo, mats, tex, li, origin_l, ns, s, u_tri,
                         sample_2d(seed, pixel, index, dim + wp.uint32(BOUNCE_LIGHT_POSITION)))
-                    if pdf_l > 0.0 and (Le_l[0] > 0.0 or Le_l[1] > 0.0 or Le_l[2] > 0.0):
+                    if pdf_l > 0.0 and (Le_l[0] > 0.0 or Le_l[1] > 0.0 or Le_l[2] > 0.0) and lit_by(
+                            lights.links, li, hit.inst):
                         f = lobes_eval(lobes, wi)
                         if f[0] > 0.0 or f[1] > 0.0 or f[2] > 0.0:
                             # shadow rays start on the side of the surface the light is on
@@ -332,13 +343,15 @@ def trace_wave_kernel(
                             if wp.dot(wi, sp.ng) < 0.0:
                                 o_sh = offset_origin(sp.p, -sp.ng)
                             rays += 1
-                            tr = transmittance(geo, mats, tex, o_sh, wi, dist * (1.0 - 1.0e-4), s)
-                            if tr > 0.0:
+                            # light/shadow linking and shadow controls (lights.linking)
+                            tr = shadow_factor(geo, mats, tex, lights.links, li, o_sh, wi, dist * (1.0 - 1.0e-4),
+                                               s)
+                            if tr[0] > 0.0 or tr[1] > 0.0 or tr[2] > 0.0:
                                 w = float(1.0)
                                 if not delta:
                                     w = power_heuristic(p_sel * pdf_l, lobes_pdf(lobes, wi))
                                 cos_i = wp.abs(wp.dot(ns, wi))
-                                L += wp.cw_mul(wp.cw_mul(beta, f), Le_l) * (cos_i * tr * w / (p_sel * pdf_l))
+                                L += wp.cw_mul(wp.cw_mul(wp.cw_mul(beta, f), Le_l), tr) * (cos_i * w / (p_sel * pdf_l))
                 # --- the BSDF's own direction continues the path
                 wi, weight, pdf, flags = lobes_sample(lobes, sample_1d(seed, pixel, index, dim + wp.uint32(BOUNCE_LOBE)),
                                                       sample_2d(seed, pixel, index, dim + wp.uint32(BOUNCE_DIRECTION)))
@@ -349,6 +362,8 @@ def trace_wave_kernel(
                     prev_delta = flags & FLAG_DELTA
                     prev_pdf = pdf
                     prev_n = ns
+                    prev_inst = hit.inst
+                    prev_p = sp.p
                     passthrough = (flags & FLAG_TRANSMISSION) != 0 and thin != 0 and (flags & FLAG_DELTA) != 0
                     if not passthrough:
                         see_through = 0

@@ -126,7 +126,7 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> Prepar
     warnings = list(scene.warnings)
     textures = upload_material_textures(flat.materials, device, warn=warnings.append)
     materials = upload_materials(flat.materials, device)
-    lights, light_count = upload_lights(flat, device)
+    lights, light_count = upload_lights(flat, device, warn=lambda what, name="": warnings.append(f"{what}: {name}"))
     cam = setup_camera(scene.camera, width, height, pixel_aspect=par, dof=dof, device=device)
     if cam.warning:
         warnings.append(cam.warning)

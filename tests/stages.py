@@ -75,11 +75,13 @@ def camera(stage, path="/World/Cam", *, translate=(0, 0, 0), rotate_x=0.0, focal
     return cam
 
 
-def distant_light(stage, path="/World/Sun", *, intensity=1.0, angle=0.53, rotate_x=-90.0):
-    """A distant light; rotate_x=-90 points its -Z axis straight down (-Y)."""
+def distant_light(stage, path="/World/Sun", *, intensity=1.0, angle=0.53, rotate_x=-90.0, normalize=True):
+    """A distant light; rotate_x=-90 points its -Z axis straight down (-Y). ``normalize`` (the default here):
+    ``intensity`` is the illuminance (lux) on a surface facing it; off, it is the radiance (nits) of its disk."""
     light = UsdLux.DistantLight.Define(stage, path)
     light.CreateIntensityAttr(intensity)
     light.CreateAngleAttr(angle)
+    light.CreateNormalizeAttr(bool(normalize))
     UsdGeom.Xformable(light).AddRotateXOp().Set(rotate_x)
     return light
 

@@ -460,7 +460,10 @@ def test_no_camera_no_lights_defaults_follow_up_axis(tmp_path):
     assert up[2] > 0.5 and forward[2] < 0, "Z-up stage: camera upright, looking down a little"
     assert scene.camera.clipping_range[0] < np.linalg.norm(to_box) < scene.camera.clipping_range[1]
     (light,) = scene.lights
-    assert light.kind == sc.LIGHT_DISTANT and light.radiance == pytest.approx((math.pi,) * 3)
+    # radiance of a 0.53 degree disk delivering the irradiance pi (a white Lambert surface facing it: 1)
+    half = math.radians(light.angle / 2)
+    assert light.kind == sc.LIGHT_DISTANT and light.angle == 0.53
+    assert np.multiply(light.radiance, math.pi * math.sin(half) ** 2) == pytest.approx((math.pi,) * 3)
     travel = -matrix_at(light.transform, 0.0)[:3, 2]
     assert travel[2] < 0 and np.dot(travel, forward) > 0, "from above, behind the camera"
 
@@ -503,13 +506,15 @@ def test_light_radiance_exposure_normalize_temperature(tmp_path):
     assert r.radiance == pytest.approx(tuple(2 * 2 * c / area for c in (1, 0.5, 0.25)))
     w = by_name(scene.lights, "Warm")
     assert w.radius == 0.0
-    assert w.radiance == pytest.approx(tuple(UsdLux.BlackbodyTemperatureAsRgb(3000.0)), rel=1e-5)
+    # treatAsPoint: the intensity (cd) of the default radius-0.5 sphere seen from afar, L pi r^2
+    assert w.radiance == pytest.approx(tuple(c * math.pi * 0.25 for c in UsdLux.BlackbodyTemperatureAsRgb(3000.0)),
+                                       rel=1e-5)
     assert w.radiance[0] > w.radiance[2]
     s = by_name(scene.lights, "Sun")
     assert s.kind == sc.LIGHT_DISTANT and s.radiance == (3.0, 3.0, 3.0) and s.angle == 1.0
     assert by_name(scene.lights, "Disk").radius == 0.25
     c = by_name(scene.lights, "Cyl")
-    assert c.kind == sc.LIGHT_CYLINDER and c.length == 4.0 and c.radius == 0.0
+    assert c.kind == sc.LIGHT_CYLINDER and c.length == 4.0 and c.radius == 0.5  # treatAsLine: a hint, disregarded
     d = by_name(scene.lights, "Dome")
     assert d.kind == sc.LIGHT_DOME and d.radiance == pytest.approx((0.1, 0.2, 0.3))
     g = by_name(scene.lights, "Legacy")

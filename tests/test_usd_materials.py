@@ -445,7 +445,7 @@ def test_dome_pole_axis(tmp_path, kind, up, pole, pole_world):
     np.testing.assert_allclose(m @ T.latlong_to_direction(0.5, 0.0), pole_world, atol=1e-6)  # the top row
 
 
-def test_dome_missing_texture_and_other_formats_warn(tmp_path):
+def test_dome_missing_texture_warns_and_other_formats_convert(tmp_path):
     stage = new_stage(tmp_path / "s.usda")
     UsdLux.DomeLight.Define(stage, "/World/Gone").CreateTextureFileAttr("./gone.hdr")
     write_image(tmp_path / "ball.exr", np.full((4, 4, 3), 0.5, np.float32))
@@ -456,10 +456,11 @@ def test_dome_missing_texture_and_other_formats_warn(tmp_path):
     scene = load(stage)
     domes = {l.name: l for l in scene.lights if l.kind == sc.LIGHT_DOME}
     assert domes["/World/Gone"].texture is None and domes["/World/Gone"].radiance == (1.0, 1.0, 1.0)
-    assert domes["/World/Ball"].texture is None
-    np.testing.assert_allclose(domes["/World/Ball"].radiance, 0.5, atol=1e-6)
+    ball = domes["/World/Ball"].texture  # mirroredBall resampled to lat-long (lights.dome_formats)
+    assert ball is not None and ball.shape[1] == 2 * ball.shape[0]
+    np.testing.assert_allclose(domes["/World/Ball"].radiance, 0.5, atol=1e-5)
     assert any("DomeLight textures missing" in w and "gone.hdr" in w for w in scene.warnings)
-    assert any("other than latlong" in w for w in scene.warnings)
+    assert not any("/World/Ball" in w for w in scene.warnings)
 
 
 # ---------------------------------------------------------------------------------------------------------------

@@ -14,11 +14,13 @@ from renderer.accel.intersect import (
     Geometry,
     instance_object_to_world,
     instance_visible,
+    instance_world_to_object,
     mesh_keys_at,
     triangle_points,
 )
 from renderer.accel.occlusion import hit_uv
 from renderer.lights.envmap import env_pdf, env_radiance, env_sample
+from renderer.lights.shaping import shaping_eval
 from renderer.lights.table import Lights
 from renderer.motion.kernels import keys_matrix
 from renderer.sampling.warps import (
@@ -111,6 +113,37 @@ def light_matrix(lights: Lights, li: int, s: float):
 
 
 @wp.func
+def light_shaping(lights: Lights, li: int, emit_dir: wp.vec3, s: float):
+    """ShapingAPI colour of light li for the unit world direction ``emit_dir`` leaving it, at time s."""
+    sh0 = lights.shape0[li]
+    if sh0[3] == 0.0:
+        return wp.vec3(1.0)
+    sh = sh0 * (1.0 - s) + lights.shape1[li] * s
+    m = light_matrix(lights, li, s)
+    ax = wp.normalize(wp.transform_vector(m, wp.vec3(1.0, 0.0, 0.0)))
+    ay = wp.normalize(wp.transform_vector(m, wp.vec3(0.0, 1.0, 0.0)))
+    az = wp.normalize(wp.transform_vector(m, wp.vec3(0.0, 0.0, 1.0)))
+    dl = wp.normalize(wp.vec3(wp.dot(emit_dir, ax), wp.dot(emit_dir, ay), wp.dot(emit_dir, az)))
+    return shaping_eval(sh, lights.focus_tint[li], lights.ies_table, lights.ies_off[li], lights.ies_param[li], dl)
+
+
+@wp.func
+def rect_texel(lights: Lights, li: int, corner: wp.vec3, ex: wp.vec3, ey: wp.vec3, q: wp.vec3):
+    """A rect light's texture at world point q on it (white without one): texel (0, 0) at the (+X, +Y) corner,
+    the image's last at (-X, -Y) (usdLux RectLight), nearest texel."""
+    off = lights.img_off[li]
+    if off < 0:
+        return wp.vec3(1.0)
+    a = wp.clamp(wp.dot(q - corner, ex) / wp.dot(ex, ex), 0.0, 1.0)  # 0 at -X, 1 at +X
+    b = wp.clamp(wp.dot(q - corner, ey) / wp.dot(ey, ey), 0.0, 1.0)  # 0 at -Y, 1 at +Y
+    w = lights.img_w[li]
+    h = lights.img_h[li]
+    col = wp.min(int((1.0 - a) * float(w)), w - 1)
+    row = wp.min(int((1.0 - b) * float(h)), h - 1)
+    return lights.img[off + row * w + col]
+
+
+@wp.func
 def rect_frame(lights: Lights, li: int, s: float):
     """World corner, edge vectors and emitting normal of a rect light at time s."""
     m = light_matrix(lights, li, s)
@@ -168,13 +201,14 @@ def sample_light(lights: Lights, geo: Geometry, mats: Materials, tex: Textures, 
         corner, ex, ey, front = rect_frame(lights, li, s)
         g = sample_rect(p, corner, ex, ey, u)
         if g.pdf > 0.0 and wp.dot(g.dir, front) < 0.0:
-            return g.dir, g.dist, Le, g.pdf, False
+            Le = wp.cw_mul(Le, rect_texel(lights, li, corner, ex, ey, p + g.dir * g.dist))
+            return g.dir, g.dist, wp.cw_mul(Le, light_shaping(lights, li, -g.dir, s)), g.pdf, False
         return zero, 0.0, zero, 0.0, False
     if kind == LIGHT_DISK:
         c, front, r = disk_frame(lights, li, s)
         g = sample_disk_light(p, c, front, r, u)
         if g.pdf > 0.0 and wp.dot(g.dir, front) < 0.0:
-            return g.dir, g.dist, Le, g.pdf, False
+            return g.dir, g.dist, wp.cw_mul(Le, light_shaping(lights, li, -g.dir, s)), g.pdf, False
         return zero, 0.0, zero, 0.0, False
     if kind == LIGHT_SPHERE:
         c, r = sphere_frame(lights, li, s)
@@ -183,16 +217,16 @@ def sample_light(lights: Lights, geo: Geometry, mats: Materials, tex: Textures, 
             dist = wp.length(d)
             if dist <= 0.0:
                 return zero, 0.0, zero, 0.0, True
-            return d / dist, dist, Le / (dist * dist), 1.0, True
+            return d / dist, dist, wp.cw_mul(Le, light_shaping(lights, li, -d / dist, s)) / (dist * dist), 1.0, True
         g = sample_sphere_light(p, c, r, u)
         if g.pdf > 0.0:
-            return g.dir, g.dist, Le, g.pdf, False
+            return g.dir, g.dist, wp.cw_mul(Le, light_shaping(lights, li, -g.dir, s)), g.pdf, False
         return zero, 0.0, zero, 0.0, False
     if kind == LIGHT_CYLINDER:
         c, axis, length, r = cylinder_frame(lights, li, s)
         g = sample_cylinder_light(p, c, axis, length, r, u)
         if g.pdf > 0.0 and wp.dot(g.dir, g.normal) < 0.0:
-            return g.dir, g.dist, Le, g.pdf, False
+            return g.dir, g.dist, wp.cw_mul(Le, light_shaping(lights, li, -g.dir, s)), g.pdf, False
         return zero, 0.0, zero, 0.0, False
     if kind == LIGHT_DISTANT:
         to_light = distant_axis(lights, li, s)
@@ -221,6 +255,12 @@ def sample_light(lights: Lights, geo: Geometry, mats: Materials, tex: Textures, 
     o2w = instance_object_to_world(geo, inst, s)
     g = sample_triangle_light(p, wp.transform_point(o2w, p0), wp.transform_point(o2w, p1),
                               wp.transform_point(o2w, p2), u)
+    if lights.one_sided[li] != 0:  # a MeshLightAPI mesh emits from its front faces (normal as surface_at's)
+        w2o_t = wp.transpose(instance_world_to_object(geo, inst, s))
+        if wp.dot(wp.transform_vector(w2o_t, wp.cross(p1 - p0, p2 - p0)), g.dir) >= 0.0:
+            return zero, 0.0, zero, 0.0, False
+    if g.pdf > 0.0 and lights.uniform[li] != 0:  # MeshLightAPI: light rays only, so no MIS partner
+        return g.dir, g.dist, lights.radiance[li], g.pdf * p_tri, True
     if g.pdf > 0.0:
         # the emission where the point landed (emissive textures): its barycentrics are the warp's
         b = square_to_uniform_triangle(u)
@@ -228,6 +268,16 @@ def sample_light(lights: Lights, geo: Geometry, mats: Materials, tex: Textures, 
         uv = hit_uv(geo, mesh, tg, b[1], 1.0 - b[0] - b[1])
         return g.dir, g.dist, eval_emission(mats, tex, geo.tri_material[tg], uv), g.pdf * p_tri, False
     return zero, 0.0, zero, 0.0, False
+
+
+@wp.func
+def emission_mis_light(lights: Lights, inst: int):
+    """The mesh light whose sampling also finds the emission seen on instance ``inst`` (for the MIS weight), or
+    -1: none, or a MeshLightAPI light (its L reaches surfaces by light sampling only; hits see the glow)."""
+    li = lights.inst_light[inst]
+    if li >= 0 and lights.uniform[li] != 0:
+        return -1
+    return li
 
 
 @wp.func
@@ -253,14 +303,15 @@ def area_light_hit(lights: Lights, li: int, ro: wp.vec3, rd: wp.vec3, tmax: floa
         if t > 0.0 and t < tmax and wp.dot(rd, front) < 0.0:
             pdf = rect_pdf(ro, rd, corner, ex, ey)
             if pdf > 0.0:
-                return t, lights.radiance[li], pdf
+                Le = wp.cw_mul(lights.radiance[li], rect_texel(lights, li, corner, ex, ey, ro + rd * t))
+                return t, wp.cw_mul(Le, light_shaping(lights, li, -rd, s)), pdf
     elif kind == LIGHT_DISK:
         c, front, r = disk_frame(lights, li, s)
         t = plane_hit(ro, rd, c, front)
         if t > 0.0 and t < tmax and wp.dot(rd, front) < 0.0:
             pdf = disk_light_pdf(ro, rd, c, front, r)
             if pdf > 0.0:
-                return t, lights.radiance[li], pdf
+                return t, wp.cw_mul(lights.radiance[li], light_shaping(lights, li, -rd, s)), pdf
     elif kind == LIGHT_SPHERE:
         c, r = sphere_frame(lights, li, s)
         if r > 0.0:
@@ -274,7 +325,7 @@ def area_light_hit(lights: Lights, li: int, ro: wp.vec3, rd: wp.vec3, tmax: floa
                 if t > 0.0 and t < tmax:
                     pdf = sphere_light_pdf(ro, rd, c, r)
                     if pdf > 0.0:
-                        return t, lights.radiance[li], pdf
+                        return t, wp.cw_mul(lights.radiance[li], light_shaping(lights, li, -rd, s)), pdf
     elif kind == LIGHT_CYLINDER:
         c, axis, length, r = cylinder_frame(lights, li, s)
         o = ro - c
@@ -290,7 +341,7 @@ def area_light_hit(lights: Lights, li: int, ro: wp.vec3, rd: wp.vec3, tmax: floa
                 if t > 0.0 and t < tmax and wp.abs(wp.dot(o + t * rd, axis)) <= 0.5 * length:
                     pdf = cylinder_light_pdf(ro, rd, c, axis, length, r)
                     if pdf > 0.0:
-                        return t, lights.radiance[li], pdf
+                        return t, wp.cw_mul(lights.radiance[li], light_shaping(lights, li, -rd, s)), pdf
     return float(BIG), zero, 0.0
 
 

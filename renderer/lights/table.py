@@ -5,12 +5,10 @@ lights from their outer surface; a distant light arrives along its local -Z with
 a dome light from every direction (a constant colour or a lat-long texture, see ``envmap``); emissive meshes
 from both faces (as Cycles does).
 
-A shading point samples ONE light, chosen with probability proportional to the irradiance it can deliver to
-the scene: a distant light its irradiance, a dome pi times its mean radiance, a finite light its power spread
-over a sphere reaching the scene's centre (at least the scene's radius away), never more than pi times its
-radiance (no light outshines a dome of its own radiance). Raw power (pbrt's power light sampler) would let a
-huge or far-away light starve a small bright one, or an HDR dome's sun. The sampling routines are in
-``light_sample``.
+A shading point samples ONE light, chosen by ``select`` in proportion to the irradiance each can deliver at that
+point (spatial clusters of finite lights, each infinite light alone; see ``select``). ``select_pdf`` /
+``select_cdf`` keep the scene-wide estimate (delivered at the scene's centre, capped at pi times the radiance) for
+tools and tests. The sampling routines are in ``sample``.
 """
 from __future__ import annotations
 
@@ -20,6 +18,9 @@ import numpy as np
 import warp as wp
 
 from renderer.lights.envmap import EnvMap, upload_envmap
+from renderer.lights.linking import Links, upload_links
+from renderer.lights.select import SelectEstimate, Selection, upload_selection
+from renderer.lights.shaping import mean_shaping
 from renderer.motion.kernels import MotionKeys, upload_keys
 from renderer.motion.transform import matrix_at
 from renderer.scene.model import (
@@ -31,6 +32,7 @@ from renderer.scene.model import (
     LIGHT_RECT,
     LIGHT_SPHERE,
     Scene,
+    Shaping,
 )
 
 
@@ -38,7 +40,7 @@ from renderer.scene.model import (
 class Lights:
     count: int
     kind: wp.array(dtype=wp.int32)
-    radiance: wp.array(dtype=wp.vec3)  # emitted radiance (distant of angle 0: irradiance; point: intensity)
+    radiance: wp.array(dtype=wp.vec3)  # emitted radiance, nits (distant of angle 0: irradiance; point: intensity)
     size: wp.array(dtype=wp.vec4)  # rect (width, height), disk/sphere (_, _, radius), cylinder (length, _,
     #                                radius), distant (cos of the half apex angle), dome (1 = textured)
     xf_off: wp.array(dtype=wp.int32)
@@ -49,10 +51,24 @@ class Lights:
     select_pdf: wp.array(dtype=wp.float32)  # (count,) probability of choosing each light
     instance: wp.array(dtype=wp.int32)  # mesh lights: the emissive instance
     inst_light: wp.array(dtype=wp.int32)  # per instance: its mesh light, or -1
+    one_sided: wp.array(dtype=wp.int32)  # mesh lights: 1 = emits from its triangles' front faces only
+    uniform: wp.array(dtype=wp.int32)  # mesh lights: 1 = MeshLightAPI (radiance[li] everywhere, light rays only)
     tri_base: wp.array(dtype=wp.int32)  # mesh lights: first emitting triangle of the instance's mesh
     tri_count: wp.array(dtype=wp.int32)  # mesh lights: number of emitting triangles
     cdf: wp.array(dtype=wp.float32)  # mesh lights: cumulative triangle power, concatenated
     cdf_off: wp.array(dtype=wp.int32)
+    shape0: wp.array(dtype=wp.vec4)  # ShapingAPI at s = 0: (cone angle rad, softness, focus, 1 = shaped)
+    shape1: wp.array(dtype=wp.vec4)  # ... at s = 1 (blended linearly by the sample's time)
+    focus_tint: wp.array(dtype=wp.vec3)
+    ies_off: wp.array(dtype=wp.int32)  # offset of the light's IES grid in ies_table, -1 none
+    ies_param: wp.array(dtype=wp.vec2)  # (ies:angleScale, 1 / profile power or 1)
+    ies_table: wp.array(dtype=wp.float32)  # IES grids (IES_THETA x IES_PHI candela each), concatenated
+    img_off: wp.array(dtype=wp.int32)  # rect lights: first texel of its texture in img, -1 none
+    img_w: wp.array(dtype=wp.int32)
+    img_h: wp.array(dtype=wp.int32)
+    img: wp.array(dtype=wp.vec3)  # rect light textures, rows top to bottom, concatenated
+    links: Links  # light/shadow linking and shadow controls (``linking``)
+    select: Selection  # which light a shading point samples (``select``)
     env: EnvMap  # the textured dome, if any (size[0] == 1 marks its light)
     dome_visible: int  # 1 when camera rays see a dome (alpha 1 there)
 
@@ -90,14 +106,71 @@ def _axis_scales(xf) -> np.ndarray:
     return np.linalg.norm(m[:3, :3], axis=0)
 
 
-def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
+def _shape_keys(sh: Shaping) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    return tuple((math.radians(sh.cone_angle[k]), sh.cone_softness[k], sh.focus[k], 1.0) for k in (0, 1))
+
+
+def _shaped_fraction(sh: Shaping, one_sided: bool) -> float:
+    """Share of a light's power its shaping lets out (at the shutter's open), for light selection."""
+    k0, _ = _shape_keys(sh)
+    ies = (sh.ies_angle_scale, sh.ies_scale)
+    return max(mean_shaping(k0, sh.focus_tint, sh.ies_grid, ies, cosine_weighted=one_sided), 1e-6)
+
+
+def _upload_shaping(lt: Lights, shapes: list, device: str) -> None:
+    no = (math.pi, 0.0, 0.0, 0.0)
+    s0, s1, tint, offs, params, grids = [], [], [], [], [], []
+    at = 0
+    for sh in shapes:
+        if sh is None:
+            s0.append(no), s1.append(no), tint.append((0.0, 0.0, 0.0)), offs.append(-1), params.append((0.0, 1.0))
+            continue
+        k0, k1 = _shape_keys(sh)
+        s0.append(k0), s1.append(k1), tint.append(sh.focus_tint)
+        params.append((sh.ies_angle_scale, sh.ies_scale))
+        if sh.ies_grid is None:
+            offs.append(-1)
+        else:
+            offs.append(at)
+            grids.append(np.asarray(sh.ies_grid, np.float32).ravel())
+            at += grids[-1].size
+    v4 = lambda a: wp.array(np.array(a or [no], np.float32), dtype=wp.vec4, device=device)  # noqa: E731
+    lt.shape0, lt.shape1 = v4(s0), v4(s1)
+    lt.focus_tint = wp.array(np.array(tint or [(0, 0, 0)], np.float32), dtype=wp.vec3, device=device)
+    lt.ies_off = wp.array(np.array(offs or [-1], np.int32), dtype=wp.int32, device=device)
+    lt.ies_param = wp.array(np.array(params or [(0, 1)], np.float32), dtype=wp.vec2, device=device)
+    lt.ies_table = wp.array(np.concatenate(grids) if grids else np.zeros(1, np.float32), dtype=wp.float32,
+                            device=device)
+
+
+def _upload_images(lt: Lights, images: list, device: str) -> None:
+    offs, ws, hs, data = [], [], [], []
+    at = 0
+    for im in images:
+        if im is None:
+            offs.append(-1), ws.append(0), hs.append(0)
+            continue
+        im = np.asarray(im, np.float32)
+        offs.append(at), ws.append(im.shape[1]), hs.append(im.shape[0])
+        data.append(im.reshape(-1, 3))
+        at += len(data[-1])
+    i32 = lambda a, d: wp.array(np.array(a or [d], np.int32), dtype=wp.int32, device=device)  # noqa: E731
+    lt.img_off, lt.img_w, lt.img_h = i32(offs, -1), i32(ws, 0), i32(hs, 0)
+    lt.img = wp.array(np.concatenate(data) if data else np.zeros((1, 3), np.float32), dtype=wp.vec3, device=device)
+
+
+def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
+                  clusters: bool = True) -> tuple[Lights, int]:
     """Lights of a scene for the kernels; returns the struct and the number of lights."""
-    kinds, radiance, size, insts, cdfs, bases, counts, powers, transforms = ([] for _ in range(9))
+    (kinds, radiance, size, insts, cdfs, bases, counts, powers, transforms, shapes, sided, images, uniform, kept,
+     estimates) = ([] for _ in range(15))
     centre, radius = scene_sphere(scene)
     env_image, env_xf = None, np.eye(4)
     dome_visible = 0
     for light in scene.lights:
         rad = np.asarray(light.radiance, np.float64)
+        phi = cap = ext = 0.0
+        pos = np.zeros(3)
         lum = _luminance(rad)
         cdf = np.zeros(1, np.float32)
         first, count = 0, 0
@@ -112,21 +185,27 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
             pts = mesh.points[0].astype(np.float64) @ m[:3, :3].T + m[:3, 3]
             tri = pts[mesh.triangles[first:end]]
             area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-            emis = np.array([_luminance(scene.materials[k].emissive_color) for k in mesh.material_ids[first:end]])
+            if light.uniform:  # MeshLightAPI: its own radiance, the same everywhere
+                emis = np.full(count, lum)
+            else:
+                emis = np.array([_luminance(scene.materials[k].emissive_color)
+                                 for k in mesh.material_ids[first:end]])
             tri_power = area * np.maximum(emis, 0.0)
             if count == 0 or not np.isfinite(tri_power).all() or tri_power.sum() <= 0:
                 continue
             cdf = (np.cumsum(tri_power) / tri_power.sum()).astype(np.float32)
             cdf[-1] = 1.0
-            power = delivered_irradiance(2.0 * math.pi * tri_power.sum(),  # both faces emit
-                                         float(emis.max()), tri.mean((0, 1)), centre, radius)
+            faces = 1.0 if light.one_sided else 2.0
+            phi = faces * math.pi * tri_power.sum()  # pi L A per emitting face
+            cap, pos = float(emis.max()), tri.mean((0, 1))
+            ext = 0.5 * float(np.linalg.norm(tri.reshape(-1, 3).max(0) - tri.reshape(-1, 3).min(0)))
+            power = delivered_irradiance(phi, cap, pos, centre, radius)
         elif light.kind == LIGHT_DISTANT:
             half = math.radians(max(0.0, light.angle) * 0.5)
             cos_max = math.cos(half) if half > 1e-6 else 1.0
             sz = (cos_max, 0.0, 0.0, 0.0)
-            power = lum  # the irradiance it delivers
-            if cos_max < 1.0:  # the disk of directions' radiance that gives the irradiance at normal incidence
-                rad = rad / (math.pi * math.sin(half) ** 2)
+            # the irradiance it delivers at normal incidence: radiance times the disk's pi sin^2 (delta: held)
+            power = lum * (math.pi * (1.0 - cos_max * cos_max) if cos_max < 1.0 else 1.0)
         elif light.kind == LIGHT_DOME:
             dome_visible |= int(light.visible_to_camera)
             texture = getattr(light, "texture", None)
@@ -146,6 +225,8 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
             power = math.pi * mean  # irradiance of a uniform dome of the mean radiance
         else:
             if light.kind == LIGHT_RECT:
+                if light.texture is not None:  # the texture's mean scales the power
+                    lum *= _luminance(np.asarray(light.texture, np.float64).reshape(-1, 3).mean(0))
                 phi = lum * light.width * light.height * sx * sy * math.pi
             elif light.kind == LIGHT_DISK:
                 phi = lum * math.pi * (light.radius * sx) ** 2 * math.pi
@@ -156,10 +237,25 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
                 sz = (light.length, 0.0, light.radius, 0.0)
                 phi = lum * 2.0 * math.pi * light.radius * sy * light.length * sx * math.pi
             point = light.kind == LIGHT_SPHERE and light.radius <= 0  # radiance holds an intensity: no cap
-            power = delivered_irradiance(phi, math.inf if point else lum, matrix_at(light.transform, 0.0)[:3, 3],
-                                         centre, radius)
+            cap, pos = (math.inf if point else lum), matrix_at(light.transform, 0.0)[:3, 3]
+            ext = max(light.width * sx, light.height * sy) * 0.5 if light.kind == LIGHT_RECT else \
+                light.length * sx * 0.5 if light.kind == LIGHT_CYLINDER else light.radius * sx
+            power = delivered_irradiance(phi, cap, pos, centre, radius)
+        if light.shaping is not None:
+            frac = _shaped_fraction(light.shaping, one_sided=light.kind in (LIGHT_RECT, LIGHT_DISK))
+            power *= frac
+            phi *= frac
         if not np.isfinite(rad).all() or (rad <= 0).all() or not power > 0:
             continue
+        shapes.append(light.shaping)
+        images.append(light.texture if light.kind == LIGHT_RECT else None)
+        sided.append(int(light.one_sided))
+        kept.append(light)
+        uniform.append(int(light.kind == LIGHT_MESH and light.uniform))
+        finite = light.kind not in (LIGHT_DISTANT, LIGHT_DOME)
+        estimates.append(SelectEstimate(finite, phi if finite else power, cap if finite else math.inf,
+                                        np.asarray(pos if finite else np.zeros(3), np.float64),
+                                        float(ext) if finite else 0.0))
         kinds.append(light.kind)
         radiance.append(rad)
         size.append(sz)
@@ -195,12 +291,18 @@ def upload_lights(scene: Scene, device: str = "cpu") -> tuple[Lights, int]:
         if k == LIGHT_MESH:
             inst_light[inst] = li
     lt.inst_light = wp.array(inst_light, dtype=wp.int32, device=device)
+    lt.one_sided = i32(sided, [0])
+    lt.uniform = i32(uniform, [0])
     lt.tri_base = i32(bases, [0])
     lt.tri_count = i32(counts, [0])
     lens = [len(c) for c in cdfs] or [1]
     lt.cdf = wp.array(np.concatenate(cdfs) if cdfs else np.zeros(1, np.float32), dtype=wp.float32,
                       device=device)
     lt.cdf_off = i32(np.cumsum([0] + lens[:-1]), [0])
+    _upload_shaping(lt, shapes, device)
+    _upload_images(lt, images, device)
+    lt.links = upload_links(kept, len(scene.instances), device, warn)
+    lt.select = upload_selection(estimates, device, clusters=clusters)
     lt.env = upload_envmap(env_image, env_xf, device)
     lt.dome_visible = int(dome_visible)
     return lt, n

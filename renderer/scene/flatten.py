@@ -27,12 +27,15 @@ def _is_still(scene: Scene, inst: Instance) -> bool:
 
 def flatten_still_instances(scene: Scene) -> Scene:
     """An equivalent scene in which mergeable still instances form one world-space mesh (instance 0)."""
+    if any(lt.illuminates is not None or lt.casts_shadow is not None for lt in scene.lights):
+        return scene  # light linking is per instance: merging would lose which instance is which
+    one_sided = {lt.instance for lt in scene.lights if lt.kind == LIGHT_MESH and lt.uniform}  # MeshLightAPI
     users = np.bincount([i.mesh for i in scene.instances], minlength=len(scene.meshes))
     merge, keep = [], []
     copied = 0
     for idx, inst in enumerate(scene.instances):
         ntri = len(scene.meshes[inst.mesh].triangles)
-        ok = _is_still(scene, inst) and (users[inst.mesh] == 1 or
+        ok = idx not in one_sided and _is_still(scene, inst) and (users[inst.mesh] == 1 or
                                          (ntri <= SHARED_COPY_LIMIT and copied + ntri <= MERGED_LIMIT))
         if ok and users[inst.mesh] > 1:
             copied += ntri

@@ -150,6 +150,21 @@ class Material:
 
 
 @dataclass
+class Shaping:
+    """usdLux ShapingAPI of a light (see ``lights.shaping``). Animated values are keyed at the shutter's open
+    and close (s = 0, s = 1) and blended linearly by the sample's time."""
+
+    cone_angle: tuple[float, float] = (90.0, 90.0)  # degrees off the light's -Z axis
+    cone_softness: tuple[float, float] = (0.0, 0.0)  # [0, 1]
+    focus: tuple[float, float] = (0.0, 0.0)  # exponent; <= 0 off
+    focus_tint: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    ies_grid: np.ndarray | None = None  # (IES_THETA, IES_PHI) float32 candela at theta = 0..180, phi = 0..360 deg
+    ies_angle_scale: float = 0.0
+    ies_scale: float = 1.0  # 1 / profile power with ies:normalize, else 1
+    ies_name: str = ""
+
+
+@dataclass
 class Light:
     """A UsdLux light. Geometry is in the light's local frame (USD conventions):
 
@@ -161,9 +176,10 @@ class Light:
     dome: radiance from every direction: constant, or a lat-long ``texture``;
     mesh: emissive geometry, ``instance`` index, sampled by triangle area.
 
-    ``radiance`` is the final emitted radiance (intensity * 2^exposure * color * blackbody, already divided by
-    the world-space area when ``normalize`` is on), except for ``distant`` where it is the irradiance on a
-    surface facing the light (the sun convention of Cycles/Karma), converted to radiance by the renderer.
+    ``radiance`` is the final emitted radiance in nits (intensity * 2^exposure * color * blackbody, already
+    divided by usdLux's sizeFactor when ``normalize`` is on), except for a point light (sphere of radius 0) where
+    it is the intensity (cd) and a distant light of angle 0 where it is the irradiance (lux) on a surface
+    facing it.
     """
 
     kind: int
@@ -184,7 +200,21 @@ class Light:
     # (OpenEXR lat-long: v = 0 is +Y, u = 0.5 is +Z, u = 0.25 is +X); ``transform`` carries dome-local to world
     # (including DomeLight_1's poleAxis turn). ``radiance`` then holds the texture's mean over the sphere.
     texture: np.ndarray | None = None
+    # LIGHT_RECT with ``texture:file``: (H, W, 3) float32 linear RGB multiplying ``radiance``, row 0 the top; texel
+    # (0, 0) sits at the rect's (+X, +Y) corner, the last at (-X, -Y) (usdLux RectLight).
     texture_name: str = ""  # resolved file, for messages
+    shaping: Shaping | None = None  # ShapingAPI (cone, focus, IES); None: emits evenly
+    one_sided: bool = False  # LIGHT_MESH: emits only from its triangles' front faces (a MeshLightAPI mesh)
+    # LIGHT_MESH of MeshLightAPI: emits ``radiance`` uniformly, through light sampling only (rays hitting the mesh
+    # see its material's glow instead); False: an emissive material's own emission, sampled with MIS.
+    uniform: bool = False
+    # Light linking (``usd.linking``): per Scene.instances, does this light illuminate it / does it cast shadows
+    # from this light; None = every instance.
+    illuminates: np.ndarray | None = None
+    casts_shadow: np.ndarray | None = None
+    shadow_enable: bool = True
+    shadow_color: tuple[float, float, float] = (0.0, 0.0, 0.0)  # replaces fully shadowed light
+    shadow_distance: float = -1.0  # scene units from the shaded point within which occluders shadow; <= 0 all
 
 
 @dataclass

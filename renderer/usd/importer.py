@@ -27,14 +27,16 @@ from pxr import Gf, Tf, Usd, UsdGeom, UsdRender, UsdShade
 
 from renderer.errors import SceneError, SettingsError
 from renderer.scene import model as sc
+from renderer.subdiv import MAX_LEVEL
 from renderer.usd import camera as usd_camera
 from renderer.usd import lights as usd_lights
 from renderer.usd.geometry import PRIMITIVE_TYPES, collapse_keys, primitive_signature, read_geometry
-from renderer.subdiv import MAX_LEVEL
+from renderer.usd.linking import apply_linking
 from renderer.usd.materials import MaterialTable
+from renderer.usd.mesh_lights import apply_mesh_light
+from renderer.usd.motion import Shutter, TransformSampler, motion_transforms, refine_keys
 from renderer.usd.skel import Skinning
 from renderer.usd.subdiv import SubdivisionDetail
-from renderer.usd.motion import Shutter, TransformSampler, motion_transforms, refine_keys
 
 _PI_ATTRS = ("positions", "orientations", "orientationsf", "scales", "velocities", "angularVelocities",
              "accelerations", "protoIndices")
@@ -160,6 +162,10 @@ class _Importer:
         self._vis_chain: dict[str, tuple[bool, tuple[float, ...]]] = {}
         self._proxies: list = []
         self._saw_render = False
+        self._proto_lights: dict = {}  # path -> (index, light prim) of lights met in PointInstancer prototypes
+        self._mesh_lights: list = []  # (MeshLightAPI prim, its instance indices)
+        self._mesh_light_instances: dict[int, object] = {}  # instance index -> its MeshLightAPI prim
+        self._light_prims: list = []  # (Light, the prim it came from), for linking
 
     # -- top level ------------------------------------------------------------------------------------------------
     def run(self) -> sc.Scene:
@@ -194,7 +200,15 @@ class _Importer:
             camera, cam_row = usd_camera.auto_camera(bounds, self._up_axis(), settings)
             warn("no camera in stage: framing the scene bounds automatically")
 
+        for prim, insts in self._mesh_lights:
+            for light in apply_mesh_light(prim, insts, self.meshes, self.instances, self.materials.materials,
+                                          float(self.shutter.normalise([self.frame])[0]), self.frame, self.warn):
+                self.lights.append(light)
+                self._light_prims.append((light, prim))
+            self._mesh_light_instances.update({i: prim for i in insts})
         self._emissive_lights()
+        for light, prim in self._light_prims:
+            apply_linking(light, prim, self.instances, self.frame, self.warn)
         if not self.lights:
             self.lights.append(usd_lights.default_light(cam_row, self._up_axis()))
             warn(usd_lights.default_light_warning())
@@ -275,10 +289,11 @@ class _Importer:
                     self._guarded(self._visit_gprim, prim, purpose)
             elif prim.IsA(UsdGeom.Mesh) or prim.GetTypeName() in PRIMITIVE_TYPES:
                 it.PruneChildren()
+                first = len(self.instances)
                 if purpose != "guide":
                     self._guarded(self._visit_gprim, prim, purpose)
-                if usd_lights.is_light(prim):
-                    self.warn("mesh lights (MeshLightAPI) are rendered as plain geometry", str(prim.GetPath()))
+                if usd_lights.is_light(prim):  # MeshLightAPI: its instances become emitters (see mesh_lights)
+                    self._mesh_lights.append((prim, list(range(first, len(self.instances)))))
             elif usd_lights.is_light(prim):
                 self._guarded(self._light, prim)
             elif prim.IsA(UsdGeom.Gprim):
@@ -465,7 +480,17 @@ class _Importer:
             return
         if len(times) > 1:
             times, rows = refine_keys(lambda ts: self._pi_placements(prim, ts)[2], times)
-        self._add_instances(meshes, names, times, rows, interval)
+        is_light = np.asarray(meshes) < 0
+        self._proto_light_prims = [p for _, p in sorted(self._proto_lights.values(), key=lambda ip: ip[0])]
+        for j in np.nonzero(is_light)[0]:  # one light per instance of a light in a prototype
+            light = usd_lights.read_light(self._proto_light_prims[-meshes[j] - 1], self.xf, self.warn,
+                                          placement=(times, rows[j]), name=names[j])
+            if light is not None:
+                self.lights.append(light)
+                self._light_prims.append((light, self._proto_light_prims[-meshes[j] - 1]))
+        keep = np.nonzero(~is_light)[0]
+        if len(keep):
+            self._add_instances([meshes[j] for j in keep], [names[j] for j in keep], times, rows[keep], interval)
 
     def _pi_key_times(self, prim) -> np.ndarray:
         sh = self.shutter
@@ -584,12 +609,20 @@ class _Importer:
             elif prim.IsA(UsdGeom.Mesh) or prim.GetTypeName() in PRIMITIVE_TYPES:
                 it.PruneChildren()
                 mesh = self._mesh_index(prim)
+                if usd_lights.is_light(prim):
+                    self.warn("mesh lights (MeshLightAPI) inside PointInstancer prototypes render as plain geometry",
+                              str(prim.GetPath()))
                 if mesh is not None:
                     meshes.append(mesh)
                     names.append(str(prim.GetPath()))
                     rows.append(self.xf.world(prim, times)[None])
-            elif usd_lights.is_light(prim):
-                self.warn("lights inside PointInstancer prototypes ignored", str(prim.GetPath()))
+            elif usd_lights.is_light(prim):  # placed like geometry, told apart by a negative index
+                key = str(prim.GetPath())
+                if key not in self._proto_lights:
+                    self._proto_lights[key] = (len(self._proto_lights), prim)
+                meshes.append(-1 - self._proto_lights[key][0])
+                names.append(str(prim.GetPath()))
+                rows.append(self.xf.world(prim, times)[None])
         if not meshes:
             return [], [], np.zeros((0, len(times), 4, 4))
         return meshes, names, np.concatenate(rows)
@@ -601,12 +634,15 @@ class _Importer:
         light = usd_lights.read_light(prim, self.xf, self.warn)
         if light is not None:
             self.lights.append(light)
+            self._light_prims.append((light, prim))
 
     def _emissive_lights(self) -> None:
         """A LIGHT_MESH light for every instance whose mesh uses a material with non-zero emissive_color."""
         mats = self.materials.materials
         emission: dict[int, tuple | None] = {}
         for i, inst in enumerate(self.instances):
+            if i in self._mesh_light_instances:  # a MeshLightAPI light already; its glow is seen, not sampled
+                continue
             if inst.mesh not in emission:
                 used = np.unique(self.meshes[inst.mesh].material_ids)
                 em = [mats[m].emissive_color for m in used if max(mats[m].emissive_color) > 0]

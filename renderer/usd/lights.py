@@ -1,16 +1,28 @@
 """Light import: UsdLux lights to ``scene.Light``, emissive geometry lights, and the default light.
 
-Radiance = intensity * 2^exposure * color * (blackbody(colorTemperature) if enableColorTemperature), divided by
-the light's world-space surface area at the frame when ``normalize`` is on (rect, disk, sphere, cylinder). For a
-DistantLight ``radiance`` holds the irradiance-like value intensity * 2^exposure * color (the renderer converts).
+Units follow usdLux's schema.usda ("Quantities and Units", ``inputs:normalize``): every light's emitted radiance
+(nits) is L = intensity * 2^exposure * color * (blackbody(colorTemperature) if enableColorTemperature) / sizeFactor,
+sizeFactor = 1 unless ``normalize`` is on; then it is the light's world-space surface area at the frame (rect,
+disk, sphere, cylinder side), pi sin^2(theta) for a DistantLight of half angle theta = angle/2 (pi (2 - sin^2
+theta) past 90 degrees), and 1 for domes. So an unnormalized DistantLight delivers the irradiance
+E = L pi sin^2(angle/2) to a surface facing it, a normalized one E = intensity * 2^exposure * color (lux). A
+DistantLight of angle 0 is a delta direction: its sizeFactor is 1 and L is taken as the irradiance. A
+SphereLight with ``treatAsPoint`` becomes a point light of the same far-field intensity (L pi r^2, cd); the
+``treatAsLine`` hint is disregarded (the cylinder keeps its radius, as the schema allows).
 Both the current ``inputs:`` attribute names and the legacy names without the prefix are read. Light parameters
 are taken at the frame; the light's transform moves over the shutter like any prim's.
+
+A RectLight's ``texture:file`` multiplies its emission; by the schema the image's first texel (top left) is at
+the rect's (+X, +Y) corner and its last at (-X, -Y), so the image reads unmirrored from the side the light
+shines towards (husk and kick once showed it mirrored).
 
 DomeLight textures (``inputs:texture:file``, OpenEXR/HDR/any OpenImageIO format, resolved relative to the
 authoring layer) become ``Light.texture``: linear radiance (the image times intensity * 2^exposure * color *
 blackbody), rows top to bottom, in the OpenEXR lat-long layout UsdLux specifies (``textures.latlong_to_direction``:
-top row +Y, image centre +Z, u = 0.25 +X, in the dome's frame). ``texture:format`` automatic and latlong are
-lat-long; other formats warn and light with the image's mean. A DomeLight_1 whose ``poleAxis`` is Z, or "scene"
+top row +Y, image centre +Z, u = 0.25 +X, in the dome's frame). ``texture:format`` mirroredBall, angular and
+cubeMapVerticalCross are resampled to lat-long when loaded (``lights.dome_formats``); automatic picks by the
+image's shape (2:1 lat-long, 3:4 cross, square angular). ``guideRadius`` is a viewport guide: ignored.
+A DomeLight_1 whose ``poleAxis`` is Z, or "scene"
 on a Z-up stage, is turned +90 degrees about X before its own transform (USD's OrientToStageUpAxis rotation), so
 its pole is +Z; a plain DomeLight always has its pole on local +Y. ``Light.radiance`` of a textured dome is the
 texture's mean over the sphere.
@@ -18,8 +30,9 @@ texture's mean over the sphere.
 from __future__ import annotations
 
 import numpy as np
-from pxr import UsdGeom, UsdLux
+from pxr import Ar, UsdGeom, UsdLux
 
+from renderer.lights import dome_formats, ies
 from renderer.scene import model as sc
 from renderer.shading.textures import ImageError, latlong_mean
 from renderer.usd.materials import read_asset_image, resolve_asset
@@ -28,8 +41,8 @@ from renderer.usd.motion import TransformSampler, motion_transform
 # Row-vector matrix of a +90 degree turn about X: the dome's +Y pole to +Z (UsdLuxDomeLight.OrientToStageUpAxis).
 _POLE_Z_ROW = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
 
-DEFAULT_LIGHT_IRRADIANCE = float(np.pi)
-DEFAULT_LIGHT_ANGLE = 0.53
+DEFAULT_LIGHT_IRRADIANCE = float(np.pi)  # lux: a white Lambertian surface facing it has radiance 1
+DEFAULT_LIGHT_ANGLE = 0.53  # degrees
 DEFAULT_LIGHT = f"""The default light, used when a stage has no UsdLux light and no emissive material.
 
 A single white DistantLight (a "key light", sun-sized: angle {DEFAULT_LIGHT_ANGLE} degrees) with irradiance pi
@@ -71,8 +84,24 @@ def _axis_lengths(row_matrix: np.ndarray) -> np.ndarray:
     return np.linalg.norm(np.asarray(row_matrix)[:3, :3], axis=1)
 
 
-def read_light(prim, sampler: TransformSampler, warn) -> sc.Light | None:
-    """A UsdLux light prim to a Light (None for unsupported kinds, with a warning)."""
+def base_emission(prim, frame: float) -> np.ndarray:
+    """intensity * 2^exposure * color * blackbody (if enabled): the radiance before sizeFactor, nits (RGB)."""
+    get = lambda n, d: _value(prim, n, frame, d)  # noqa: E731
+    color = np.asarray(get("color", (1.0, 1.0, 1.0)), np.float64)[:3]
+    radiance = float(get("intensity", 1.0)) * 2.0 ** float(get("exposure", 0.0)) * color
+    if bool(get("enableColorTemperature", False)):
+        radiance = radiance * np.asarray(UsdLux.BlackbodyTemperatureAsRgb(float(get("colorTemperature", 6500.0))))
+    return radiance
+
+
+def normalized(prim, frame: float) -> bool:
+    return bool(_value(prim, "normalize", frame, False))
+
+
+def read_light(prim, sampler: TransformSampler, warn, placement=None, name: str | None = None) -> sc.Light | None:
+    """A UsdLux light prim to a Light (None for unsupported kinds, with a warning). ``placement`` (absolute
+    times (K,), row-vector world matrices (K, 4, 4)) places one instance of a light in a PointInstancer
+    prototype, ``name`` naming it."""
     kind_name = prim.GetTypeName()
     path = str(prim.GetPath())
     kind = _KINDS.get(kind_name)
@@ -81,16 +110,18 @@ def read_light(prim, sampler: TransformSampler, warn) -> sc.Light | None:
         return None
     frame = sampler.shutter.frame
     get = lambda n, d: _value(prim, n, frame, d)  # noqa: E731
-    color = np.asarray(get("color", (1.0, 1.0, 1.0)), np.float64)[:3]
-    radiance = float(get("intensity", 1.0)) * 2.0 ** float(get("exposure", 0.0)) * color
-    if bool(get("enableColorTemperature", False)):
-        radiance = radiance * np.asarray(UsdLux.BlackbodyTemperatureAsRgb(float(get("colorTemperature", 6500.0))))
-    times, rows = sampler.motion(prim)
+    radiance = base_emission(prim, frame)
+    if placement is None:
+        times, rows = sampler.motion(prim)
+        frame_row = sampler.world(prim, [frame])[0]
+    else:  # a light inside a PointInstancer prototype: this instance's world matrices
+        times, rows = placement
+        times, rows = np.asarray(times, np.float64), np.asarray(rows, np.float64)
+        frame_row = rows[int(np.argmin(np.abs(times - frame)))]
     if kind == sc.LIGHT_DOME and dome_pole_is_z(prim):
         rows = _POLE_Z_ROW[None] @ np.asarray(rows, np.float64)
-    light = sc.Light(kind=kind, name=path, radiance=(0.0, 0.0, 0.0),
+    light = sc.Light(kind=kind, name=name or path, radiance=(0.0, 0.0, 0.0),
                      transform=motion_transform(sampler.shutter.normalise(times), rows))
-    frame_row = sampler.world(prim, [frame])[0]
     sx, sy, sz = _axis_lengths(frame_row)
     area = 0.0
     if kind == sc.LIGHT_RECT:
@@ -100,18 +131,31 @@ def read_light(prim, sampler: TransformSampler, warn) -> sc.Light | None:
         light.radius = float(get("radius", 0.5))
         area = np.pi * light.radius**2 * sx * sy
     elif kind == sc.LIGHT_SPHERE:
-        light.radius = 0.0 if bool(get("treatAsPoint", False)) else float(get("radius", 0.5))
-        area = 4.0 * np.pi * light.radius**2 * (sx * sy + sy * sz + sz * sx) / 3.0
+        r = float(get("radius", 0.5))
+        area = 4.0 * np.pi * r**2 * (sx * sy + sy * sz + sz * sx) / 3.0
+        light.radius = r
+        if bool(get("treatAsPoint", False)):  # a point of the sphere's far-field intensity L pi r^2 (cd)
+            light.radius = 0.0
+            radiance = radiance * (np.pi * r * r * sx * sy if r > 0.0 else 1.0)
     elif kind == sc.LIGHT_CYLINDER:
         light.length = float(get("length", 1.0))
-        light.radius = 0.0 if bool(get("treatAsLine", False)) else float(get("radius", 0.5))
+        light.radius = float(get("radius", 0.5))
         area = 2.0 * np.pi * light.radius * light.length * sx * 0.5 * (sy + sz)
     elif kind == sc.LIGHT_DISTANT:
         light.angle = float(get("angle", 0.53))
+        area = distant_size_factor(light.angle)
     elif kind == sc.LIGHT_DOME:
         radiance = _dome_texture(prim, light, radiance, frame, warn)
-    if prim.HasAPI(UsdLux.ShapingAPI) or prim.HasAPI(UsdLux.ShadowAPI):
-        warn("light shaping/shadow controls (spot cones, IES profiles, shadow colour) ignored", path)
+    if kind == sc.LIGHT_RECT:
+        image = _light_image(prim, frame, warn)
+        if image is not None:
+            light.texture, light.texture_name = image
+    if kind not in (sc.LIGHT_DISTANT, sc.LIGHT_DOME):
+        light.shaping = read_shaping(prim, sampler.shutter, warn)
+    elif _has_shaping(prim):
+        warn("light shaping on distant and dome lights ignored (the schema shapes local lights)", path)
+    if float(get("diffuse", 1.0)) != 1.0 or float(get("specular", 1.0)) != 1.0:
+        warn("per-light diffuse/specular multipliers other than 1 ignored (the BSDF is not split by lobe)", path)
     if bool(get("normalize", False)) and area > 0.0:
         radiance = radiance / area
     if not np.all(np.isfinite(radiance)):
@@ -119,6 +163,76 @@ def read_light(prim, sampler: TransformSampler, warn) -> sc.Light | None:
         return None
     light.radiance = tuple(float(x) for x in radiance)
     return light
+
+
+_SHAPING_NAMES = ("shaping:cone:angle", "shaping:cone:softness", "shaping:focus", "shaping:focusTint",
+                  "shaping:ies:file", "shaping:ies:angleScale", "shaping:ies:normalize")
+
+
+def _has_shaping(prim) -> bool:
+    if prim.HasAPI(UsdLux.ShapingAPI):
+        return True
+    return any((prim.GetAttribute("inputs:" + n) and prim.GetAttribute("inputs:" + n).HasAuthoredValue())
+               or (prim.GetAttribute(n) and prim.GetAttribute(n).HasAuthoredValue()) for n in _SHAPING_NAMES)
+
+
+def read_shaping(prim, shutter, warn) -> sc.Shaping | None:
+    """ShapingAPI of a light (None when it has none): cone, softness and focus at the shutter's open and close
+    (an animated cone blurs), focus tint and IES profile at the frame."""
+    if not _has_shaping(prim):
+        return None
+    path = str(prim.GetPath())
+    at = lambda n, d, t: float(_value(prim, n, t, d))  # noqa: E731
+    ends = (shutter.open, shutter.close)
+    sh = sc.Shaping(
+        cone_angle=tuple(at("shaping:cone:angle", 90.0, t) for t in ends),
+        cone_softness=tuple(at("shaping:cone:softness", 0.0, t) for t in ends),
+        focus=tuple(at("shaping:focus", 0.0, t) for t in ends),
+        focus_tint=tuple(float(x) for x in _value(prim, "shaping:focusTint", shutter.frame, (0.0, 0.0, 0.0))),
+    )
+    attr = None
+    for name in ("inputs:shaping:ies:file", "shaping:ies:file"):
+        a = prim.GetAttribute(name)
+        if a and a.HasAuthoredValue():
+            attr = a
+            break
+    value = attr.Get(shutter.frame) if attr is not None else None
+    if value is not None and str(getattr(value, "path", value) or "").strip():
+        resolved, _ = resolve_asset(attr, value)
+        try:
+            profile = ies.parse_ies(read_asset_text(resolved))
+        except (ies.IesError, OSError, UnicodeDecodeError) as e:
+            warn("IES profiles missing or unreadable: those lights emit without a profile",
+                 f"{resolved} ({' '.join(str(e).split())[:160]}; {path})")
+        else:
+            sh.ies_grid = profile.grid()
+            sh.ies_angle_scale = float(_value(prim, "shaping:ies:angleScale", shutter.frame, 0.0))
+            if bool(_value(prim, "shaping:ies:normalize", shutter.frame, False)):
+                power = profile.power()
+                sh.ies_scale = 1.0 / power if power > 0 else 0.0
+            sh.ies_name = resolved
+    return sh
+
+
+def read_asset_text(resolved: str) -> str:
+    """A text asset's contents (plain files and files inside .usdz packages)."""
+    if Ar.IsPackageRelativePath(resolved):
+        asset = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(resolved))
+        if asset is None:
+            raise OSError(f"cannot open {resolved}")
+        return bytes(asset.GetBuffer()).decode("latin-1")
+    with open(resolved, encoding="latin-1") as f:
+        return f.read()
+
+
+def distant_size_factor(angle_deg: float) -> float:
+    """usdLux's sizeFactor of a DistantLight of apex ``angle_deg``: the irradiance a unit-radiance disk of
+    directions delivers at normal incidence (pi sin^2 theta_max), 1 for a delta direction (schema.usda)."""
+    theta = min(max(np.radians(angle_deg) / 2.0, 0.0), np.pi)
+    if theta <= 0.0:
+        return 1.0
+    s2 = np.sin(theta) ** 2
+    return float(np.pi * s2) if theta <= np.pi / 2 else float(np.pi * (2.0 - s2))
 
 
 def dome_pole_is_z(prim) -> bool:
@@ -130,6 +244,33 @@ def dome_pole_is_z(prim) -> bool:
     if pole == "scene":
         return str(UsdGeom.GetStageUpAxis(prim.GetStage())) == "Z"
     return pole == "Z"
+
+
+def _light_image(prim, frame: float, warn) -> tuple[np.ndarray, str] | None:
+    """A RectLight's ``texture:file`` as (H, W, 3) float32 linear RGB, rows top to bottom, and its path."""
+    path = str(prim.GetPath())
+    attr = None
+    for name in ("inputs:texture:file", "texture:file"):
+        a = prim.GetAttribute(name)
+        if a and a.HasAuthoredValue():
+            attr = a
+            break
+    value = attr.Get(frame) if attr is not None else None
+    if value is None or not str(getattr(value, "path", value) or "").strip():
+        return None
+    resolved, tiles = resolve_asset(attr, value)
+    if tiles is not None:
+        warn("UDIM light textures ignored: those lights use their constant color", path)
+        return None
+    try:
+        loaded = read_asset_image(resolved, "auto", keep_top_down=True)
+    except (ImageError, OSError, RuntimeError) as e:
+        warn("light textures missing or unreadable: those lights use their constant color",
+             f"{resolved} ({' '.join(str(e).split())[:160]}; {path})")
+        return None
+    img = loaded.top_down
+    rgb = np.repeat(img[..., :1], 3, -1) if img.shape[-1] < 3 else img[..., :3]
+    return np.ascontiguousarray(rgb, np.float32), resolved
 
 
 def _dome_texture(prim, light: sc.Light, radiance: np.ndarray, frame: float, warn) -> np.ndarray:
@@ -162,14 +303,18 @@ def _dome_texture(prim, light: sc.Light, radiance: np.ndarray, frame: float, war
     rgb = (rgb.astype(np.float64) * np.asarray(radiance, np.float64)).astype(np.float32)
     if loaded.downsampled:
         warn("large textures downsampled to at most 4096 texels a side", f"{resolved} {loaded.original_size}")
-    mean = latlong_mean(rgb)
-    if fmt not in ("automatic", "latlong"):
-        warn("DomeLight texture formats other than latlong: those domes use the image's mean color",
-             f"{path} ({fmt})")
-        return mean
     h, w = rgb.shape[:2]
-    if fmt == "automatic" and w != 2 * h:
-        warn("DomeLight textures (format automatic) that are not 2:1 are read as latlong", f"{path} ({w}x{h})")
+    if fmt == "automatic":  # by the image's shape, as UsdLux's "automatic" asks
+        fmt = "latlong" if w == 2 * h else "cubeMapVerticalCross" if 4 * w == 3 * h else \
+            "angular" if w == h else "latlong"
+        if fmt == "latlong" and w != 2 * h:
+            warn("DomeLight textures (format automatic) of no recognised shape are read as latlong",
+                 f"{path} ({w}x{h})")
+    if fmt in dome_formats.FORMATS:
+        rgb = dome_formats.to_latlong(rgb, fmt)
+    elif fmt != "latlong":
+        warn("unknown DomeLight texture formats read as latlong", f"{path} ({fmt})")
+    mean = latlong_mean(rgb)
     light.texture = np.ascontiguousarray(rgb)
     light.texture_name = resolved
     return mean
@@ -201,7 +346,7 @@ def default_light(camera_row: np.ndarray | None, up_axis: str) -> sc.Light:
     return sc.Light(
         kind=sc.LIGHT_DISTANT,
         name="default key light",
-        radiance=(DEFAULT_LIGHT_IRRADIANCE,) * 3,
+        radiance=(DEFAULT_LIGHT_IRRADIANCE / distant_size_factor(DEFAULT_LIGHT_ANGLE),) * 3,  # nits
         transform=sc.MotionTransform.static(col),
         angle=DEFAULT_LIGHT_ANGLE,
     )

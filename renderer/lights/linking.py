@@ -1,0 +1,142 @@
+"""Light linking, shadow linking and the ShadowAPI controls, as the kernels test them.
+
+Lights whose link collections differ from "everything" get a bit (lights with the same membership share one: a
+link group); each instance carries two bit masks, the groups that light it and the groups it casts shadows
+for (``upload_links``). ``lit_by`` says whether light li may light a point of instance ``inst``;
+``shadow_factor`` is what reaches a point from light li along a shadow ray: the transmittance T through the
+occluders that cast shadows for li (only those nearer than ``shadow:distance``), as L (T + (1 - T)
+shadow:color), and 1 with ``shadow:enable`` off.
+"""
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from renderer.accel.intersect import (
+    BIG,
+    Geometry,
+    box_entry,
+    instance_visible,
+    instance_world_to_object,
+    node_box,
+    safe_inverse,
+    stack_t,
+    tlas_keys_at,
+)
+from renderer.accel.occlusion import blas_transmittance, transmittance
+from renderer.shading.materials import Materials
+from renderer.shading.textures import Textures
+
+MAX_GROUPS = 31  # link groups per mask (bits of an int32)
+
+
+@wp.struct
+class Links:
+    light_bit: wp.array(dtype=wp.int32)  # per light: its light-link group bit, -1 unlinked (lights everything)
+    shadow_bit: wp.array(dtype=wp.int32)  # per light: its shadow-link group bit, -1 (everything casts)
+    inst_lit: wp.array(dtype=wp.int32)  # per instance: bits of the groups that light it
+    inst_caster: wp.array(dtype=wp.int32)  # per instance: bits of the groups it casts shadows for
+    shadow_color: wp.array(dtype=wp.vec3)  # per light
+    shadow_param: wp.array(dtype=wp.vec2)  # per light: (enable 0/1, max occluder distance or -1)
+
+
+def _groups(masks: list, n_inst: int, what: str, names: list[str], warn) -> tuple[list[int], np.ndarray]:
+    """A bit per distinct membership array, and per instance the bits of the groups containing it."""
+    bits, keys = [], {}
+    inst = np.zeros(max(1, n_inst), np.int64)
+    for m, name in zip(masks, names):
+        if m is None:
+            bits.append(-1)
+            continue
+        key = np.asarray(m, bool).tobytes()
+        if key not in keys:
+            if len(keys) >= MAX_GROUPS:
+                warn(f"more than {MAX_GROUPS} distinct {what} collections: the rest are ignored", name)
+                bits.append(-1)
+                continue
+            keys[key] = len(keys)
+            inst[:n_inst] |= np.asarray(m, bool).astype(np.int64) << keys[key]
+        bits.append(keys[key])
+    return bits, inst.astype(np.int32)
+
+
+def upload_links(lights, n_inst: int, device: str, warn=lambda *a: None) -> Links:
+    """Link groups and shadow controls of the uploaded ``lights`` (scene.Light, in table order)."""
+    names = [lt.name for lt in lights]
+    lb, lit = _groups([lt.illuminates for lt in lights], n_inst, "light-link", names, warn)
+    sb, cast = _groups([lt.casts_shadow for lt in lights], n_inst, "shadow-link", names, warn)
+    k = Links()
+    i32 = lambda a: wp.array(np.asarray(a if len(a) else [-1], np.int32), dtype=wp.int32, device=device)  # noqa
+    k.light_bit, k.shadow_bit = i32(lb), i32(sb)
+    k.inst_lit = wp.array(lit, dtype=wp.int32, device=device)
+    k.inst_caster = wp.array(cast, dtype=wp.int32, device=device)
+    k.shadow_color = wp.array(np.array([lt.shadow_color for lt in lights] or [(0, 0, 0)], np.float32),
+                              dtype=wp.vec3, device=device)
+    k.shadow_param = wp.array(np.array([(float(lt.shadow_enable), lt.shadow_distance) for lt in lights]
+                                       or [(1.0, -1.0)], np.float32), dtype=wp.vec2, device=device)
+    return k
+
+
+@wp.func
+def lit_by(links: Links, li: int, inst: int):
+    """May light li light a point of instance ``inst`` (-1: not on an instance)?"""
+    b = links.light_bit[li]
+    if b < 0 or inst < 0:
+        return True
+    return ((links.inst_lit[inst] >> b) & 1) != 0
+
+
+@wp.func(inline=True)  # one call site: no copy of the Geometry struct
+def caster_transmittance(geo: Geometry, mats: Materials, tex: Textures, links: Links, bit: int, ro: wp.vec3,
+                         rd: wp.vec3, tmax: float, s: float):
+    """``occlusion.transmittance`` through the instances that cast shadows for link group ``bit`` only."""
+    k0, k1, u = tlas_keys_at(geo, s)
+    nk = geo.tlas_nkeys
+    inv_d = safe_inverse(rd)
+    stack = stack_t()
+    stack[0] = 0
+    sp = int(1)
+    tr = float(1.0)
+    while sp > 0 and tr > 0.0:
+        sp -= 1
+        n = stack[sp]
+        a = geo.tlas_a[n]
+        b = geo.tlas_b[n]
+        if a < 0:
+            first = -(a + 1)
+            for i in range(b):
+                inst = geo.tlas_prim[first + i]
+                casts = ((links.inst_caster[inst] >> bit) & 1) != 0
+                if casts and instance_visible(geo, inst, s) and tr > 0.0:
+                    w2o = instance_world_to_object(geo, inst, s)
+                    tr = blas_transmittance(geo, mats, tex, geo.inst_mesh[inst], wp.transform_point(w2o, ro),
+                                            wp.transform_vector(w2o, rd), tmax, s, tr)
+        else:
+            lo_a, hi_a = node_box(geo.tlas_lo, geo.tlas_hi, a * nk, k0, k1, u)
+            if box_entry(lo_a, hi_a, ro, inv_d, tmax) < BIG:
+                stack[sp] = a
+                sp += 1
+            lo_b, hi_b = node_box(geo.tlas_lo, geo.tlas_hi, b * nk, k0, k1, u)
+            if box_entry(lo_b, hi_b, ro, inv_d, tmax) < BIG:
+                stack[sp] = b
+                sp += 1
+    return tr
+
+
+@wp.func(inline=True)  # one call site: no copy of the Geometry struct
+def shadow_factor(geo: Geometry, mats: Materials, tex: Textures, links: Links, li: int, ro: wp.vec3,
+                  rd: wp.vec3, tmax: float, s: float):
+    """What fraction (per channel) of light li's emission arrives along the shadow ray (ro, rd, tmax)."""
+    sp = links.shadow_param[li]
+    if sp[0] == 0.0:
+        return wp.vec3(1.0)
+    t = tmax
+    if sp[1] > 0.0:
+        t = wp.min(tmax, sp[1])
+    bit = links.shadow_bit[li]
+    tr = float(1.0)
+    if bit < 0:
+        tr = transmittance(geo, mats, tex, ro, rd, t, s)
+    else:
+        tr = caster_transmittance(geo, mats, tex, links, bit, ro, rd, t, s)
+    return wp.vec3(tr) + links.shadow_color[li] * (1.0 - tr)

@@ -1,0 +1,194 @@
+"""Choosing the light a shading point samples, in proportion to what each can deliver there.
+
+A two-level light cut, spatially aware: finite lights are grouped into at most ``MAX_CLUSTERS`` spatial
+clusters (recursive median splits along the widest axis); each infinite light (distant, dome) is a cluster of
+its own. At a shading point p a cluster is chosen in proportion to its estimated irradiance at p,
+
+    finite:   min(Phi_c / (4 pi max(|p - centre_c|^2, R_c^2)), pi * cap_c)    (Phi_c the cluster's power,
+              R_c its radius, cap_c the brightest radiance in it: no light outshines a dome of its radiance)
+    infinite: the irradiance it delivers (distant: E; dome: pi * mean radiance),
+
+then a light inside it in proportion to its power. Every light keeps a non-zero probability everywhere, so the
+estimate stays unbiased; near lights are chosen far more often than far ones, which is what keeps a row of a
+thousand lights quiet. ``select_pdf`` gives the same probability for a light found by BSDF sampling (MIS).
+Cost per shading point: O(clusters). With ``clusters=False`` all finite lights form one cluster (selection by
+power, as before).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+MAX_CLUSTERS = 64
+
+
+@dataclass
+class SelectEstimate:
+    """One uploaded light, as selection sees it."""
+
+    finite: bool
+    power: float  # finite: radiant power Phi (pi L A; a point: 4 pi I); infinite: the irradiance it delivers
+    cap: float  # finite: the brightest radiance (inf for point lights)
+    pos: np.ndarray  # finite: centre
+    extent: float  # finite: radius of the light's shape
+
+
+@wp.struct
+class Selection:
+    count: int  # clusters
+    kind: wp.array(dtype=wp.int32)  # 0 finite, 1 infinite
+    centre: wp.array(dtype=wp.vec3)
+    radius2: wp.array(dtype=wp.float32)  # squared radius (the distance below which the estimate stops rising)
+    power: wp.array(dtype=wp.float32)  # finite: Phi / (4 pi); infinite: irradiance
+    cap: wp.array(dtype=wp.float32)  # finite: pi * brightest radiance (or a huge number)
+    first: wp.array(dtype=wp.int32)  # cluster's first entry in order / cdf
+    n: wp.array(dtype=wp.int32)
+    order: wp.array(dtype=wp.int32)  # light indices, cluster by cluster
+    cdf: wp.array(dtype=wp.float32)  # within-cluster cumulative power, per entry of order
+    light_cluster: wp.array(dtype=wp.int32)  # per light
+    light_p: wp.array(dtype=wp.float32)  # per light: probability within its cluster
+
+
+def _split(idx: np.ndarray, pos: np.ndarray, leaf: int) -> list[np.ndarray]:
+    if len(idx) <= leaf:
+        return [idx]
+    p = pos[idx]
+    axis = int(np.argmax(p.max(0) - p.min(0)))
+    o = idx[np.argsort(p[:, axis], kind="stable")]
+    h = len(o) // 2
+    return _split(o[:h], pos, leaf) + _split(o[h:], pos, leaf)
+
+
+def build_clusters(est: list[SelectEstimate], clusters: bool = True) -> list[np.ndarray]:
+    """Light indices per cluster: finite lights split spatially, each infinite light alone."""
+    fin = np.array([i for i, e in enumerate(est) if e.finite], np.int64)
+    groups: list[np.ndarray] = []
+    if len(fin):
+        if not clusters:
+            groups.append(fin)
+        else:
+            pos = np.array([e.pos for e in est], np.float64)
+            leaf = max(1, math.ceil(len(fin) / MAX_CLUSTERS))
+            groups += _split(fin, pos, leaf)
+    groups += [np.array([i]) for i, e in enumerate(est) if not e.finite]
+    return groups
+
+
+def upload_selection(est: list[SelectEstimate], device: str, clusters: bool = True) -> Selection:
+    groups = build_clusters(est, clusters)
+    kinds, centres, r2, power, cap, first, ns, order, cdf = ([] for _ in range(9))
+    light_cluster = np.zeros(max(1, len(est)), np.int32)
+    light_p = np.ones(max(1, len(est)), np.float32)
+    at = 0
+    for c, g in enumerate(groups):
+        e = [est[i] for i in g]
+        w = np.array([max(x.power, 0.0) for x in e], np.float64)
+        if w.sum() <= 0:
+            w = np.ones(len(e))
+        p = w / w.sum()
+        light_cluster[g] = c
+        light_p[g] = p
+        order += [int(i) for i in g]
+        cum = np.cumsum(p)
+        cum[-1] = 1.0
+        cdf += list(cum)
+        first.append(at)
+        ns.append(len(g))
+        at += len(g)
+        if e[0].finite:
+            pts = np.array([x.pos for x in e])
+            ctr = 0.5 * (pts.min(0) + pts.max(0))
+            rad = max(float(np.max(np.linalg.norm(pts - ctr, axis=1) + [x.extent for x in e])), 1e-4)
+            kinds.append(0)
+            centres.append(ctr)
+            r2.append(rad * rad)
+            power.append(w.sum() / (4.0 * math.pi))
+            cap.append(min(math.pi * max(x.cap for x in e), 3.0e38))
+        else:
+            kinds.append(1)
+            centres.append(np.zeros(3))
+            r2.append(1.0)
+            power.append(w.sum())
+            cap.append(3.0e38)
+    s = Selection()
+    s.count = len(groups)
+    i32 = lambda a: wp.array(np.array(a or [0], np.int32), dtype=wp.int32, device=device)  # noqa: E731
+    f32 = lambda a: wp.array(np.array(a or [0.0], np.float32), dtype=wp.float32, device=device)  # noqa: E731
+    s.kind, s.first, s.n, s.order = i32(kinds), i32(first), i32(ns), i32(order)
+    s.centre = wp.array(np.array(centres or [np.zeros(3)], np.float32), dtype=wp.vec3, device=device)
+    s.radius2, s.power, s.cap, s.cdf = f32(r2), f32(power), f32(cap), f32(cdf)
+    s.light_cluster = wp.array(light_cluster, dtype=wp.int32, device=device)
+    s.light_p = wp.array(light_p, dtype=wp.float32, device=device)
+    return s
+
+
+def cluster_weights_np(sel_host: dict, p: np.ndarray) -> np.ndarray:
+    """NumPy twin of ``cluster_weight`` for every cluster at point p (sel_host: the Selection's arrays)."""
+    d2 = np.sum((sel_host["centre"] - p) ** 2, axis=1)
+    fin = np.minimum(sel_host["power"] / np.maximum(d2, sel_host["radius2"]), sel_host["cap"])
+    return np.where(sel_host["kind"] == 1, sel_host["power"], fin)
+
+
+@wp.func
+def cluster_weight(sel: Selection, c: int, p: wp.vec3):
+    if sel.kind[c] == 1:
+        return sel.power[c]
+    d = sel.centre[c] - p
+    return wp.min(sel.power[c] / wp.max(wp.dot(d, d), sel.radius2[c]), sel.cap[c])
+
+
+@wp.func
+def select_light(sel: Selection, p: wp.vec3, u: float):
+    """A light chosen at p from one uniform number: (index, its probability, u rescaled to [0, 1) again)."""
+    total = float(0.0)
+    for c in range(sel.count):
+        total += cluster_weight(sel, c, p)
+    if not (total > 0.0):
+        return int(0), 0.0, u
+    target = u * total
+    acc = float(0.0)
+    chosen = sel.count - 1
+    w_c = float(0.0)
+    for c in range(sel.count):
+        w = cluster_weight(sel, c, p)
+        if acc + w > target and w > 0.0:
+            chosen = c
+            w_c = w
+            break
+        acc += w
+    if w_c <= 0.0:  # rounding at the top end: the last cluster with weight
+        for c in range(sel.count):
+            w = cluster_weight(sel, c, p)
+            if w > 0.0:
+                chosen = c
+                w_c = w
+        acc = total - w_c
+    v = wp.clamp((target - acc) / w_c, 0.0, 0.99999994)
+    first = sel.first[chosen]
+    lo = int(0)
+    hi = sel.n[chosen] - 1
+    while lo < hi:  # first entry with cdf > v
+        mid = (lo + hi) // 2
+        if sel.cdf[first + mid] > v:
+            hi = mid
+        else:
+            lo = mid + 1
+    li = sel.order[first + lo]
+    p_in = sel.light_p[li]
+    start = sel.cdf[first + lo] - p_in
+    u_rest = wp.clamp((v - start) / wp.max(p_in, 1.0e-30), 0.0, 0.99999994)
+    return li, (w_c / total) * p_in, u_rest
+
+
+@wp.func
+def select_pdf(sel: Selection, li: int, p: wp.vec3):
+    """Probability that ``select_light`` at p returns light li."""
+    total = float(0.0)
+    for c in range(sel.count):
+        total += cluster_weight(sel, c, p)
+    if not (total > 0.0):
+        return 0.0
+    return cluster_weight(sel, sel.light_cluster[li], p) / total * sel.light_p[li]

@@ -1,0 +1,213 @@
+"""usdLux ShapingAPI and IES profiles: the parser on hand-written files, the kernels' shaping against the
+schema's formulas written out here, and renders of a floor under a shaped point light."""
+from __future__ import annotations
+
+import math
+import pathlib
+
+import numpy as np
+import pytest
+from pxr import Gf, Sdf, UsdGeom, UsdLux
+
+import stages
+from renderer.lights.ies import IesError, parse_ies, read_ies
+from renderer.lights.shaping import shaping_np
+from test_render_analytic import pixel_average, render_rgb
+
+DATA = pathlib.Path(__file__).parent / "data"
+
+
+def schema_cone(theta, angle_deg, softness):
+    """schema.usda, shaping:cone:softness: 1 - smoothStep(theta, lerp(softness, cutoff, 0), cutoff); 0 beyond."""
+    cutoff = math.radians(angle_deg)
+    start = cutoff + softness * (0.0 - cutoff)
+    t = np.clip((theta - start) / max(cutoff - start, 1e-30), 0, 1)
+    f = 1 - t * t * (3 - 2 * t) if softness > 0 else np.ones_like(theta)
+    return np.where(theta > cutoff, 0.0, f)
+
+
+# --------------------------------------------------------------------------- parser
+def test_parser_reads_the_hand_written_profile():
+    p = read_ies(str(DATA / "spot.ies"))
+    np.testing.assert_array_equal(p.vertical, [0, 15, 30, 45, 60, 75, 90])
+    np.testing.assert_allclose(p.candela[0], [1.0, 0.9, 0.7, 0.4, 0.2, 0.05, 0.0])  # times the 0.001 multiplier
+    np.testing.assert_allclose(p.eval(22.5, 123.0), 0.8)  # axially symmetric, linear between rows
+    assert p.eval(120.0, 0.0) == 0.0  # beyond the measured range
+    g = p.grid()
+    assert g.shape == (181, 73) and g[30, 10] == pytest.approx(0.7)
+
+
+def test_parser_unfolds_quadrant_symmetry_and_skips_a_tilt_block():
+    p = read_ies(str(DATA / "quadrant.ies"))
+    assert p.candela.shape == (2, 3)
+    for phi, expected in ((0, 10), (90, 20), (180, 10), (270, 20), (45, 15), (135, 15), (315, 15)):
+        assert p.eval(0.0, phi) == pytest.approx(expected), phi
+
+
+def test_profile_power_is_the_mean_intensity_over_the_hemisphere():
+    uniform = parse_ies("TILT=NONE\n1 -1 1 91 1 1 2 0 0 0 1 1 1\n" + " ".join(map(str, range(91))) + "\n0\n"
+                        + " ".join(["3"] * 91))
+    assert uniform.power() == pytest.approx(3.0, rel=1e-3)  # 0..90 degrees: a hemisphere
+
+
+@pytest.mark.parametrize("text,needle", [("no tilt here", "TILT"), ("TILT=NONE\n1 2 3", "truncated header"),
+                                         ("TILT=NONE\n1 -1 1 2 1 1 2 0 0 0 1 1 1\n0 90\n0\n5", "truncated"),
+                                         ("TILT=NONE\n1 -1 1 2 1 3 2 0 0 0 1 1 1\n0 90\n0\n5 5", "type"),
+                                         ("TILT=lamp.tlt\n", "separate files")])
+def test_parser_rejects_bad_files_with_a_reason(text, needle):
+    with pytest.raises(IesError, match=needle):
+        parse_ies(text)
+
+
+# --------------------------------------------------------------------------- formulas
+def test_shaping_twin_follows_the_schema_cone_and_focus():
+    theta = np.radians(np.linspace(0, 180, 721))
+    d = np.stack([np.sin(theta), np.zeros_like(theta), -np.cos(theta)], 1)  # off the -Z axis by theta
+    c = shaping_np((math.radians(40), 0.3, 0.0, 1), (0, 0, 0), None, (0, 1), d)
+    np.testing.assert_allclose(c[:, 0], schema_cone(theta, 40, 0.3), atol=1e-12)
+    focus = shaping_np((math.pi, 0.0, 2.0, 1), (0.2, 0.5, 1.0), None, (0, 1), d)
+    ff = np.abs(np.cos(theta)) ** 2
+    np.testing.assert_allclose(focus, np.stack([0.2 + 0.8 * ff, 0.5 + 0.5 * ff, np.ones_like(ff)], 1), atol=1e-12)
+
+
+# --------------------------------------------------------------------------- renders
+H = 1.0  # light height above the floor (m)
+W = 96  # pixels across the strip, 0.025 m each: x in [-1.2, 1.2]
+PX = 0.025
+
+
+def floor_under_point_light(path, configure):
+    """A white floor, a point light (treatAsPoint, r = 1/sqrt(pi): intensity = radiance) H above it aimed down,
+    and an orthographic camera looking down on a strip along x."""
+    stage = stages.new_stage(path)
+    stages.camera(stage, ortho=True, h_ap_mm=W * PX * 10, v_ap_mm=4 * PX * 10, translate=(0, 0.5, 0),
+                  rotate_x=-90.0, tenths_per_mm=1.0)
+    stages.rect_xz(stage, "/World/Floor", -10, 10, -10, 10, 0.0, stages.material(stage, "White", (1, 1, 1)))
+    light = UsdLux.SphereLight.Define(stage, "/World/Spot")
+    light.CreateRadiusAttr(1.0 / math.sqrt(math.pi))
+    light.CreateTreatAsPointAttr(True)
+    UsdGeom.Xformable(light).AddTranslateOp().Set(Gf.Vec3d(0, H, 0))
+    UsdGeom.Xformable(light).AddRotateXOp().Set(-90.0)  # -Z (the primary axis) points down
+    configure(light, stage)
+    stage.Save()
+    rgb, _ = render_rgb(path, width=W, height=4, spp=16, filter="box", max_depth=1)
+    return rgb[..., 0].mean(0)
+
+
+def floor_profile(intensity_of_theta):
+    """Floor radiance (albedo 1) under a point light of intensity I(theta) at height H: I cos^3 / (pi H^2)."""
+    def radiance(px, z):
+        x = (px - W / 2) * PX
+        theta = np.arctan2(np.hypot(x, z), H)
+        return intensity_of_theta(theta) * np.cos(theta) ** 3 / (math.pi * H * H)
+    zs = (np.arange(32) + 0.5) / 32 * 4 * PX - 2 * PX  # the strip's 4 rows, across z
+    return np.mean([pixel_average(lambda px: radiance(px, z), 0, W) for z in zs], 0)
+
+
+@pytest.mark.parametrize("angle,softness", [(30.0, 0.0), (40.0, 0.5), (25.0, 1.0)])
+def test_spot_cone_and_softness_on_a_plane_match_the_schema(tmp_path, angle, softness):
+    def configure(light, _stage):
+        UsdLux.ShapingAPI.Apply(light.GetPrim())
+        shaping = UsdLux.ShapingAPI(light.GetPrim())
+        shaping.CreateShapingConeAngleAttr(angle)
+        shaping.CreateShapingConeSoftnessAttr(softness)
+    measured = floor_under_point_light(tmp_path / "spot.usda", configure)
+    expected = floor_profile(lambda th: schema_cone(th, angle, softness))
+    assert_profile(measured, expected)
+    assert measured[:W // 8].max() == 0.0  # far outside the cone: dark
+
+
+def assert_profile(measured, expected):
+    """Pointwise within 1.5 % of the peak away from a hard cut (whose pixels 16 samples only stratify), and the
+    running integral (where the cut is) within 0.5 %."""
+    jump = np.abs(np.diff(expected, prepend=expected[0])) > 0.05 * expected.max()
+    near_cut = jump | np.roll(jump, -1)
+    err = np.abs(measured - expected)[~near_cut]
+    assert err.max() < 0.015 * expected.max(), err.max()
+    cum = np.abs(np.cumsum(measured) - np.cumsum(expected)).max()
+    assert cum < 0.005 * expected.sum(), cum
+
+
+def test_ies_profile_reproduces_its_candela_table_on_a_plane(tmp_path):
+    profile = read_ies(str(DATA / "spot.ies"))
+
+    def configure(light, _stage):
+        UsdLux.ShapingAPI.Apply(light.GetPrim())
+        ies = light.GetPrim().CreateAttribute("inputs:shaping:ies:file", Sdf.ValueTypeNames.Asset)
+        ies.Set(Sdf.AssetPath("data/spot.ies"))
+        light.GetPrim().CreateAttribute("inputs:shaping:cone:angle", Sdf.ValueTypeNames.Float).Set(180.0)
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "spot.ies").write_text((DATA / "spot.ies").read_text())
+    measured = floor_under_point_light(tmp_path / "ies.usda", configure)
+    expected = floor_profile(lambda th: profile.eval(np.degrees(th), 0.0))
+    assert_profile(measured, expected)
+
+
+def test_ies_normalize_divides_by_the_profile_power(tmp_path):
+    profile = read_ies(str(DATA / "spot.ies"))
+    (tmp_path / "spot.ies").write_text((DATA / "spot.ies").read_text())
+
+    def configure(light, _stage):
+        s = UsdLux.ShapingAPI.Apply(light.GetPrim())
+        s.CreateShapingIesFileAttr(Sdf.AssetPath("spot.ies"))
+        s.CreateShapingIesNormalizeAttr(True)
+        s.CreateShapingConeAngleAttr(180.0)
+    measured = floor_under_point_light(tmp_path / "iesn.usda", configure)
+    power = profile.power()
+    expected = floor_profile(lambda th: profile.eval(np.degrees(th), 0.0) / power)
+    assert_profile(measured, expected)
+
+
+def test_missing_ies_file_warns_naming_the_light(tmp_path):
+    from renderer.usd.importer import load_scene
+    stage = stages.new_stage(tmp_path / "m.usda")
+    light = UsdLux.SphereLight.Define(stage, "/World/Bulb")
+    UsdLux.ShapingAPI.Apply(light.GetPrim()).CreateShapingIesFileAttr(Sdf.AssetPath("nowhere.ies"))
+    stage.Save()
+    scene = load_scene(tmp_path / "m.usda", 0.0)
+    assert any("IES profiles missing" in w and "/World/Bulb" in w for w in scene.warnings)
+
+
+def test_shaping_kernel_matches_its_numpy_twin():
+    import warp as wp
+
+    from renderer.lights.ies import IES_PHI, IES_THETA
+    from renderer.lights.shaping import shaping_eval
+
+    @wp.kernel
+    def run(dirs: wp.array(dtype=wp.vec3), shape: wp.vec4, tint: wp.vec3, table: wp.array(dtype=wp.float32),
+            off: int, ies: wp.vec2, out: wp.array(dtype=wp.vec3)):
+        i = wp.tid()
+        out[i] = shaping_eval(shape, tint, table, off, ies, dirs[i])
+
+    rng = np.random.default_rng(3)
+    d = rng.normal(size=(2000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    grid = read_ies(str(DATA / "quadrant.ies")).grid()
+    assert grid.shape == (IES_THETA, IES_PHI)
+    for shape, tint, g, ies in [((0.7, 0.4, 0.0, 1), (0, 0, 0), None, (0, 1)),
+                                ((1.2, 1.0, 3.0, 1), (0.3, 0.1, 0.9), None, (0, 1)),
+                                ((math.pi, 0.0, 0.0, 1), (0, 0, 0), grid, (0.7, 0.5)),
+                                ((2.0, 0.2, 1.5, 1), (0.5, 0.5, 0.5), grid, (-1.3, 1.0))]:
+        out = wp.zeros(len(d), dtype=wp.vec3)
+        table = wp.array(np.asarray(g if g is not None else np.zeros(1), np.float32).ravel(), dtype=wp.float32)
+        wp.launch(run, len(d), [wp.array(d.astype(np.float32), dtype=wp.vec3), wp.vec4(*shape), wp.vec3(*tint),
+                                table, 0 if g is not None else -1, wp.vec2(*ies), out])
+        np.testing.assert_allclose(out.numpy(), shaping_np(shape, tint, g, ies, d), atol=2e-3)
+
+
+def test_an_animated_cone_is_keyed_at_the_shutter_ends(tmp_path):
+    """Cone angle keyed 20 -> 40 degrees over frames -1 .. 1; a shutter of [-0.5, 0.5] sees 25 -> 35 (the
+    kernels blend the keys by each sample's time, so the cone's edge blurs)."""
+    from renderer.usd.importer import load_scene
+    stage = stages.new_stage(tmp_path / "a.usda")
+    stages.camera(stage, shutter=(-0.5, 0.5))
+    stages.rect_xz(stage, "/World/Floor", -1, 1, -1, 1, 0.0)
+    light = UsdLux.SphereLight.Define(stage, "/World/Spot")
+    attr = UsdLux.ShapingAPI.Apply(light.GetPrim()).CreateShapingConeAngleAttr()
+    attr.Set(20.0, -1.0)
+    attr.Set(40.0, 1.0)
+    stage.Save()
+    (lt,) = load_scene(tmp_path / "a.usda", 0.0).lights
+    assert lt.shaping.cone_angle == pytest.approx((25.0, 35.0))
+    assert lt.shaping.cone_softness == (0.0, 0.0) and lt.shaping.ies_grid is None

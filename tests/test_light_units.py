@@ -1,0 +1,106 @@
+"""UsdLux units against usdLux's schema.usda ("Quantities and Units", ``normalize``): what a white Lambertian
+floor (albedo 1) reflects under each light is albedo * E / pi with the schema's irradiance E."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from pxr import Gf, UsdGeom, UsdLux
+
+import stages
+from test_render_analytic import render_rgb
+
+
+def floor_stage(path):
+    """A white Lambertian floor at y = 0 seen straight down by an orthographic camera at y = 0.5."""
+    stage = stages.new_stage(path)
+    stages.camera(stage, ortho=True, h_ap_mm=0.4, v_ap_mm=0.4, translate=(0, 0.5, 0), rotate_x=-90.0,
+                  tenths_per_mm=1.0)
+    stages.rect_xz(stage, "/World/Floor", -10, 10, -10, 10, 0.0, stages.material(stage, "White", (1, 1, 1)))
+    return stage
+
+
+def floor_radiance(path, spp=16):
+    rgb, _ = render_rgb(path, width=8, height=8, spp=spp, max_depth=1)
+    return rgb.reshape(-1, 3).mean(0)
+
+
+@pytest.mark.parametrize("intensity,angle,normalize", [(50000.0, 0.53, False), (1.0, 20.0, False),
+                                                       (2.0, 0.53, True), (2.0, 20.0, True)])
+def test_distant_light_irradiance_follows_the_schema(tmp_path, intensity, angle, normalize):
+    """Unnormalized, intensity is the radiance L of a disk of apex ``angle``: E = L pi sin^2(angle/2) (the
+    default 50000 nits at 0.53 degrees gives E = 3.36 lux); normalized, E = intensity."""
+    stage = floor_stage(tmp_path / "sun.usda")
+    light = stages.distant_light(stage, intensity=intensity, angle=angle, normalize=normalize)
+    light.CreateExposureAttr(1.0)
+    stage.Save()
+    L = intensity * 2.0
+    E = L if normalize else L * math.pi * math.sin(math.radians(angle / 2)) ** 2
+    if intensity == 50000.0:
+        assert E == pytest.approx(2 * 3.36, rel=0.01)
+    np.testing.assert_allclose(floor_radiance(tmp_path / "sun.usda"), E / math.pi, rtol=0.01)
+
+
+def test_no_light_gives_a_white_lambert_surface_facing_the_default_light_radiance_one(tmp_path):
+    """The default key light has irradiance pi; it comes from (-right + up + back) of the camera, so the floor
+    seen straight down (camera right = +X, back = -Z... projected on the floor plane) is lit at cos = 1/sqrt(3)
+    when the camera looks along the horizon; looking straight down, right and back are still defined by the
+    camera's axes projected onto the floor plane."""
+    stage = stages.new_stage(tmp_path / "none.usda")
+    # a tilted camera: its right (+X) and back (+Z rotated) projected onto the floor are +X and +Z
+    stages.camera(stage, ortho=True, h_ap_mm=0.4, v_ap_mm=0.4, translate=(0, 0.5, 0.5), rotate_x=-45.0,
+                  tenths_per_mm=1.0)
+    stages.rect_xz(stage, "/World/Floor", -10, 10, -10, 10, 0.0, stages.material(stage, "White", (1, 1, 1)))
+    stage.Save()
+    np.testing.assert_allclose(floor_radiance(tmp_path / "none.usda"), 1.0 / math.sqrt(3.0), rtol=0.01)
+
+
+def test_sphere_light_normalize_divides_by_its_area_and_treat_as_point_keeps_its_intensity(tmp_path):
+    """A sphere of radius r and radiance L a height h above the floor (h >> r): E = L pi r^2 / h^2; normalized,
+    L / (4 pi r^2); treatAsPoint, the same far-field intensity L pi r^2 from a point."""
+    h, r = 2.0, 0.05
+    results = {}
+    for name, normalize, point in (("plain", False, False), ("norm", True, False), ("point", False, True)):
+        stage = floor_stage(tmp_path / f"{name}.usda")
+        s = UsdLux.SphereLight.Define(stage, "/World/Bulb")
+        s.CreateIntensityAttr(100.0)
+        s.CreateRadiusAttr(r)
+        s.CreateNormalizeAttr(normalize)
+        s.CreateTreatAsPointAttr(point)
+        UsdGeom.Xformable(s).AddTranslateOp().Set(Gf.Vec3d(0, h, 0))
+        stage.Save()
+        results[name] = floor_radiance(tmp_path / f"{name}.usda", spp=64)[0]
+    # exact irradiance of a Lambertian sphere on the normal below it: L pi (r/h)^2
+    E = 100.0 * math.pi * (r / h) ** 2
+    assert results["plain"] == pytest.approx(E / math.pi, rel=0.02)
+    assert results["point"] == pytest.approx(E / math.pi, rel=0.02)
+    assert results["norm"] == pytest.approx(E / math.pi / (4 * math.pi * r * r), rel=0.02)
+
+
+def test_rect_light_texture_follows_the_schema_orientation(tmp_path):
+    """usdLux RectLight: the texture's first texel (top left) at local (+X, +Y), its last at (-X, -Y). A 2x2
+    image (red, green / blue, white) on a rect 2 cm above the floor lights each floor quadrant with its texel."""
+    from PIL import Image
+    img = np.array([[[255, 0, 0], [0, 255, 0]], [[0, 0, 255], [255, 255, 255]]], np.uint8)
+    Image.fromarray(img).save(tmp_path / "quad.png")
+    stage = stages.new_stage(tmp_path / "tex.usda")
+    stages.camera(stage, ortho=True, h_ap_mm=8.0, v_ap_mm=8.0, translate=(0, 0.5, 0), rotate_x=-90.0,
+                  tenths_per_mm=1.0)  # 0.8 m square; image right = +X, image top = -Z
+    stages.rect_xz(stage, "/World/Floor", -10, 10, -10, 10, 0.0, stages.material(stage, "White", (1, 1, 1)))
+    rect = UsdLux.RectLight.Define(stage, "/World/Panel")
+    rect.CreateWidthAttr(1.0)
+    rect.CreateHeightAttr(1.0)
+    rect.CreateTextureFileAttr("quad.png")
+    xf = UsdGeom.Xformable(rect)
+    xf.AddTranslateOp().Set(Gf.Vec3d(0, 0.02, 0))
+    xf.AddRotateXOp().Set(-90.0)  # emits down; local +Y is world -Z (image top), local +X world +X
+    stage.Save()
+    rgb, _ = render_rgb(tmp_path / "tex.usda", width=8, height=8, spp=16, max_depth=1)
+    quads = {"top_right": rgb[1:3, 5:7], "top_left": rgb[1:3, 1:3], "bottom_right": rgb[5:7, 5:7],
+             "bottom_left": rgb[5:7, 1:3]}
+    mean = {k: v.reshape(-1, 3).mean(0) for k, v in quads.items()}
+    assert np.argmax(mean["top_right"]) == 0 and mean["top_right"][0] > 3 * mean["top_right"][1:].max()  # red
+    assert np.argmax(mean["top_left"]) == 1 and mean["top_left"][1] > 3 * mean["top_left"][[0, 2]].max()  # green
+    assert np.argmax(mean["bottom_right"]) == 2 and mean["bottom_right"][2] > 3 * mean["bottom_right"][:2].max()
+    assert mean["bottom_left"].min() > 0.8 * mean["bottom_left"].max()  # white
