@@ -7,6 +7,7 @@ texture coordinates and returns a ``MaterialSample``. Each input is either a con
     st'   = M st + t                      (UsdTransform2d; st = the hit's uv, or a constant st)
     rgba  = lookup(texture, st') * scale + bias      (fallback, unscaled, where there is no texture/tile)
     value = rgba.rgb or rgba.r/g/b/a      (the connected output; a scalar broadcast to a colour input)
+    value = value * post_scale + post_bias  (shading-network math after the lookup; scalars use x)
 
 Layout: inputs of material m live at ``m * NUM_INPUTS + slot`` (slots ``IN_*`` below) in ``value`` (the constant,
 scalars in x) and ``binding`` (a texture-binding row, or -1). Binding rows hold the texture (an index into
@@ -94,6 +95,8 @@ class Materials:
     b_st: wp.array(dtype=wp.vec2)  # constant st, or the primvar reader's fallback when the hit has no uv
     b_xf: wp.array(dtype=wp.vec4)  # UsdTransform2d 2x2 matrix, row-major (m00, m01, m10, m11)
     b_xt: wp.array(dtype=wp.vec2)  # UsdTransform2d translation
+    b_post_scale: wp.array(dtype=wp.vec3)  # network math after the lookup: value * post_scale + post_bias
+    b_post_bias: wp.array(dtype=wp.vec3)
 
 
 @wp.struct
@@ -160,7 +163,8 @@ def input_color(mats: Materials, tex: Textures, mat: int, slot: int, uv: wp.vec2
     b = mats.binding[i]
     if b < 0:
         return mats.value[i]
-    return select_color(binding_rgba(mats, tex, b, uv), mats.b_output[b])
+    c = select_color(binding_rgba(mats, tex, b, uv), mats.b_output[b])
+    return wp.cw_mul(c, mats.b_post_scale[b]) + mats.b_post_bias[b]
 
 
 @wp.func(inline=True)  # small and called per input: no copy of the Materials struct
@@ -170,7 +174,8 @@ def input_scalar(mats: Materials, tex: Textures, mat: int, slot: int, uv: wp.vec
     b = mats.binding[i]
     if b < 0:
         return mats.value[i][0]
-    return select_scalar(binding_rgba(mats, tex, b, uv), mats.b_output[b])
+    return select_scalar(binding_rgba(mats, tex, b, uv), mats.b_output[b]) * mats.b_post_scale[b][0] \
+        + mats.b_post_bias[b][0]
 
 
 @wp.func
@@ -459,12 +464,15 @@ def upload_materials(materials: list[Material], device: str = "cpu") -> Material
 
     rows_or_dummy = rows or [None]
     tex_ids, outs, wraps, scales, biases, fallbacks, const_st, sts, xfs, xts = ([] for _ in range(10))
+    post_scales, post_biases = [], []
     for ti in rows_or_dummy:
         if ti is None:
             tex_ids.append(-1), outs.append(OUTPUT_RGB), wraps.append((2, 2)), scales.append((1, 1, 1, 1))
             biases.append((0, 0, 0, 0)), fallbacks.append((0, 0, 0, 1)), const_st.append(1), sts.append((0, 0))
-            xfs.append((1, 0, 0, 1)), xts.append((0, 0))
+            xfs.append((1, 0, 0, 1)), xts.append((0, 0)), post_scales.append((1, 1, 1)), post_biases.append((0, 0, 0))
             continue
+        post_scales.append(ti.post_scale)
+        post_biases.append(ti.post_bias)
         tex_ids.append(tex_index[id(ti.texture)] if ti.texture is not None else -1)
         outs.append(OUTPUTS.get(ti.output, OUTPUT_RGB))
         wraps.append((WRAP_MODES.get(ti.wrap_s, 2), WRAP_MODES.get(ti.wrap_t, 2)))
@@ -485,6 +493,8 @@ def upload_materials(materials: list[Material], device: str = "cpu") -> Material
     m.b_st = f32(np.nan_to_num(sts), wp.vec2)
     m.b_xf = f32(np.nan_to_num(xfs), wp.vec4)
     m.b_xt = f32(np.nan_to_num(xts), wp.vec2)
+    m.b_post_scale = f32(np.nan_to_num(post_scales), wp.vec3)
+    m.b_post_bias = f32(np.nan_to_num(post_biases), wp.vec3)
     return m
 
 

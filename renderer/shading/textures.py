@@ -7,6 +7,9 @@ reads) as float32 and decodes sRGB to linear at load time, so every lookup is li
   keeps the values, "auto" (the UsdUVTexture default) decodes 8-bit images with 3 or 4 channels unless the file
   says it is linear, and keeps everything else (float, 16-bit, 1- and 2-channel images), as the
   UsdPreviewSurface spec describes.
+* "auto8" (MaterialX image nodes, Arnold's "auto") decodes every 8-bit image, grey ones too, and keeps float;
+  "ACES2065-1" / "ACEScg" (also "lin_ap0" / "lin_ap1") are linear with other primaries: converted to linear
+  Rec.709 when read.
 * Images are stored **bottom row first**: texel (i, j) has its centre at st = ((i + 0.5) / W, (j + 0.5) / H),
   the UsdUVTexture convention of ``st`` with its origin at the bottom-left (the top-left pixel of a PNG is at
   st ~ (0, 1)).
@@ -93,6 +96,18 @@ class LoadedImage:
         return self.texels.shape[1] != self.original_size[0] or self.texels.shape[0] != self.original_size[1]
 
 
+# Linear colour spaces with other primaries than Rec.709, converted to linear Rec.709 when read (row-major 3x3,
+# Bradford-adapted from the ACES white point to D65, as OpenColorIO's ACES configs do).
+_AP0_TO_709 = np.array([[2.52169, -1.13413, -0.38756], [-0.27648, 1.37272, -0.09624], [-0.01538, -0.15298, 1.16835]])
+_AP1_TO_709 = np.array([[1.70505, -0.62179, -0.08326], [-0.13026, 1.14080, -0.01055], [-0.02400, -0.12897, 1.15297]])
+_PRIMARIES = {
+    "aces2065-1": _AP0_TO_709,
+    "lin_ap0": _AP0_TO_709,
+    "acescg": _AP1_TO_709,
+    "lin_ap1": _AP1_TO_709,
+}
+
+
 def _is_linear_tag(tag: str) -> bool:
     t = tag.lower()
     return t.startswith("lin") or "linear" in t or t in ("raw", "scene_linear", "acescg", "aces2065-1")
@@ -132,8 +147,11 @@ def read_image(path: str, colorspace: str = "auto", max_size: int = MAX_TEXTURE_
         buf = oiio.ImageBufAlgo.resize(buf, roi=oiio.ROI(0, w, 0, h, 0, 1, 0, nch))
         if buf.has_error:
             raise ImageError(f"cannot downsample {path}: {' '.join(buf.geterror().split())}")
+    primaries = _PRIMARIES.get(colorspace.lower())
     if colorspace == "auto":
         srgb = eight_bit and nch in (3, 4) and not (tag and _is_linear_tag(tag))
+    elif colorspace == "auto8":
+        srgb = eight_bit and not (tag and _is_linear_tag(tag))
     else:
         srgb = colorspace.lower() == "srgb"
     ncolor = {1: 1, 2: 1, 3: 3, 4: 3}[nch] if srgb else 0
@@ -155,6 +173,9 @@ def read_image(path: str, colorspace: str = "auto", max_size: int = MAX_TEXTURE_
             px[..., :ncolor] = srgb_to_linear(px[..., :ncolor])
         if not np.all(np.isfinite(px)):
             px = np.nan_to_num(px, nan=0.0, posinf=0.0, neginf=0.0)
+    if primaries is not None and nch >= 3:
+        px = px.copy()
+        px[..., :3] = px[..., :3] @ primaries.T.astype(np.float32)
     return LoadedImage(
         texels=np.ascontiguousarray(px[::-1]),
         colorspace="sRGB" if srgb else "raw",
