@@ -233,8 +233,8 @@ def test_materialx_image_place2d_mix_and_baked_products(tmp_path):
     blue = np.array([0, 0, 1.0])
     want = [0.8 * (0.75 * c + 0.25 * blue) for c in (green, red)]  # times base 0.8 (the default)
     np.testing.assert_allclose(out["diffuse_color"], want, atol=0.02)
-    # grey * grey tiled three times, baked: "auto" decodes 8-bit images, grey ones too (sRGB 0.5 -> 0.214)
-    g = 0.2140
+    # grey * grey tiled three times, baked; float images are data (not colour-managed): 8-bit 128 -> 0.502
+    g = 128 / 255
     np.testing.assert_allclose(out["roughness"], [1.0, g * g], atol=0.02)
     assert "mix" not in warnings(scene)
 
@@ -355,3 +355,39 @@ def Material "M"
     np.testing.assert_allclose(out["specular_color"][0], [0, 0, 0], atol=1e-6)
     np.testing.assert_allclose(out["roughness"][0], 0.2, atol=1e-6)  # the nodedef's default
     assert "sheen" in warnings(scene)
+
+
+MTLX_DOC = """<?xml version="1.0"?>
+<materialx version="1.38">
+  <nodegraph name="NG">
+    <constant name="c" type="color3"><input name="value" type="color3" value="0.2, 0.4, 0.6" /></constant>
+    <multiply name="m" type="color3">
+      <input name="in1" type="color3" nodename="c" />
+      <input name="in2" type="float" value="2" />
+    </multiply>
+    <output name="base_out" type="color3" nodename="m" />
+  </nodegraph>
+  <standard_surface name="SS" type="surfaceshader">
+    <input name="base" type="float" value="1" />
+    <input name="base_color" type="color3" nodegraph="NG" output="base_out" />
+    <input name="specular_roughness" type="float" value="0.35" />
+  </standard_surface>
+  <surfacematerial name="Look" type="material">
+    <input name="surfaceshader" type="surfaceshader" nodename="SS" />
+  </surfacematerial>
+</materialx>
+"""
+
+
+def test_mtlx_file_referenced_from_usd(tmp_path):
+    (tmp_path / "look.mtlx").write_text(MTLX_DOC)
+    body = QUAD.format(mat="MaterialX/Materials/Look") + """
+over "MaterialX" (references = @./look.mtlx@</MaterialX>)
+{
+}
+"""
+    scene = load(tmp_path, body)
+    out = evaluate(scene)
+    np.testing.assert_allclose(out["diffuse_color"][0], [0.4, 0.8, 1.0], atol=1e-6)
+    np.testing.assert_allclose(out["roughness"][0], 0.35, atol=1e-6)
+    assert "composition error" not in warnings(scene)

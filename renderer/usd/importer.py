@@ -31,6 +31,7 @@ from renderer.usd import camera as usd_camera
 from renderer.usd import lights as usd_lights
 from renderer.usd.geometry import PRIMITIVE_TYPES, primitive_signature, read_geometry
 from renderer.usd.materials import MaterialTable
+from renderer.usd.mtlx import compose_mtlx
 from renderer.usd.motion import Shutter, TransformSampler, motion_transforms, refine_keys
 
 _PI_ATTRS = ("positions", "orientations", "orientationsf", "scales", "velocities", "angularVelocities",
@@ -152,7 +153,8 @@ class _Importer:
     # -- top level ------------------------------------------------------------------------------------------------
     def run(self) -> sc.Scene:
         stage, warn = self.stage, self.warn
-        errors = stage.GetCompositionErrors()
+        self._mtlx_layers = compose_mtlx(stage, warn)  # .mtlx references, translated (no UsdMtlx in usd-core)
+        errors = [e for e in stage.GetCompositionErrors() if ".mtlx" not in str(e) or not self._mtlx_layers]
         if errors:
             warn(f"{len(errors)} composition error(s) (missing references/payloads?); the rest was loaded",
                  str(errors[0]).splitlines()[0] if str(errors[0]) else None)

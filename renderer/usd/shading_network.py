@@ -27,7 +27,6 @@ represented warns once, naming the node, and takes the nearest supported value (
 """
 from __future__ import annotations
 
-import colorsys
 import math
 from dataclasses import dataclass, replace
 
@@ -38,7 +37,7 @@ from renderer.scene.model import Texture, TextureInput
 from renderer.shading.textures import image_bilinear_np
 from renderer.usd.texture_files import TextureFiles, resolve_asset
 
-BAKE_MAX = 2048  # texels on the longest side of a baked texture
+BAKE_MAX = 1024  # texels on the longest side of a baked texture
 MAX_DEPTH = 64  # nodes on one path through a network (guards against connection cycles)
 
 _TYPES = {"float": 1, "integer": 1, "boolean": 1, "vector2": 2, "float2": 2, "color3": 3, "vector3": 3,
@@ -149,13 +148,17 @@ def tex_mean(ti: TextureInput, n: int = 3) -> np.ndarray:
     return select_post(mean * np.asarray(ti.scale) + np.asarray(ti.bias), ti, n)
 
 
-def tex_values(ti: TextureInput, n: int, st: np.ndarray) -> np.ndarray:
+def tex_values(ti: TextureInput, n: int, st: np.ndarray, grid: tuple[int, int] | None = None) -> np.ndarray:
     """Values (N, n) of a single-image textured input at texture-space coordinates st (N, 2) (after its uv
-    transform)."""
+    transform); ``grid`` (h, w): st are the texel centres of that grid, row by row from the bottom."""
     if ti.texture is None:
         fb = select_post(np.asarray(ti.fallback, np.float64), ti, n)
         return np.broadcast_to(fb, (len(st), len(fb))).copy()
-    rgba = image_bilinear_np(ti.texture.images[0], st, ti.wrap_s, ti.wrap_t).astype(np.float64)
+    im = ti.texture.images[0]
+    if grid is not None and im.shape[:2] == grid:  # a texture on the bake grid itself: its texels
+        rgba = expand_rgba(np.asarray(im, np.float64).reshape(-1, im.shape[-1]))
+    else:
+        rgba = image_bilinear_np(im, st, ti.wrap_s, ti.wrap_t).astype(np.float64)
     return select_post(rgba * np.asarray(ti.scale) + np.asarray(ti.bias), ti, n)
 
 
@@ -168,13 +171,37 @@ def _safe_div(a, b):
     return a / np.where(np.abs(b) > 1e-12, b, 1e-12)
 
 
-def _hsv(fn):
-    def f(c):
-        c = np.asarray(c, np.float64)
-        flat = c.reshape(-1, c.shape[-1])
-        out = np.array([fn(*row[:3]) for row in flat]).reshape(flat.shape[:-1] + (3,))
-        return out.reshape(c.shape[:-1] + (3,))
-    return f
+def _rgb_to_hsv(c):
+    """Vectorised colorsys.rgb_to_hsv over the last axis (hue in [0, 1))."""
+    c = np.asarray(c, np.float64)[..., :3]
+    r, g, b = c[..., 0], c[..., 1], c[..., 2]
+    mx_, mn = c.max(-1), c.min(-1)
+    d = mx_ - mn
+    s = np.where(mx_ > 0, _safe_div(d, mx_), 0.0)
+    rc, gc, bc = (_safe_div(mx_ - x, d) for x in (r, g, b))
+    h = np.where(r == mx_, bc - gc, np.where(g == mx_, 2.0 + rc - bc, 4.0 + gc - rc))
+    h = np.where(d > 0, (h / 6.0) % 1.0, 0.0)
+    return np.stack([h, s, mx_], -1)
+
+
+def _hsv_to_rgb(c):
+    """Vectorised colorsys.hsv_to_rgb over the last axis."""
+    c = np.asarray(c, np.float64)[..., :3]
+    h, s, v = c[..., 0] % 1.0, c[..., 1], c[..., 2]
+    i = np.floor(h * 6.0)
+    f = h * 6.0 - i
+    p, q, t = v * (1.0 - s), v * (1.0 - s * f), v * (1.0 - s * (1.0 - f))
+    i = i.astype(np.int64) % 6
+    r = np.choose(i, [v, q, p, p, t, v])
+    g = np.choose(i, [t, v, v, q, p, p])
+    b = np.choose(i, [p, p, t, v, v, q])
+    return np.stack([r, g, b], -1)
+
+
+def _combine(*a):
+    a = [np.asarray(x, np.float64) for x in a]
+    lead = np.broadcast_shapes(*[x.shape[:-1] for x in a])
+    return np.concatenate([np.broadcast_to(x[..., :1], lead + (1,)) for x in a], -1)
 
 
 def _smoothstep(x, lo, hi):
@@ -198,16 +225,14 @@ MATH = {
               lambda x, il, ih, ol, oh: ol + _safe_div(x - il, ih - il) * (oh - ol)),
     "smoothstep": ((("in", 0.0), ("low", 0.0), ("high", 1.0)), _smoothstep),
     "luminance": ((("in", 0.0),), lambda c: np.repeat((c[..., :3] * LUMA).sum(-1, keepdims=True), 3, -1)),
-    "rgbtohsv": ((("in", 0.0),), _hsv(colorsys.rgb_to_hsv)),
-    "hsvtorgb": ((("in", 0.0),), _hsv(lambda h, s, v: colorsys.hsv_to_rgb(h % 1.0, s, v))),
+    "rgbtohsv": ((("in", 0.0),), _rgb_to_hsv),
+    "hsvtorgb": ((("in", 0.0),), _hsv_to_rgb),
     "dot": ((("in", 0.0),), lambda x: x),
     "constant": ((("value", 0.0),), lambda x: x),
     "convert": ((("in", 0.0),), lambda x: x),
-    "combine2": ((("in1", 0.0), ("in2", 0.0)), lambda *a: np.concatenate([x[..., :1] for x in a], -1)),
-    "combine3": ((("in1", 0.0), ("in2", 0.0), ("in3", 0.0)),
-                 lambda *a: np.concatenate([x[..., :1] for x in a], -1)),
-    "combine4": ((("in1", 0.0), ("in2", 0.0), ("in3", 0.0), ("in4", 0.0)),
-                 lambda *a: np.concatenate([x[..., :1] for x in a], -1)),
+    "combine2": ((("in1", 0.0), ("in2", 0.0)), _combine),
+    "combine3": ((("in1", 0.0), ("in2", 0.0), ("in3", 0.0)), _combine),
+    "combine4": ((("in1", 0.0), ("in2", 0.0), ("in3", 0.0), ("in4", 0.0)), _combine),
     # MaterialX normalmap: a tangent-space normal from [0, 1] texel values, xy scaled by ``scale``
     "normalmap": ((("in", (0.5, 0.5, 1.0)), ("scale", 1.0)),
                   lambda c, s: (c[..., :3] * 2.0 - 1.0) * np.concatenate([np.broadcast_to(s[..., :1], c[..., :1].shape)] * 2 + [np.ones_like(c[..., :1])], -1)),
@@ -280,6 +305,14 @@ class Network:
     def value(self, prim, name: str, default=None):
         v = self.raw(prim, name)[1]
         return default if v is None else v
+
+    def constant(self, prim, name: str, default, where: str) -> np.ndarray:
+        """A uniform input's value as a vector like ``default``, following node connections (constants only)."""
+        sig = self.input(prim, name, default)
+        if not isinstance(sig, Const):
+            self.warn("varying values where a node needs a constant: the default used", f"{where} ({name})")
+            sig = const(default)
+        return np.resize(sig.value, len(default))
 
     def source(self, prim, name: str):
         """(prim, output name) of the shader output feeding an input, or None."""
@@ -378,10 +411,10 @@ class Network:
         if not isinstance(inner, UV):
             self.warn("texture coordinates from unsupported nodes: a constant st (0, 0) is used", str(prim.GetPath()))
             inner = UV(None, (0.0, 0.0), np.eye(2), np.zeros(2))
-        v = lambda nm, d: np.resize(np.asarray(self.value(prim, nm, d), np.float64).reshape(-1), len(d))  # noqa
+        v = lambda nm, d: self.constant(prim, nm, d, str(prim.GetPath()))  # noqa: E731
         if cat == "UsdTransform2d":
             sx, sy = v("scale", (1.0, 1.0))
-            rot = math.radians(float(self.value(prim, "rotation", 0.0) or 0.0))
+            rot = math.radians(float(v("rotation", (0.0,))[0]))
             c, s = math.cos(rot), math.sin(rot)
             a = np.array([[c * sx, -s * sy], [s * sx, c * sy]])  # R(rotation) @ diag(scale)
             t = v("translation", (0.0, 0.0))
@@ -390,7 +423,7 @@ class Network:
             scale = np.where(np.abs(scale) > 1e-12, scale, 1e-12)
             pivot = v("pivot", (0.0, 0.0))
             off = v("offset", (0.0, 0.0))
-            rot = math.radians(float(self.value(prim, "rotate", 0.0) or 0.0))
+            rot = math.radians(float(v("rotate", (0.0,))[0]))
             c, s = math.cos(rot), math.sin(rot)
             r = np.array([[c, s], [-s, c]])
             a = r @ np.diag(1.0 / scale)
@@ -465,14 +498,14 @@ class Network:
             if uv is None:
                 uv = UV("st", (0.0, 0.0), np.eye(2), np.zeros(2))
             if cat == "tiledimage" and isinstance(uv, UV):
-                tiling = np.resize(np.asarray(self.value(prim, "uvtiling", (1.0, 1.0)), np.float64).ravel(), 2)
-                offset = np.resize(np.asarray(self.value(prim, "uvoffset", (0.0, 0.0)), np.float64).ravel(), 2)
-                img = np.resize(np.asarray(self.value(prim, "realworldimagesize", (1.0, 1.0)), np.float64).ravel(), 2)
-                tile = np.resize(np.asarray(self.value(prim, "realworldtilesize", (1.0, 1.0)), np.float64).ravel(), 2)
+                tiling, offset, img, tile = (self.constant(prim, nm, d, where) for nm, d in (
+                    ("uvtiling", (1.0, 1.0)), ("uvoffset", (0.0, 0.0)), ("realworldimagesize", (1.0, 1.0)),
+                    ("realworldtilesize", (1.0, 1.0))))
                 k = np.diag(tile / np.where(np.abs(img) > 1e-12, img, 1e-12))
                 uv = UV(uv.primvar, uv.fallback, k @ np.diag(tiling) @ uv.matrix,
                         k @ (tiling * uv.translation - offset))
-            colorspace = self._colorspace(prim, attr, "auto8")
+            # MaterialX colour-manages colour images only; "auto" decodes 8-bit ones (Arnold's reading)
+            colorspace = self._colorspace(prim, attr, "auto8" if n >= 3 and typ in ("color3", "color4") else "raw")
             wrap_names = [_ADDRESS.get(str(self.value(prim, w, "periodic")), "repeat")
                           for w in ("uaddressmode", "vaddressmode")]
             if not path:
@@ -581,7 +614,7 @@ class Network:
             h, w = max(1, int(h / f)), max(1, int(w / f))
         ys, xs = np.meshgrid((np.arange(h) + 0.5) / h, (np.arange(w) + 0.5) / w, indexing="ij")
         st = np.stack([xs.ravel(), ys.ravel()], -1)
-        vals = [tex_values(a.ti, a.n, st) if isinstance(a, Tex) else a.value for a in args]
+        vals = [tex_values(a.ti, a.n, st, (h, w)) if isinstance(a, Tex) else a.value for a in args]
         out = np.nan_to_num(np.asarray(fn(*vals), np.float64))
         if out.ndim == 1:
             out = np.broadcast_to(out, (len(st), out.size))
@@ -591,7 +624,6 @@ class Network:
             c = 3
         img = np.ascontiguousarray(out.reshape(h, w, c).astype(np.float32))
         texture = Texture(name=f"{where} (baked)", images=[img], colorspace="raw")
-        self.files.textures.append(texture)
         wrap = (first.wrap_s, first.wrap_t)
         fb = tuple(float(x) for x in np.resize(np.asarray(fn(*[tex_mean(a.ti, a.n) if isinstance(a, Tex) else a.value
                                                                 for a in args]), np.float64), 3)) + (1.0,)
