@@ -10,6 +10,7 @@ import pytest
 from renderer.film.film import resolve
 from renderer.render import RenderOptions, prepare, render_frame
 from renderer.shading import materials as M
+from renderer.shading import textures as T
 from renderer.usd.importer import load_scene
 
 QUAD = """
@@ -391,3 +392,112 @@ over "MaterialX" (references = @./look.mtlx@</MaterialX>)
     np.testing.assert_allclose(out["diffuse_color"][0], [0.4, 0.8, 1.0], atol=1e-6)
     np.testing.assert_allclose(out["roughness"][0], 0.35, atol=1e-6)
     assert "composition error" not in warnings(scene)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Texture filtering by the ray footprint, and the texture budget
+
+
+def checker_scene(tmp_path):
+    checks = (np.indices((256, 256)) // 8).sum(0) % 2  # 32 x 32 checks of 8 texels
+    img = np.repeat(checks[..., None], 3, -1).astype(np.float32)
+    write_png(tmp_path / "checker.png", img)
+    body = """
+def Mesh "Q" (prepend apiSchemas = ["MaterialBindingAPI"])
+{
+    int[] faceVertexCounts = [4]
+    int[] faceVertexIndices = [0, 1, 2, 3]
+    point3f[] points = [(-20, -1, 0), (20, -1, 0), (20, 60, 0), (-20, 60, 0)]
+    texCoord2f[] primvars:st = [(0, 0), (8, 0), (8, 12), (0, 12)] (interpolation = "vertex")
+    rel material:binding = </M>
+}
+def Material "M"
+{
+    token outputs:surface.connect = </M/S.outputs:surface>
+    def Shader "S"
+    {
+        uniform token info:id = "UsdPreviewSurface"
+        color3f inputs:diffuseColor = (0, 0, 0)
+        color3f inputs:emissiveColor.connect = </M/T.outputs:rgb>
+        token outputs:surface
+    }
+    def Shader "T"
+    {
+        uniform token info:id = "UsdUVTexture"
+        asset inputs:file = @checker.png@
+        token inputs:sourceColorSpace = "raw"
+        float2 inputs:st.connect = </M/R.outputs:result>
+        float3 outputs:rgb
+    }
+    def Shader "R"
+    {
+        uniform token info:id = "UsdPrimvarReader_float2"
+        string inputs:varname = "st"
+        float2 outputs:result
+    }
+}
+def Camera "Cam"
+{
+    float focalLength = 30
+    double3 xformOp:translate = (0, 0, 0.6)
+    float3 xformOp:rotateXYZ = (84, 0, 0)
+    uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateXYZ"]
+}
+"""
+    return load(tmp_path, body)
+
+
+def test_grazing_checkerboard_does_not_alias(tmp_path):
+    import dataclasses
+
+    scene = checker_scene(tmp_path)
+    mats = scene.materials
+
+    def render(spp, mips):
+        prep = prepare(scene, RenderOptions(width=64, height=48, spp=spp, max_depth=0, seed=3))
+        if not mips:  # the same atlas with level 0 only: plain bilinear lookups
+            prep = dataclasses.replace(prep, textures=M.upload_material_textures(mats, mips=False))
+        return resolve(render_frame(prep, tile_size=64, threads=2).sums)["rgba"][..., :3]
+
+    ref = render(256, mips=False)  # supersampled: the box-filtered truth that mip levels approximate
+    far = slice(16, 32)  # below the horizon: the distant, minified part of the plane
+    err_mip = np.sqrt(np.mean((render(4, mips=True)[far] - ref[far]) ** 2))
+    err_plain = np.sqrt(np.mean((render(4, mips=False)[far] - ref[far]) ** 2))
+    assert ref[far].mean() > 0.2  # the plane fills the region
+    assert err_mip < 0.5 * err_plain, (err_mip, err_plain)
+
+
+def test_texture_set_larger_than_the_budget_renders_within_it(tmp_path):
+    rng = np.random.default_rng(5)
+    for tile in (1001, 1002, 1011, 1012):
+        write_png(tmp_path / f"big.{tile}.png", rng.random((256, 256, 3)))
+    body = QUAD.format(mat="M") + """
+def Material "M"
+{
+    token outputs:surface.connect = </M/S.outputs:surface>
+    def Shader "S"
+    {
+        uniform token info:id = "UsdPreviewSurface"
+        color3f inputs:diffuseColor.connect = </M/T.outputs:rgb>
+        token outputs:surface
+    }
+    def Shader "T"
+    {
+        uniform token info:id = "UsdUVTexture"
+        asset inputs:file = @big.<UDIM>.png@
+        float3 outputs:rgb
+    }
+}
+"""
+    scene = load(tmp_path, body)
+    full = sum(im.nbytes for m in scene.materials for ti in m.textures.values() for im in ti.texture.images)
+    assert full == 4 * 256 * 256 * 3 * 4
+    budget = 1 << 20  # 1 MiB: less than a third of the set at full resolution, mip levels included
+    warns = []
+    atlas = M.upload_material_textures(scene.materials, warn=warns.append, budget=budget)
+    assert T.atlas_bytes(atlas) <= budget
+    assert warns and "texture budget" in warns[0]
+    # still every tile, at a lower resolution, and the same mean colour
+    out = M.evaluate_materials(M.upload_materials(scene.materials), atlas, [0] * 4,
+                               [(0.5, 0.5), (1.5, 0.5), (0.5, 1.5), (1.5, 1.5)])
+    assert np.all(out["diffuse_color"] > 0.0)

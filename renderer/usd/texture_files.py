@@ -1,7 +1,9 @@
 """Texture files of a USD stage: asset paths resolved as USD resolves them (relative to the authoring layer,
 ``<UDIM>`` tile sets, files inside .usdz packages) and images loaded once per (file, colour space).
 
-A missing or unreadable file warns once (naming it) and loads as None: the input takes its fallback.
+A missing or unreadable file warns once (naming it) and loads as None: the input takes its fallback. A UDIM set
+is read at a tile size that fits ``UDIM_SET_BUDGET`` (half the texture budget), so a set of many 8K tiles is
+never held at full resolution (mip-mapped ``.tx`` / tiled EXR tiles are read at the stored level that fits).
 """
 from __future__ import annotations
 
@@ -11,7 +13,16 @@ import tempfile
 from pxr import Ar, Sdf, Usd, UsdShade
 
 from renderer.scene.model import Texture
-from renderer.shading.textures import ImageError, LoadedImage, image_texture, read_image
+from renderer.shading.textures import (MAX_TEXTURE_SIZE, TEXTURE_BUDGET, ImageError, LoadedImage, image_texture,
+                                       read_image)
+
+UDIM_SET_BUDGET = TEXTURE_BUDGET // 2  # bytes a UDIM set may take when read: its tiles are read smaller beyond
+
+
+def udim_tile_size(n_tiles: int, budget: int = UDIM_SET_BUDGET) -> int:
+    """Largest side (texels) at which n tiles of float RGBA with mip levels (4/3) fit in ``budget`` bytes."""
+    side = int((budget / (max(n_tiles, 1) * 16 * 4 / 3)) ** 0.5)
+    return max(16, min(MAX_TEXTURE_SIZE, side))
 
 
 
@@ -51,7 +62,8 @@ def resolve_asset(attr, value) -> tuple[str, list[tuple[str, int]] | None]:
     return path, None
 
 
-def read_asset_image(resolved: str, colorspace: str = "auto", keep_top_down: bool = False) -> LoadedImage:
+def read_asset_image(resolved: str, colorspace: str = "auto", keep_top_down: bool = False,
+                     max_size: int = MAX_TEXTURE_SIZE) -> LoadedImage:
     """``textures.read_image`` of a resolved asset path, including files inside .usdz packages."""
     if Ar.IsPackageRelativePath(resolved):
         asset = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(resolved))
@@ -63,15 +75,16 @@ def read_asset_image(resolved: str, colorspace: str = "auto", keep_top_down: boo
             local = os.path.join(tmp, "image" + os.path.splitext(inner)[1].lower())
             with open(local, "wb") as f:
                 f.write(data)
-            return read_image(local, colorspace, keep_top_down=keep_top_down)
-    return read_image(resolved, colorspace, keep_top_down=keep_top_down)
+            return read_image(local, colorspace, keep_top_down=keep_top_down, max_size=max_size)
+    return read_image(resolved, colorspace, keep_top_down=keep_top_down, max_size=max_size)
 
 
 class TextureFiles:
     """Images loaded once per (file, colour space) for one import; failures warn once per file."""
 
-    def __init__(self, warn):
+    def __init__(self, warn, set_budget: int = UDIM_SET_BUDGET):
         self.warn = warn
+        self.set_budget = set_budget  # bytes one UDIM set may take when read (float RGBA, mips included)
         self._cache: dict[tuple, tuple[Texture | None, tuple | None]] = {}
         self.textures: list[Texture] = []
 
@@ -87,7 +100,8 @@ class TextureFiles:
             if tiles is not None:
                 if not tiles:
                     raise ImageError(f"no UDIM tiles found for {name}")
-                loaded = [read_asset_image(p, colorspace) for p, _ in tiles]
+                side = udim_tile_size(len(tiles), self.set_budget)
+                loaded = [read_asset_image(p, colorspace, max_size=side) for p, _ in tiles]
                 texture = image_texture(name, loaded, [t for _, t in tiles])
             else:
                 loaded = [read_asset_image(name, colorspace)]
@@ -96,7 +110,8 @@ class TextureFiles:
             small = [im for im in loaded if im.downsampled]
             if small:
                 w, h = small[0].original_size
-                self.warn("large textures downsampled to at most 4096 texels a side", f"{name} ({w}x{h})")
+                self.warn("large textures (or UDIM sets beyond their share of the texture budget) read at a lower "
+                          "resolution", f"{name} ({w}x{h} -> {small[0].texels.shape[1]}x{small[0].texels.shape[0]})")
         except (ImageError, OSError, RuntimeError) as e:
             self.warn("texture files missing or unreadable: those inputs use their UsdUVTexture fallback",
                       f"{name} ({' '.join(str(e).split())[:160]}; {where})")
