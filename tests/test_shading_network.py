@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import OpenImageIO as oiio
-import pytest
 
 from renderer.film.film import resolve
 from renderer.render import RenderOptions, prepare, render_frame
@@ -54,6 +53,26 @@ def warnings(scene):
     return "\n".join(scene.warnings)
 
 
+STAGE = """
+def DistantLight "Sun"
+{
+    float inputs:intensity = 2
+}
+def Camera "Cam"
+{
+    double3 xformOp:translate = (0, 0, 4)
+    uniform token[] xformOpOrder = ["xformOp:translate"]
+}
+"""
+
+
+def render_mean(scene) -> np.ndarray:
+    """Mean RGB of the centre of a small render of the quad (the camera looks straight at it)."""
+    prep = prepare(scene, RenderOptions(width=24, height=24, spp=8, max_depth=2))
+    img = resolve(render_frame(prep, tile_size=24, threads=2).sums)["rgba"]
+    return img[6:18, 6:18, :3].reshape(-1, 3).mean(0)
+
+
 # ---------------------------------------------------------------------------------------------------------------
 # UsdShade connections
 
@@ -74,11 +93,16 @@ def Material "M"
 
 
 def test_material_interface_input_drives_the_colour(tmp_path):
-    red = evaluate(load(tmp_path, QUAD.format(mat="M") + PREVIEW_INTERFACE.format(tint="(0.8, 0.1, 0.1)"), "a.usda"))
-    blue = evaluate(load(tmp_path, QUAD.format(mat="M") + PREVIEW_INTERFACE.format(tint="(0.1, 0.2, 0.7)"),
-                         "b.usda"))
-    np.testing.assert_allclose(red["diffuse_color"][0], [0.8, 0.1, 0.1], atol=1e-6)
-    np.testing.assert_allclose(blue["diffuse_color"][0], [0.1, 0.2, 0.7], atol=1e-6)
+    red_scene = load(tmp_path, QUAD.format(mat="M") + PREVIEW_INTERFACE.format(tint="(0.8, 0.1, 0.1)") + STAGE,
+                     "a.usda")
+    blue_scene = load(tmp_path, QUAD.format(mat="M") + PREVIEW_INTERFACE.format(tint="(0.1, 0.2, 0.7)") + STAGE,
+                      "b.usda")
+    np.testing.assert_allclose(evaluate(red_scene)["diffuse_color"][0], [0.8, 0.1, 0.1], atol=1e-6)
+    np.testing.assert_allclose(evaluate(blue_scene)["diffuse_color"][0], [0.1, 0.2, 0.7], atol=1e-6)
+    red, blue = render_mean(red_scene), render_mean(blue_scene)
+    # the rendered colour follows the interface input (plus the white specular reflection of the sun)
+    assert red[0] > 3 * red[2] and blue[2] > 3 * blue[0], (red, blue)
+    assert red[0] > 2 * blue[0] and blue[2] > 2 * red[2]
 
 
 NODEGRAPH = QUAD.format(mat="M") + """
@@ -299,16 +323,7 @@ def Material "M"
         token outputs:out
     }}
 }}
-def DistantLight "Sun"
-{{
-    float inputs:intensity = 2
-}}
-def Camera "Cam"
-{{
-    double3 xformOp:translate = (0, 0, 4)
-    uniform token[] xformOpOrder = ["xformOp:translate"]
-}}
-"""
+""" + STAGE
 
 
 def test_standard_surface_openpbr_and_preview_render_alike(tmp_path):
@@ -316,9 +331,7 @@ def test_standard_surface_openpbr_and_preview_render_alike(tmp_path):
     for kind in SURFACES:
         scene = load(tmp_path, surface_scene(kind), f"{kind}.usda")
         assert "supported surface" not in warnings(scene), warnings(scene)
-        prep = prepare(scene, RenderOptions(width=24, height=24, spp=8, max_depth=2))
-        img = resolve(render_frame(prep, tile_size=24, threads=2).sums)["rgba"]
-        means[kind] = img[6:18, 6:18, :3].reshape(-1, 3).mean(0)
+        means[kind] = render_mean(scene)
     ref = means["preview"]
     assert ref.min() > 0.01
     for kind, m in means.items():
