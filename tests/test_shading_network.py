@@ -3,6 +3,8 @@ inputs, NodeGraph outputs, multi-output shaders, connected varnames, MaterialX m
 (MaterialX and Arnold ids), OpenPBR and UsdPreviewSurface rendering alike."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import OpenImageIO as oiio
 
@@ -461,8 +463,6 @@ def Camera "Cam"
 
 
 def test_grazing_checkerboard_does_not_alias(tmp_path):
-    import dataclasses
-
     scene = checker_scene(tmp_path)
     mats = scene.materials
 

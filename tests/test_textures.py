@@ -9,6 +9,7 @@ import warp as wp
 from renderer.shading import materials as M
 from renderer.shading import textures as T
 from renderer.scene.model import Material, Texture, TextureInput
+from renderer.usd.texture_files import TextureFiles, udim_tile_size
 
 
 def write_image(path, pixels, fmt=oiio.UINT8):
@@ -309,8 +310,6 @@ def test_mip_mapped_files_are_read_at_the_stored_level_that_fits(tmp_path):
 
 
 def test_udim_sets_are_read_within_their_share_of_the_budget(tmp_path):
-    from renderer.usd.texture_files import TextureFiles, udim_tile_size
-
     tiles = [(write_image(tmp_path / f"t.{u}.exr", np.full((128, 128, 4), 0.5, np.float32), oiio.FLOAT), u)
              for u in (1001, 1002, 1003, 1004)]
     budget = 4 * 64 * 64 * 16 * 4 // 3 + 1  # four 64x64 float RGBA tiles with mips

@@ -2,10 +2,12 @@
 
 **Binding.** Per prim: ``UsdShadeMaterialBindingAPI.ComputeBoundMaterial`` with the "full" purpose, which falls
 back to the all-purpose binding (direct and collection bindings, ``bindingStrength`` honoured by USD); then the
-material's universal ``outputs:surface`` shader. GeomSubsets of family ``materialBind`` give per-face material
+material's surface shader: the first of a supported model (``surfaces``) among its ``mtlx``, universal and
+``arnold`` surface outputs. Inputs are read through the shading network (``shading_network``: NodeGraphs,
+interface inputs, multi-output shaders, MaterialX nodes) and mapped onto UsdPreviewSurface inputs. GeomSubsets of family ``materialBind`` give per-face material
 ids, each subset bound the same way.
 
-**UsdPreviewSurface.** Every input of the spec is read: diffuseColor, emissiveColor, useSpecularWorkflow,
+**UsdPreviewSurface** (and what Standard Surface / OpenPBR map to). Every input of the spec is read: diffuseColor, emissiveColor, useSpecularWorkflow,
 specularColor, metallic, roughness, clearcoat, clearcoatRoughness, opacity, opacityThreshold, ior, normal and
 occlusion (imported, unused by the renderer); displacement is ignored (a warning when authored non-zero or
 connected). An input is constant, takes the value of a material/node-graph interface input it is connected to,
@@ -29,8 +31,8 @@ A textured input stores its ``TextureInput`` in ``Material.textures`` and its *m
 stores its coverage (fraction of texels kept). One uv set per mesh: the mesh's texture coordinates are the
 importer's (``st``, else the first texCoord2f primvar); ``uv_sets(prim)`` tells which primvars its textures read.
 
-Other surfaces (PxrSurface, MaterialX, arnold, ...) and unbound prims take the prim's ``primvars:displayColor``
-(averaged when not constant) or grey 0.18.
+Other surfaces (PxrSurface, other arnold shaders, ...) and unbound prims take the prim's
+``primvars:displayColor`` (averaged when not constant) or grey 0.18, with a warning naming the shader.
 
 **Absorption extension (Beer-Lambert, paper section 5).** UsdPreviewSurface has no attribute for absorption
 inside a solid, so the renderer reads two extension inputs, on the UsdPreviewSurface shader or on the Material
@@ -265,6 +267,14 @@ class MaterialTable:
                 if surface_model(sid) is not None:
                     return src[0].GetPrim(), None
                 found.append(sid)
+        for out in mat.GetSurfaceOutputs():  # other render contexts (ri, ...): supported or named in the warning
+            for attr in out.GetValueProducingAttributes():
+                if UsdShade.Output.IsOutput(attr):
+                    sid = shader_id(attr.GetPrim())
+                    if surface_model(sid) is not None:
+                        return attr.GetPrim(), None
+                    if sid not in found:
+                        found.append(sid)
         return None, (", ".join(found) if found else "no surface shader")
 
     def _preview_fields(self, mat: UsdShade.Material, shader, path: str) -> tuple:
