@@ -47,6 +47,9 @@ def _mtlx_references(stage: Usd.Stage):
 def compose_mtlx(stage: Usd.Stage, warn) -> list[Sdf.Layer]:
     """Reference translated MaterialX documents from the session layer; returns the layers (keep them alive)."""
     layers: list[Sdf.Layer] = []
+    if not any(str(dep).lower().endswith(".mtlx") for layer in stage.GetUsedLayers()
+               for dep in layer.GetCompositionAssetDependencies()):
+        return layers  # the usual case: no prim walk at all
     done: dict[str, Sdf.Layer | None] = {}
     for prim, path, prim_path in list(_mtlx_references(stage)):
         if path not in done:
