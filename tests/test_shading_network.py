@@ -514,3 +514,28 @@ def Material "M"
     out = M.evaluate_materials(M.upload_materials(scene.materials), atlas, [0] * 4,
                                [(0.5, 0.5), (1.5, 0.5), (0.5, 1.5), (1.5, 1.5)])
     assert np.all(out["diffuse_color"] > 0.0)
+
+
+def test_display_color_through_a_standard_surface_gain(tmp_path):
+    body = QUAD.format(mat="M").replace('rel material:binding', 'color3f[] primvars:displayColor = [(0.2, 0.6, 1)]\n'
+                                         '    rel material:binding') + """
+def Material "M"
+{
+    token outputs:mtlx:surface.connect = </M/SS.outputs:out>
+    def Shader "SS"
+    {
+        uniform token info:id = "ND_standard_surface_surfaceshader"
+        float inputs:base = 0.5
+        color3f inputs:base_color.connect = </M/Cd.outputs:out>
+        token outputs:out
+    }
+    def Shader "Cd"
+    {
+        uniform token info:id = "ND_geompropvalue_color3"
+        string inputs:geomprop = "displayColor"
+        color3f outputs:out
+    }
+}
+"""
+    scene = load(tmp_path, body)
+    np.testing.assert_allclose(evaluate(scene)["diffuse_color"][0], [0.1, 0.3, 0.5], atol=1e-6)

@@ -236,8 +236,10 @@ class MaterialTable:
                 return self._add(("usd", path), Material(name=path, **fields))
             color = display_color(prim, self.frame)
             f = dict(fields)
-            for name, fallback in uses_display:
-                f[name] = color if color is not None else fallback
+            for name, fallback, scale in uses_display:  # displayColor (or the reader's fallback) x network scale
+                c = color if color is not None else fallback
+                f[name] = tuple(float(x) * k for x, k in zip(np.resize(c, 3), scale)) if isinstance(c, tuple) \
+                    else float(np.resize(c, 1)[0]) * scale[0]
             return self._add(("usd", path, color), Material(name=path, **f))
         color = display_color(prim, self.frame)
         return self._add(("fallback", path, color), Material(name=path, diffuse_color=color or GREY))
@@ -287,7 +289,8 @@ class MaterialTable:
             sig = signals.get(inp_name)
             value = None
             if isinstance(sig, Display):
-                display_fields.append((field_name, _as_field(sig.fallback, default) or default))
+                display_fields.append((field_name, _as_field(sig.fallback, default) or default,
+                                       tuple(float(x) for x in sig.scale)))
                 continue
             if isinstance(sig, UV):
                 self.warn("texture coordinates connected to surface inputs ignored", f"{path} ({inp_name})")

@@ -28,7 +28,7 @@ represented warns once, naming the node, and takes the nearest supported value (
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from pxr import Sdf, UsdShade
@@ -74,6 +74,7 @@ class Tex:
 @dataclass(frozen=True, eq=False)
 class Display:
     fallback: np.ndarray  # (3,) the reader's fallback where the prim has no displayColor
+    scale: np.ndarray = field(default_factory=lambda: np.ones(3))  # (3,) network gain applied to it
 
 
 Signal = Const | UV | Tex | Display
@@ -558,7 +559,17 @@ class Network:
     # -- math -----------------------------------------------------------------------------------------------
     def apply(self, fn, args: list, where: str, n_out: int = 0) -> Signal | None:
         """fn of the signals ``args``: folded to a constant, into one texture's remap, or baked."""
-        args = [a if not isinstance(a, Display) else Const(a.fallback) for a in args]
+        disp = [i for i, a in enumerate(args) if isinstance(a, Display)]
+        if len(disp) == 1 and all(isinstance(a, Const) for j, a in enumerate(args) if j != disp[0]):
+            i = disp[0]
+            f1 = lambda x: fn(*[x if j == i else a.value for j, a in enumerate(args)])  # noqa: E731
+            ab = _affine(f1, 3)
+            if ab is not None and np.allclose(ab[1], 0.0) and np.broadcast(*ab).shape == (3,):
+                a = np.broadcast_to(ab[0], (3,))
+                return Display(args[i].fallback, args[i].scale * a)  # displayColor x gain, per prim
+        if disp:
+            self.warn("displayColor in shading math other than a gain: the reader's fallback used", where)
+        args = [a if not isinstance(a, Display) else Const(a.fallback * a.scale) for a in args]
         if any(a is None for a in args):
             args = [a if a is not None else const(0.0) for a in args]
         texs = [i for i, a in enumerate(args) if isinstance(a, Tex)]
