@@ -62,9 +62,10 @@ from renderer.shading.materials import (
     MaterialSample,
     apply_normal_map,
     beer_lambert,
-    eval_material,
+    eval_material_cone,
     triangle_tangent,
 )
+from renderer.shading.raycone import bounce_spread, camera_cone, uv_density, uv_footprint
 from renderer.shading.textures import Textures
 
 # Rendering needs no gradients: no adjoint code (half the compile time and code size).
@@ -120,6 +121,7 @@ class SurfacePoint:
     ns: wp.vec3  # shading normal, same hemisphere as ng
     tangent: wp.vec4  # world dP/du and uv handedness (w = 0: no usable uvs), for normal maps
     uv: wp.vec2  # st at the hit, NaN where the mesh has none
+    uv_density: float  # sqrt(uv area / world area) of the triangle (ray cones: raycone.uv_footprint)
     front: int  # 1 when the ray hit the side the triangle's winding faces (entering a closed solid)
     material: int
 
@@ -146,11 +148,14 @@ def surface_at(geo: Geometry, inst: int, tri: int, b1: float, b2: float, ro: wp.
     sp = SurfacePoint()
     sp.uv = hit_uv(geo, m, tri, b1, b2)
     sp.tangent = wp.vec4(0.0)
+    sp.uv_density = 0.0
     if geo.mesh_has_uvs[m] != 0:
         # from world-space corners, so a mirroring transform is accounted for in the handedness
-        sp.tangent = triangle_tangent(wp.transform_point(o2w, p0), wp.transform_point(o2w, p1),
-                                      wp.transform_point(o2w, p2), geo.uvs[3 * tri], geo.uvs[3 * tri + 1],
-                                      geo.uvs[3 * tri + 2])
+        w0 = wp.transform_point(o2w, p0)
+        w1 = wp.transform_point(o2w, p1)
+        w2 = wp.transform_point(o2w, p2)
+        sp.tangent = triangle_tangent(w0, w1, w2, geo.uvs[3 * tri], geo.uvs[3 * tri + 1], geo.uvs[3 * tri + 2])
+        sp.uv_density = uv_density(w0, w1, w2, geo.uvs[3 * tri], geo.uvs[3 * tri + 1], geo.uvs[3 * tri + 2])
     sp.front = 1
     if wp.dot(ng, rd) > 0.0:  # hit from behind: both normals face the viewer, and we are leaving
         ng = -ng
@@ -245,6 +250,8 @@ def trace_wave_kernel(
     lens_u = sample_2d(seed, pixel, index, wp.uint32(DIM_LENS))
     ro, rd, tmin, tmax, fwd = camera_ray(cam, wp.vec2(float(px) + film_u[0], float(py) + film_u[1]), lens_u, s)
     cam_origin = ro
+    # ray cone (texture filtering, raycone): width at the current origin (scene units), spread (radians)
+    cone_w, cone_spread = camera_cone(cam.film_size[1], cam.focal_length, cam.height, cam.orthographic)
 
     L = wp.vec3(0.0)
     beta = wp.vec3(1.0)  # path throughput
@@ -296,7 +303,9 @@ def trace_wave_kernel(
             if sigma[0] > 0.0 or sigma[1] > 0.0 or sigma[2] > 0.0:
                 beta = wp.cw_mul(beta, beer_lambert(sigma, hit.t))
             sp = surface_at(geo, hit.inst, hit.tri, hit.b1, hit.b2, origin, rd, hit.t, s)
-            ms = eval_material(mats, tex, sp.material, sp.uv, s)
+            cone_w = cone_w + cone_spread * hit.t
+            ms = eval_material_cone(mats, tex, sp.material, sp.uv, s,
+                                    uv_footprint(cone_w, sp.uv_density, wp.dot(sp.ng, rd)))
             ns = shading_normal(sp, ms)
             thin = 1 - geo.tri_solid[hit.tri]  # open surfaces are thin sheets, closed ones bound solids
             params = surface_params(ms, thin)
@@ -359,6 +368,7 @@ def trace_wave_kernel(
                     alive = 0
                 else:
                     beta = wp.cw_mul(beta, weight)
+                    cone_spread = bounce_spread(cone_spread, ms.roughness, flags & FLAG_DELTA)
                     prev_delta = flags & FLAG_DELTA
                     prev_pdf = pdf
                     prev_n = ns

@@ -9,6 +9,7 @@ import warp as wp
 from renderer.shading import materials as M
 from renderer.shading import textures as T
 from renderer.scene.model import Material, Texture, TextureInput
+from renderer.usd.texture_files import TextureFiles, udim_tile_size
 
 
 def write_image(path, pixels, fmt=oiio.UINT8):
@@ -296,3 +297,38 @@ def test_warp_triangle_tangent_matches_numpy_and_vec3_overload():
                                                          wp.array([[2, 0, 0]], dtype=wp.vec3),
                                                          wp.array([[0, 0.6, 0.8]], dtype=wp.vec3), res])
     np.testing.assert_allclose(res.numpy()[0], [0, 0.6, 0.8], atol=1e-6)
+
+
+def test_mip_mapped_files_are_read_at_the_stored_level_that_fits(tmp_path):
+    src = write_image(tmp_path / "src.exr", np.full((256, 512, 3), 0.25, np.float32), oiio.FLOAT)
+    tx = str(tmp_path / "tex.tx")
+    assert oiio.ImageBufAlgo.make_texture(oiio.MakeTxTexture, src, tx)
+    im = T.read_image(tx, "raw", max_size=128)
+    assert im.level == 2 and im.texels.shape == (64, 128, 3) and im.original_size == (512, 256)
+    np.testing.assert_allclose(im.texels, 0.25, atol=1e-5)
+    assert T.read_image(tx, "raw").level == 0  # fits: level 0
+
+
+def test_udim_sets_are_read_within_their_share_of_the_budget(tmp_path):
+    tiles = [(write_image(tmp_path / f"t.{u}.exr", np.full((128, 128, 4), 0.5, np.float32), oiio.FLOAT), u)
+             for u in (1001, 1002, 1003, 1004)]
+    budget = 4 * 64 * 64 * 16 * 4 // 3 + 1  # four 64x64 float RGBA tiles with mips
+    assert udim_tile_size(4, budget) == 64
+    warns = []
+    tex, _ = TextureFiles(lambda m, i=None: warns.append(m), set_budget=budget).load(
+        str(tmp_path / "t.<UDIM>.exr"), tiles, "raw", "/M/T")
+    assert [im.shape for im in tex.images] == [(64, 64, 4)] * 4
+    assert sum(T.mip_bytes(im) for im in tex.images) <= budget
+    assert any("lower resolution" in w for w in warns)
+
+
+def test_trilinear_levels_average_the_texture(tmp_path):
+    checks = ((np.indices((64, 64)) // 4).sum(0) % 2).astype(np.float32)[..., None]
+    tex = T.upload_textures([Texture("c", [checks])])
+    st = np.random.default_rng(2).random((256, 2))
+    fine = T.lookup(tex, 0, st)  # level 0: the checks themselves, bilinear
+    assert np.abs(fine[:, 0] - 0.5).max() > 0.45
+    coarse = T.lookup(tex, 0, st, footprint=1.0)  # the whole texture in the footprint: its mean everywhere
+    np.testing.assert_allclose(coarse[:, :3], 0.5, atol=1e-5)
+    mid = T.lookup(tex, 0, st, footprint=4.0 / 64)  # 4 texels: level 2, where each check is one texel
+    assert np.abs(mid[:, 0] - 0.5).max() > 0.3

@@ -100,7 +100,9 @@ class TextureInput:
 
     value(st) = output(lookup(texture, M st + t) * scale + bias), or ``fallback`` (unscaled) where there is no
     texture (missing file, missing UDIM tile). ``output`` picks channels of the RGBA lookup: "r", "g", "b", "a"
-    or "rgb" (a scalar feeding a colour input is replicated; "rgb" feeding a scalar input gives r).
+    or "rgb" (a scalar feeding a colour input is replicated; "rgb" feeding a scalar input gives r). Then
+    ``value * post_scale + post_bias`` per colour channel (the affine math of a shading network after the
+    lookup, e.g. a colour times a grey texture; a scalar input reads the first channel); fallbacks included.
     """
 
     texture: Texture | None  # None: the file is missing or unreadable -> fallback everywhere
@@ -115,6 +117,8 @@ class TextureInput:
     # UsdTransform2d (composed if chained): st' = uv_matrix @ st + uv_translation; uv_matrix is row-major 2x2
     uv_matrix: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 1.0)
     uv_translation: tuple[float, float] = (0.0, 0.0)
+    post_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    post_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
 @dataclass

@@ -7,6 +7,7 @@ texture coordinates and returns a ``MaterialSample``. Each input is either a con
     st'   = M st + t                      (UsdTransform2d; st = the hit's uv, or a constant st)
     rgba  = lookup(texture, st') * scale + bias      (fallback, unscaled, where there is no texture/tile)
     value = rgba.rgb or rgba.r/g/b/a      (the connected output; a scalar broadcast to a colour input)
+    value = value * post_scale + post_bias  (shading-network math after the lookup; scalars use x)
 
 Layout: inputs of material m live at ``m * NUM_INPUTS + slot`` (slots ``IN_*`` below) in ``value`` (the constant,
 scalars in x) and ``binding`` (a texture-binding row, or -1). Binding rows hold the texture (an index into
@@ -30,7 +31,7 @@ import numpy as np
 import warp as wp
 
 from renderer.scene.model import Material, Mesh, Texture
-from renderer.shading.textures import OUTPUT_RGB, OUTPUTS, WRAP_MODES, Textures, texture_fetch, upload_textures
+from renderer.shading.textures import OUTPUT_RGB, OUTPUTS, WRAP_MODES, Textures, texture_fetch_lod, upload_textures
 
 # No gradients are ever taken: no adjoint code (half the compile time and code size).
 wp.set_module_options({"enable_backward": False})
@@ -94,6 +95,8 @@ class Materials:
     b_st: wp.array(dtype=wp.vec2)  # constant st, or the primvar reader's fallback when the hit has no uv
     b_xf: wp.array(dtype=wp.vec4)  # UsdTransform2d 2x2 matrix, row-major (m00, m01, m10, m11)
     b_xt: wp.array(dtype=wp.vec2)  # UsdTransform2d translation
+    b_post_scale: wp.array(dtype=wp.vec3)  # network math after the lookup: value * post_scale + post_bias
+    b_post_bias: wp.array(dtype=wp.vec3)
 
 
 @wp.struct
@@ -123,17 +126,21 @@ class MaterialSample:
 
 
 @wp.func
-def binding_rgba(mats: Materials, tex: Textures, b: int, uv: wp.vec2):
-    """The RGBA a texture binding delivers at the hit's uv (non-finite uv: the primvar reader's fallback)."""
+def binding_rgba(mats: Materials, tex: Textures, b: int, uv: wp.vec2, footprint: float):
+    """The RGBA a texture binding delivers at the hit's uv (non-finite uv: the primvar reader's fallback),
+    filtered over ``footprint`` (width in uv units of the ray cone at the hit; 0: the finest level)."""
     st = uv
+    fp = footprint
     if mats.b_const_st[b] != 0 or not (wp.isfinite(uv[0]) and wp.isfinite(uv[1])):
         st = mats.b_st[b]
+        fp = 0.0  # one point of the texture everywhere
     m = mats.b_xf[b]
     tr = mats.b_xt[b]
     s = m[0] * st[0] + m[1] * st[1] + tr[0]
     t = m[2] * st[0] + m[3] * st[1] + tr[1]
     w = mats.b_wrap[b]
-    c, ok = texture_fetch(tex, mats.b_texture[b], s, t, w[0], w[1])
+    fp = fp * wp.sqrt(wp.abs(m[0] * m[3] - m[1] * m[2]))  # the uv transform scales the footprint
+    c, ok = texture_fetch_lod(tex, mats.b_texture[b], s, t, w[0], w[1], fp)
     if not ok:
         return mats.b_fallback[b]
     return wp.cw_mul(c, mats.b_scale[b]) + mats.b_bias[b]
@@ -154,23 +161,25 @@ def select_scalar(c: wp.vec4, output: int):
 
 
 @wp.func(inline=True)  # small and called per input: no copy of the Materials struct
-def input_color(mats: Materials, tex: Textures, mat: int, slot: int, uv: wp.vec2):
+def input_color(mats: Materials, tex: Textures, mat: int, slot: int, uv: wp.vec2, footprint: float):
     """A colour (or vector) input of material ``mat`` at uv."""
     i = mat * NUM_INPUTS + slot
     b = mats.binding[i]
     if b < 0:
         return mats.value[i]
-    return select_color(binding_rgba(mats, tex, b, uv), mats.b_output[b])
+    c = select_color(binding_rgba(mats, tex, b, uv, footprint), mats.b_output[b])
+    return wp.cw_mul(c, mats.b_post_scale[b]) + mats.b_post_bias[b]
 
 
 @wp.func(inline=True)  # small and called per input: no copy of the Materials struct
-def input_scalar(mats: Materials, tex: Textures, mat: int, slot: int, uv: wp.vec2):
+def input_scalar(mats: Materials, tex: Textures, mat: int, slot: int, uv: wp.vec2, footprint: float):
     """A float input of material ``mat`` at uv."""
     i = mat * NUM_INPUTS + slot
     b = mats.binding[i]
     if b < 0:
         return mats.value[i][0]
-    return select_scalar(binding_rgba(mats, tex, b, uv), mats.b_output[b])
+    return select_scalar(binding_rgba(mats, tex, b, uv, footprint), mats.b_output[b]) * mats.b_post_scale[b][0] \
+        + mats.b_post_bias[b][0]
 
 
 @wp.func
@@ -184,10 +193,10 @@ def clamp01_3(c: wp.vec3):
 
 
 @wp.func(inline=True)  # called once per path vertex: no copy of the big structs
-def eval_opacity(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, s: float):
+def eval_opacity_cone(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, s: float, footprint: float):
     """Just the opacity of ``eval_material`` at normalised shutter time s (after opacityThreshold): for shadow
     rays through cut-outs, and for transparency that changes during the shutter (opacity keys)."""
-    opacity = clamp01(input_scalar(mats, tex, mat_id, IN_OPACITY, uv))
+    opacity = clamp01(input_scalar(mats, tex, mat_id, IN_OPACITY, uv, footprint))
     n = mats.opacity_key_count[mat_id]
     if n > 0:
         off = mats.opacity_key_off[mat_id]
@@ -203,7 +212,7 @@ def eval_opacity(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, s: fl
                 opacity = k[1] + (k1[1] - k[1]) * u
             k = k1
         opacity = clamp01(opacity)
-    threshold = input_scalar(mats, tex, mat_id, IN_OPACITY_THRESHOLD, uv)
+    threshold = input_scalar(mats, tex, mat_id, IN_OPACITY_THRESHOLD, uv, footprint)
     if threshold > 0.0:
         if opacity >= threshold:
             opacity = 1.0
@@ -213,31 +222,32 @@ def eval_opacity(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, s: fl
 
 
 @wp.func(inline=True)  # called once per path vertex: no copy of the big structs
-def eval_emission(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2):
+def eval_emission_cone(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, footprint: float):
     """Just the emissive colour of ``eval_material``: for points sampled on emissive meshes."""
-    e = input_color(mats, tex, mat_id, IN_EMISSIVE, uv)
+    e = input_color(mats, tex, mat_id, IN_EMISSIVE, uv, footprint)
     return wp.vec3(wp.max(e[0], 0.0), wp.max(e[1], 0.0), wp.max(e[2], 0.0))
 
 
 @wp.func(inline=True)  # called once per path vertex: no copy of the big structs
-def eval_material(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, s: float):
+def eval_material_cone(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, s: float, footprint: float):
     """All UsdPreviewSurface inputs of material ``mat_id`` at texture coordinates ``uv``.
 
-    ``uv`` is the hit's interpolated primvar (st); pass a non-finite uv (e.g. ``wp.vec2(wp.nan, wp.nan)``) for
+    ``uv`` is the hit's interpolated primvar (st); ``footprint`` the ray cone's width at the hit in uv units
+    (mip level selection, ``textures.texture_fetch_lod``; 0 = the finest level). Pass a non-finite uv (e.g. ``wp.vec2(wp.nan, wp.nan)``) for
     a mesh without texture coordinates, which gives each primvar reader's fallback.
     """
     ms = MaterialSample()
-    ms.diffuse_color = clamp01_3(input_color(mats, tex, mat_id, IN_DIFFUSE, uv))
-    ms.emissive_color = eval_emission(mats, tex, mat_id, uv)
-    ms.specular_color = clamp01_3(input_color(mats, tex, mat_id, IN_SPECULAR, uv))
+    ms.diffuse_color = clamp01_3(input_color(mats, tex, mat_id, IN_DIFFUSE, uv, footprint))
+    ms.emissive_color = eval_emission_cone(mats, tex, mat_id, uv, footprint)
+    ms.specular_color = clamp01_3(input_color(mats, tex, mat_id, IN_SPECULAR, uv, footprint))
     ms.use_specular_workflow = mats.use_specular_workflow[mat_id]
-    ms.metallic = clamp01(input_scalar(mats, tex, mat_id, IN_METALLIC, uv))
-    ms.roughness = clamp01(input_scalar(mats, tex, mat_id, IN_ROUGHNESS, uv))
-    ms.clearcoat = clamp01(input_scalar(mats, tex, mat_id, IN_CLEARCOAT, uv))
-    ms.clearcoat_roughness = clamp01(input_scalar(mats, tex, mat_id, IN_CLEARCOAT_ROUGHNESS, uv))
-    ms.opacity = eval_opacity(mats, tex, mat_id, uv, s)
-    ms.ior = wp.max(input_scalar(mats, tex, mat_id, IN_IOR, uv), 1.0e-3)
-    n = input_color(mats, tex, mat_id, IN_NORMAL, uv)
+    ms.metallic = clamp01(input_scalar(mats, tex, mat_id, IN_METALLIC, uv, footprint))
+    ms.roughness = clamp01(input_scalar(mats, tex, mat_id, IN_ROUGHNESS, uv, footprint))
+    ms.clearcoat = clamp01(input_scalar(mats, tex, mat_id, IN_CLEARCOAT, uv, footprint))
+    ms.clearcoat_roughness = clamp01(input_scalar(mats, tex, mat_id, IN_CLEARCOAT_ROUGHNESS, uv, footprint))
+    ms.opacity = eval_opacity_cone(mats, tex, mat_id, uv, s, footprint)
+    ms.ior = wp.max(input_scalar(mats, tex, mat_id, IN_IOR, uv, footprint), 1.0e-3)
+    n = input_color(mats, tex, mat_id, IN_NORMAL, uv, footprint)
     ln = wp.length(n)
     ms.normal_ts = wp.vec3(0.0, 0.0, 1.0)
     ms.has_normal_map = 0
@@ -246,12 +256,30 @@ def eval_material(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, s: f
         ms.normal_ts = n / ln
         if mats.binding[i] >= 0 or n[0] != 0.0 or n[1] != 0.0 or n[2] != 1.0:
             ms.has_normal_map = 1
-    ms.occlusion = clamp01(input_scalar(mats, tex, mat_id, IN_OCCLUSION, uv))
+    ms.occlusion = clamp01(input_scalar(mats, tex, mat_id, IN_OCCLUSION, uv, footprint))
     a = mats.absorption_cd[mat_id]
     ms.absorption_color = wp.vec3(a[0], a[1], a[2])
     ms.absorption_distance = a[3]
     ms.absorption = mats.absorption[mat_id]
     return ms
+
+
+@wp.func(inline=True)
+def eval_opacity(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, s: float):
+    """``eval_opacity_cone`` at the finest texture level (shadow rays)."""
+    return eval_opacity_cone(mats, tex, mat_id, uv, s, 0.0)
+
+
+@wp.func(inline=True)
+def eval_emission(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2):
+    """``eval_emission_cone`` at the finest texture level (points sampled on emissive meshes)."""
+    return eval_emission_cone(mats, tex, mat_id, uv, 0.0)
+
+
+@wp.func(inline=True)
+def eval_material(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, s: float):
+    """``eval_material_cone`` at the finest texture level (bilinear, no footprint)."""
+    return eval_material_cone(mats, tex, mat_id, uv, s, 0.0)
 
 
 @wp.func
@@ -389,9 +417,11 @@ def collect_textures(materials: list[Material]) -> list[Texture]:
     return out
 
 
-def upload_material_textures(materials: list[Material], device: str = "cpu", warn=None) -> Textures:
-    """The texture atlas for ``upload_materials(materials)``."""
-    return upload_textures(collect_textures(materials), device, warn=warn)
+def upload_material_textures(materials: list[Material], device: str = "cpu", warn=None, *, budget: int | None = None,
+                             mips: bool = True) -> Textures:
+    """The texture atlas for ``upload_materials(materials)`` (``budget``: bytes, default the textures module's)."""
+    kw = {} if budget is None else {"budget": budget}
+    return upload_textures(collect_textures(materials), device, warn=warn, mips=mips, **kw)
 
 
 def _vec3(v, default) -> np.ndarray:
@@ -459,12 +489,15 @@ def upload_materials(materials: list[Material], device: str = "cpu") -> Material
 
     rows_or_dummy = rows or [None]
     tex_ids, outs, wraps, scales, biases, fallbacks, const_st, sts, xfs, xts = ([] for _ in range(10))
+    post_scales, post_biases = [], []
     for ti in rows_or_dummy:
         if ti is None:
             tex_ids.append(-1), outs.append(OUTPUT_RGB), wraps.append((2, 2)), scales.append((1, 1, 1, 1))
             biases.append((0, 0, 0, 0)), fallbacks.append((0, 0, 0, 1)), const_st.append(1), sts.append((0, 0))
-            xfs.append((1, 0, 0, 1)), xts.append((0, 0))
+            xfs.append((1, 0, 0, 1)), xts.append((0, 0)), post_scales.append((1, 1, 1)), post_biases.append((0, 0, 0))
             continue
+        post_scales.append(ti.post_scale)
+        post_biases.append(ti.post_bias)
         tex_ids.append(tex_index[id(ti.texture)] if ti.texture is not None else -1)
         outs.append(OUTPUTS.get(ti.output, OUTPUT_RGB))
         wraps.append((WRAP_MODES.get(ti.wrap_s, 2), WRAP_MODES.get(ti.wrap_t, 2)))
@@ -485,6 +518,8 @@ def upload_materials(materials: list[Material], device: str = "cpu") -> Material
     m.b_st = f32(np.nan_to_num(sts), wp.vec2)
     m.b_xf = f32(np.nan_to_num(xfs), wp.vec4)
     m.b_xt = f32(np.nan_to_num(xts), wp.vec2)
+    m.b_post_scale = f32(np.nan_to_num(post_scales), wp.vec3)
+    m.b_post_bias = f32(np.nan_to_num(post_biases), wp.vec3)
     return m
 
 

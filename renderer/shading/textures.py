@@ -7,10 +7,16 @@ reads) as float32 and decodes sRGB to linear at load time, so every lookup is li
   keeps the values, "auto" (the UsdUVTexture default) decodes 8-bit images with 3 or 4 channels unless the file
   says it is linear, and keeps everything else (float, 16-bit, 1- and 2-channel images), as the
   UsdPreviewSurface spec describes.
+* "auto8" (MaterialX image nodes, Arnold's "auto") decodes every 8-bit image, grey ones too, and keeps float;
+  "ACES2065-1" / "ACEScg" (also "lin_ap0" / "lin_ap1") are linear with other primaries: converted to linear
+  Rec.709 when read.
 * Images are stored **bottom row first**: texel (i, j) has its centre at st = ((i + 0.5) / W, (j + 0.5) / H),
   the UsdUVTexture convention of ``st`` with its origin at the bottom-left (the top-left pixel of a PNG is at
   st ~ (0, 1)).
-* Images larger than ``MAX_TEXTURE_SIZE`` on a side are downsampled by OpenImageIO when read (a warning);
+* Images larger than ``MAX_TEXTURE_SIZE`` on a side (or the ``max_size`` asked for) are downsampled when read
+  (a warning): mip-mapped files (``.tx``, tiled OpenEXR/TIFF with levels) are read at their finest stored
+  level within the size, so the texels above it are never loaded; other files stream through OpenImageIO's
+  image cache into the resize;
   ``upload_textures`` halves the largest images further if all of them together exceed ``TEXTURE_BUDGET``.
 * ``wrap_metadata`` reports OpenImageIO's ``wrapmodes`` attribute (TIFF/OpenEXR) for ``useMetadata``.
 
@@ -20,8 +26,9 @@ material input references) is a set of tiles: one image, or the tiles of a UDIM 
 number. ``texture_lookup`` filters bilinearly with the wrap modes black (transparent black outside),
 clamp, repeat and mirror; a UDIM texture picks tile 1001 + floor(s) + 10 floor(t) and clamps inside the tile,
 returning the fallback where no tile exists. Channel expansion follows UsdUVTexture: grey -> (g, g, g, 1),
-grey-alpha -> (g, g, g, a), RGB -> (r, g, b, 1). No mipmaps: the many samples per pixel of distributed ray
-tracing filter minified textures.
+grey-alpha -> (g, g, g, a), RGB -> (r, g, b, 1). Every image is mip-mapped (2x2 box levels down to 1x1);
+``texture_fetch_lod`` filters trilinearly for a footprint in st units (the ray cone's, see
+``shading.raycone``), ``texture_fetch`` reads level 0.
 
 Dome lights use the lat-long (OpenEXR/UsdLux) convention of ``envmap``, re-exported here as
 ``latlong_to_direction``, ``direction_to_latlong`` and ``latlong_mean``.
@@ -87,10 +94,23 @@ class LoadedImage:
     wrap_metadata: tuple[str, str] | None  # (s, t) wrap modes named by the file, or None
     original_size: tuple[int, int]  # (width, height) in the file
     top_down: np.ndarray | None = None  # (H, W, C) the same texels with row 0 = top (``keep_top_down``)
+    level: int = 0  # the file's mip level read (mip-mapped files larger than the size asked for)
 
     @property
     def downsampled(self) -> bool:
         return self.texels.shape[1] != self.original_size[0] or self.texels.shape[0] != self.original_size[1]
+
+
+# Linear colour spaces with other primaries than Rec.709, converted to linear Rec.709 when read (row-major 3x3,
+# Bradford-adapted from the ACES white point to D65, as OpenColorIO's ACES configs do).
+_AP0_TO_709 = np.array([[2.52169, -1.13413, -0.38756], [-0.27648, 1.37272, -0.09624], [-0.01538, -0.15298, 1.16835]])
+_AP1_TO_709 = np.array([[1.70505, -0.62179, -0.08326], [-0.13026, 1.14080, -0.01055], [-0.02400, -0.12897, 1.15297]])
+_PRIMARIES = {
+    "aces2065-1": _AP0_TO_709,
+    "lin_ap0": _AP0_TO_709,
+    "acescg": _AP1_TO_709,
+    "lin_ap1": _AP1_TO_709,
+}
 
 
 def _is_linear_tag(tag: str) -> bool:
@@ -119,6 +139,16 @@ def read_image(path: str, colorspace: str = "auto", max_size: int = MAX_TEXTURE_
         parts = [_OIIO_WRAP.get(m.strip().lower()) for m in modes.split(",")]
         if parts and all(parts):
             wrap = (parts[0], parts[-1])
+    level = 0
+    if buf.nmiplevels > 1 and max(spec.width, spec.height) > max_size:
+        # a mip-mapped file (.tx, tiled OpenEXR/TIFF): read the finest stored level within max_size, never
+        # the texels above it
+        while level + 1 < buf.nmiplevels and max(spec.width, spec.height) > max_size:
+            level += 1
+            buf = oiio.ImageBuf(path, 0, level)
+            spec = buf.spec()
+        if buf.has_error:
+            raise ImageError(f"cannot read {path} (mip level {level}): {' '.join(buf.geterror().split())}")
     if spec.get_int_attribute("Orientation", 1) != 1:
         buf = oiio.ImageBufAlgo.reorient(buf)
         spec = buf.spec()
@@ -132,8 +162,11 @@ def read_image(path: str, colorspace: str = "auto", max_size: int = MAX_TEXTURE_
         buf = oiio.ImageBufAlgo.resize(buf, roi=oiio.ROI(0, w, 0, h, 0, 1, 0, nch))
         if buf.has_error:
             raise ImageError(f"cannot downsample {path}: {' '.join(buf.geterror().split())}")
+    primaries = _PRIMARIES.get(colorspace.lower())
     if colorspace == "auto":
         srgb = eight_bit and nch in (3, 4) and not (tag and _is_linear_tag(tag))
+    elif colorspace == "auto8":
+        srgb = eight_bit and not (tag and _is_linear_tag(tag))
     else:
         srgb = colorspace.lower() == "srgb"
     ncolor = {1: 1, 2: 1, 3: 3, 4: 3}[nch] if srgb else 0
@@ -155,7 +188,11 @@ def read_image(path: str, colorspace: str = "auto", max_size: int = MAX_TEXTURE_
             px[..., :ncolor] = srgb_to_linear(px[..., :ncolor])
         if not np.all(np.isfinite(px)):
             px = np.nan_to_num(px, nan=0.0, posinf=0.0, neginf=0.0)
+    if primaries is not None and nch >= 3:
+        px = px.copy()
+        px[..., :3] = px[..., :3] @ primaries.T.astype(np.float32)
     return LoadedImage(
+        level=level,
         texels=np.ascontiguousarray(px[::-1]),
         colorspace="sRGB" if srgb else "raw",
         wrap_metadata=wrap,
@@ -181,10 +218,12 @@ class Textures:
     Texture ``t`` has tiles ``tex_first[t] .. tex_first[t] + tex_count[t]``; tile ``k`` is image
     ``tile_image[k]`` with UDIM number ``tile_udim[k]`` (0 for a plain image). Image ``i`` has its texel
     (x, y) (y from the bottom), channel ``c`` at ``texels[img_offset[i] + (y * img_width[i] + x) *
-    img_channels[i] + c]``.
+    img_channels[i] + c]``. A tile's image is its mip level 0; its levels 1, 2, ... (each a 2x2 box filter of
+    the one before, down to 1x1) are the images that follow it (``img_levels``).
     """
 
     texels: wp.array(dtype=wp.float32)
+    img_levels: wp.array(dtype=wp.int32)  # mip levels from this image on: level l of image i is image i + l
     img_offset: wp.array(dtype=wp.int32)
     img_width: wp.array(dtype=wp.int32)
     img_height: wp.array(dtype=wp.int32)
@@ -197,47 +236,77 @@ class Textures:
 
 
 def _halve(im: np.ndarray) -> np.ndarray:
-    """2x2 box downsampling (odd sizes keep their last row/column)."""
+    """2x2 box downsampling (an odd size repeats its last row/column first): (H, W) -> ((H+1)//2, (W+1)//2)."""
     h, w = im.shape[:2]
     if h > 1:
-        im = np.concatenate([im[: h - h % 2], im[h - 1:]], 0) if h % 2 else im
+        im = np.concatenate([im, im[-1:]], 0) if h % 2 else im
         im = 0.5 * (im[0::2] + im[1::2])
     if w > 1:
-        im = np.concatenate([im[:, : w - w % 2], im[:, w - 1:]], 1) if w % 2 else im
+        im = np.concatenate([im, im[:, -1:]], 1) if w % 2 else im
         im = 0.5 * (im[:, 0::2] + im[:, 1::2])
     return np.ascontiguousarray(im, np.float32)
 
 
+def mip_chain(im: np.ndarray) -> list[np.ndarray]:
+    """Level 0 and its 2x2 box-filtered halvings down to 1x1."""
+    levels = [im]
+    while max(levels[-1].shape[:2]) > 1:
+        levels.append(_halve(levels[-1]))
+    return levels
+
+
+def mip_bytes(im: np.ndarray) -> int:
+    """Bytes of an image with its mip chain (about 4/3 of level 0), without building it."""
+    h, w = im.shape[:2]
+    per = int(np.prod(im.shape[2:], dtype=np.int64)) * 4
+    total = h * w * per
+    while max(h, w) > 1:
+        h, w = (h + 1) // 2, (w + 1) // 2
+        total += h * w * per
+    return int(total)
+
+
 def fit_budget(images: list[np.ndarray], budget: int = TEXTURE_BUDGET) -> tuple[list[np.ndarray], int]:
-    """Halve the largest images until all fit in ``budget`` bytes. Returns (images, number of halvings)."""
+    """Halve the largest images until all, with their mip chains, fit in ``budget`` bytes.
+    Returns (images, number of halvings)."""
     images = list(images)
     halvings = 0
-    while images and sum(im.nbytes for im in images) > budget:
-        i = int(np.argmax([im.nbytes for im in images]))
+    sizes = [mip_bytes(im) for im in images]
+    while images and sum(sizes) > budget:
+        i = int(np.argmax(sizes))
         if max(images[i].shape[:2]) <= 1:
             break
         images[i] = _halve(images[i])
+        sizes[i] = mip_bytes(images[i])
         halvings += 1
     return images, halvings
 
 
 def upload_textures(textures: list[Texture], device: str = "cpu", budget: int = TEXTURE_BUDGET,
-                    warn=None) -> Textures:
-    """The atlas of ``textures`` (texture ``t`` of the kernels is ``textures[t]``)."""
-    images: list[np.ndarray] = []
-    first, count, is_udim, tile_image, tile_udim = [], [], [], [], []
+                    warn=None, mips: bool = True) -> Textures:
+    """The atlas of ``textures`` (texture ``t`` of the kernels is ``textures[t]``), mip-mapped (``mips``), within
+    ``budget`` bytes of texels (the largest images are halved until it fits, with a warning)."""
+    tiles: list[np.ndarray] = []
+    first, count, is_udim, tile_udim = [], [], [], []
     for tex in textures:
-        first.append(len(tile_image))
+        first.append(len(tiles))
         count.append(len(tex.images))
         is_udim.append(int(tex.udims is not None))
         for k, im in enumerate(tex.images):
-            tile_image.append(len(images))
             tile_udim.append(int(tex.udims[k]) if tex.udims is not None else 0)
             im = np.asarray(im, np.float32)
-            images.append(im if im.ndim == 3 else im[..., None])
-    images, halvings = fit_budget(images, budget)
+            tiles.append(im if im.ndim == 3 else im[..., None])
+    tiles, halvings = fit_budget(tiles, budget)
     if halvings and warn is not None:
         warn(f"textures exceed the {budget >> 20} MiB texture budget: the largest were halved {halvings} time(s)")
+    images: list[np.ndarray] = []
+    levels: list[int] = []
+    tile_image: list[int] = []
+    for im in tiles:
+        tile_image.append(len(images))
+        chain = mip_chain(im) if mips else [im]
+        levels += [len(chain) - k for k in range(len(chain))]
+        images += chain
     sizes = [im.size for im in images]
     offsets = np.cumsum([0] + sizes)[:-1]
     if offsets.size and int(offsets[-1]) + sizes[-1] >= 2**31:
@@ -249,6 +318,7 @@ def upload_textures(textures: list[Texture], device: str = "cpu", budget: int = 
     t = Textures()
     flat = np.concatenate([im.reshape(-1) for im in images]) if images else np.zeros(1, np.float32)
     t.texels = wp.array(flat.astype(np.float32), dtype=wp.float32, device=device)
+    t.img_levels = i32(levels, 1)
     t.img_offset = i32(offsets)
     t.img_width = i32([im.shape[1] for im in images], 1)
     t.img_height = i32([im.shape[0] for im in images], 1)
@@ -259,6 +329,11 @@ def upload_textures(textures: list[Texture], device: str = "cpu", budget: int = 
     t.tile_image = i32(tile_image)
     t.tile_udim = i32(tile_udim)
     return t
+
+
+def atlas_bytes(tex: Textures) -> int:
+    """Bytes of texels uploaded (all images and mip levels)."""
+    return int(tex.texels.shape[0]) * 4
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -342,15 +417,43 @@ def image_bilinear(tex: Textures, img: int, s: float, t: float, wrap_s: int, wra
 
 
 @wp.func
+def image_trilinear(tex: Textures, img: int, s: float, t: float, wrap_s: int, wrap_t: int, footprint: float):
+    """RGBA of a mip-mapped image for a footprint ``footprint`` wide in st units (0: level 0, bilinear).
+
+    The level of detail is log2(footprint * sqrt(W H)) (texels of level 0 covered by the footprint); the two
+    levels around it are filtered bilinearly and blended linearly (trilinear filtering)."""
+    n = tex.img_levels[img]
+    if footprint <= 0.0 or n <= 1 or not wp.isfinite(footprint):
+        return image_bilinear(tex, img, s, t, wrap_s, wrap_t)
+    texels = footprint * wp.sqrt(float(tex.img_width[img]) * float(tex.img_height[img]))
+    lod = wp.clamp(wp.log2(wp.max(texels, 1.0e-8)), 0.0, float(n - 1))
+    l0 = wp.min(int(wp.floor(lod)), n - 1)
+    f = lod - float(l0)
+    c0 = image_bilinear(tex, img + l0, s, t, wrap_s, wrap_t)
+    if f <= 0.0 or l0 + 1 >= n:
+        return c0
+    c1 = image_bilinear(tex, img + l0 + 1, s, t, wrap_s, wrap_t)
+    return c0 * (1.0 - f) + c1 * f
+
+
+@wp.func
 def texture_fetch(tex: Textures, texture: int, s: float, t: float, wrap_s: int, wrap_t: int):
-    """(filtered RGBA at st = (s, t), found). Not found: texture -1 (missing file) or no UDIM tile at st."""
+    """(filtered RGBA at st = (s, t), found), level 0 only (see ``texture_fetch_lod``)."""
+    return texture_fetch_lod(tex, texture, s, t, wrap_s, wrap_t, 0.0)
+
+
+@wp.func
+def texture_fetch_lod(tex: Textures, texture: int, s: float, t: float, wrap_s: int, wrap_t: int,
+                      footprint: float):
+    """(RGBA at st = (s, t) filtered over a footprint in st units, found). Not found: texture -1 (missing
+    file) or no UDIM tile at st."""
     if texture < 0:
         return wp.vec4(0.0), False
     if not (wp.isfinite(s) and wp.isfinite(t)):
         return wp.vec4(0.0), False
     first = tex.tex_first[texture]
     if tex.tex_udim[texture] == 0:
-        return image_bilinear(tex, tex.tile_image[first], s, t, wrap_s, wrap_t), True
+        return image_trilinear(tex, tex.tile_image[first], s, t, wrap_s, wrap_t, footprint), True
     fu = wp.floor(s)
     fv = wp.floor(t)
     if fu < 0.0 or fu > 9.0 or fv < 0.0 or fv > 99.0:
@@ -362,7 +465,7 @@ def texture_fetch(tex: Textures, texture: int, s: float, t: float, wrap_s: int, 
             img = tex.tile_image[k]
     if img < 0:
         return wp.vec4(0.0), False
-    return image_bilinear(tex, img, s - fu, t - fv, WRAP_CLAMP, WRAP_CLAMP), True
+    return image_trilinear(tex, img, s - fu, t - fv, WRAP_CLAMP, WRAP_CLAMP, footprint), True
 
 
 @wp.func
@@ -376,20 +479,24 @@ def texture_lookup(tex: Textures, texture: int, s: float, t: float, wrap_s: int,
 
 
 @wp.kernel
-def lookup_kernel(tex: Textures, texture: int, wrap_s: int, wrap_t: int, fallback: wp.vec4,
+def lookup_kernel(tex: Textures, texture: int, wrap_s: int, wrap_t: int, fallback: wp.vec4, footprint: float,
                   st: wp.array(dtype=wp.vec2), out: wp.array(dtype=wp.vec4)):
     i = wp.tid()
-    out[i] = texture_lookup(tex, texture, st[i][0], st[i][1], wrap_s, wrap_t, fallback)
+    c, ok = texture_fetch_lod(tex, texture, st[i][0], st[i][1], wrap_s, wrap_t, footprint)
+    out[i] = c
+    if not ok:
+        out[i] = fallback
 
 
 def lookup(tex: Textures, texture: int, st: np.ndarray, wrap_s: str = "repeat", wrap_t: str = "repeat",
-           fallback=(0.0, 0.0, 0.0, 1.0), device: str = "cpu") -> np.ndarray:
-    """Host-side batch of ``texture_lookup``: st (N, 2) -> RGBA (N, 4) (for tests and tools)."""
+           fallback=(0.0, 0.0, 0.0, 1.0), device: str = "cpu", footprint: float = 0.0) -> np.ndarray:
+    """Host-side batch of ``texture_fetch_lod``: st (N, 2) -> RGBA (N, 4) (for tests and tools); ``footprint``
+    in st units (0: level 0, bilinear)."""
     st = np.ascontiguousarray(np.asarray(st, np.float32).reshape(-1, 2))
     st_w = wp.array(st, dtype=wp.vec2, device=device)
     out = wp.zeros(len(st), dtype=wp.vec4, device=device)
     wp.launch(lookup_kernel, dim=len(st), inputs=[tex, int(texture), WRAP_MODES[wrap_s], WRAP_MODES[wrap_t],
-                                                    wp.vec4(*fallback), st_w, out], device=device)
+                                                    wp.vec4(*fallback), float(footprint), st_w, out], device=device)
     return out.numpy()
 
 
@@ -444,7 +551,7 @@ def image_bilinear_np(image: np.ndarray, st: np.ndarray, wrap_s: str = "repeat",
 
 __all__ = [
     "ImageError", "LoadedImage", "Textures", "read_image", "image_texture", "upload_textures", "texture_lookup",
-    "texture_fetch",
+    "texture_fetch", "texture_fetch_lod", "image_trilinear", "mip_chain", "mip_bytes", "atlas_bytes",
     "image_bilinear", "lookup", "image_bilinear_np", "srgb_to_linear", "linear_to_srgb", "latlong_to_direction",
     "direction_to_latlong", "latlong_mean", "WRAP_MODES", "OUTPUTS",
     "MAX_TEXTURE_SIZE", "TEXTURE_BUDGET",

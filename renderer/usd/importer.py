@@ -34,6 +34,7 @@ from renderer.usd.geometry import PRIMITIVE_TYPES, collapse_keys, primitive_sign
 from renderer.usd.linking import apply_linking
 from renderer.usd.materials import MaterialTable
 from renderer.usd.mesh_lights import apply_mesh_light
+from renderer.usd.mtlx import compose_mtlx
 from renderer.usd.motion import Shutter, TransformSampler, motion_transforms, refine_keys
 from renderer.usd.skel import Skinning
 from renderer.usd.subdiv import SubdivisionDetail
@@ -170,7 +171,8 @@ class _Importer:
     # -- top level ------------------------------------------------------------------------------------------------
     def run(self) -> sc.Scene:
         stage, warn = self.stage, self.warn
-        errors = stage.GetCompositionErrors()
+        self._mtlx_layers = compose_mtlx(stage, warn)  # .mtlx references, translated (no UsdMtlx in usd-core)
+        errors = [e for e in stage.GetCompositionErrors() if ".mtlx" not in str(e) or not self._mtlx_layers]
         if errors:
             warn(f"{len(errors)} composition error(s) (missing references/payloads?); the rest was loaded",
                  str(errors[0]).splitlines()[0] if str(errors[0]) else None)

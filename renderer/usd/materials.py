@@ -2,10 +2,12 @@
 
 **Binding.** Per prim: ``UsdShadeMaterialBindingAPI.ComputeBoundMaterial`` with the "full" purpose, which falls
 back to the all-purpose binding (direct and collection bindings, ``bindingStrength`` honoured by USD); then the
-material's universal ``outputs:surface`` shader. GeomSubsets of family ``materialBind`` give per-face material
+material's surface shader: the first of a supported model (``surfaces``) among its ``mtlx``, universal and
+``arnold`` surface outputs. Inputs are read through the shading network (``shading_network``: NodeGraphs,
+interface inputs, multi-output shaders, MaterialX nodes) and mapped onto UsdPreviewSurface inputs. GeomSubsets of family ``materialBind`` give per-face material
 ids, each subset bound the same way.
 
-**UsdPreviewSurface.** Every input of the spec is read: diffuseColor, emissiveColor, useSpecularWorkflow,
+**UsdPreviewSurface** (and what Standard Surface / OpenPBR map to). Every input of the spec is read: diffuseColor, emissiveColor, useSpecularWorkflow,
 specularColor, metallic, roughness, clearcoat, clearcoatRoughness, opacity, opacityThreshold, ior, normal and
 occlusion (imported, unused by the renderer); displacement is ignored (a warning when authored non-zero or
 connected). An input is constant, takes the value of a material/node-graph interface input it is connected to,
@@ -29,8 +31,8 @@ A textured input stores its ``TextureInput`` in ``Material.textures`` and its *m
 stores its coverage (fraction of texels kept). One uv set per mesh: the mesh's texture coordinates are the
 importer's (``st``, else the first texCoord2f primvar); ``uv_sets(prim)`` tells which primvars its textures read.
 
-Other surfaces (PxrSurface, MaterialX, arnold, ...) and unbound prims take the prim's ``primvars:displayColor``
-(averaged when not constant) or grey 0.18.
+Other surfaces (PxrSurface, other arnold shaders, ...) and unbound prims take the prim's
+``primvars:displayColor`` (averaged when not constant) or grey 0.18, with a warning naming the shader.
 
 **Absorption extension (Beer-Lambert, paper section 5).** UsdPreviewSurface has no attribute for absorption
 inside a solid, so the renderer reads two extension inputs, on the UsdPreviewSurface shader or on the Material
@@ -47,43 +49,28 @@ Materials are deduplicated: one ``Material`` per (material prim, displayColor wh
 """
 from __future__ import annotations
 
-import math
-import os
-import tempfile
-
 import numpy as np
-from pxr import Ar, Gf, Sdf, Usd, UsdGeom, UsdShade
+from pxr import Gf, UsdGeom, UsdShade
 
 from renderer.scene.model import Material, Texture, TextureInput
-from renderer.shading.textures import ImageError, LoadedImage, image_texture, read_image
+from renderer.usd.shading_network import (Const, Display, Network, Tex, UV, expand_rgba, select_post, shader_id,
+                                          tex_mean)
+from renderer.usd.surfaces import PREVIEW, PREVIEW_DEFAULTS, surface_inputs, surface_model
+from renderer.usd.texture_files import (TextureFiles, authoring_layer, read_asset_image,  # noqa: F401 - re-exported
+                                        resolve_asset)
 
 GREY = (0.18, 0.18, 0.18)
-PREVIEW_SURFACE_IDS = ("UsdPreviewSurface", "ND_UsdPreviewSurface_surfaceshader")
-UV_TEXTURE_IDS = ("UsdUVTexture", "ND_UsdUVTexture")
-TRANSFORM2D_IDS = ("UsdTransform2d", "ND_UsdTransform2d")
 ABSORPTION_COLOR = "drt:absorptionColor"
 ABSORPTION_DISTANCE = "drt:absorptionDistance"
-MAX_NODE_CHAIN = 16
+SURFACE_CONTEXTS = ("mtlx", "", "arnold")  # render contexts of a Material's surface output, in preference order
 
-# UsdPreviewSurface spec defaults, and the Material field each input fills ("color": 3 floats, else a scalar).
-_INPUTS = {
-    "diffuseColor": ("diffuse_color", GREY),
-    "emissiveColor": ("emissive_color", (0.0, 0.0, 0.0)),
-    "useSpecularWorkflow": ("use_specular_workflow", 0),
-    "specularColor": ("specular_color", (0.0, 0.0, 0.0)),
-    "metallic": ("metallic", 0.0),
-    "roughness": ("roughness", 0.5),
-    "clearcoat": ("clearcoat", 0.0),
-    "clearcoatRoughness": ("clearcoat_roughness", 0.01),
-    "opacity": ("opacity", 1.0),
-    "opacityThreshold": ("opacity_threshold", 0.0),
-    "ior": ("ior", 1.5),
-    "normal": ("normal", (0.0, 0.0, 1.0)),
-    "occlusion": ("occlusion", 1.0),
-}
-_SRGB_NAMES = ("srgb", "srgb_texture", "srgb_rec709_scene", "srgb_rec709_display", "srgb_display", "gamma22")
-_RAW_NAMES = ("raw", "linear", "lin_rec709", "lin_rec709_scene", "lin_srgb", "scene_linear", "data", "lin_ap1",
-              "acescg", "lin_rec709_display", "utility - raw", "non-color", "identity")
+# UsdPreviewSurface input -> (the Material field it fills, its spec default) ("color": 3 floats, else a scalar).
+_INPUTS = {name: (field, PREVIEW_DEFAULTS[name]) for name, field in (
+    ("diffuseColor", "diffuse_color"), ("emissiveColor", "emissive_color"),
+    ("useSpecularWorkflow", "use_specular_workflow"), ("specularColor", "specular_color"),
+    ("metallic", "metallic"), ("roughness", "roughness"), ("clearcoat", "clearcoat"),
+    ("clearcoatRoughness", "clearcoat_roughness"), ("opacity", "opacity"),
+    ("opacityThreshold", "opacity_threshold"), ("ior", "ior"), ("normal", "normal"), ("occlusion", "occlusion"))}
 
 
 def display_color(prim, frame: float) -> tuple[float, float, float] | None:
@@ -101,158 +88,18 @@ def display_color(prim, frame: float) -> tuple[float, float, float] | None:
     return (round(float(m[0]), 6), round(float(m[1]), 6), round(float(m[2]), 6))
 
 
-def _shader_id(shader: UsdShade.Shader) -> str:
-    sid = shader.GetShaderId()
-    return str(sid) if sid else shader.GetPrim().GetTypeName()
-
-
-# ---------------------------------------------------------------------------------------------------------------
-# Asset paths and image files
-
-
-def authoring_layer(attr) -> Sdf.Layer | None:
-    """The layer whose opinion gives the attribute its value (the strongest spec holding a value)."""
-    try:
-        stack = attr.GetPropertyStack(Usd.TimeCode.Default())
-    except Exception:  # noqa: BLE001 - no stack for odd attributes
-        stack = []
-    for spec in stack:
-        if spec.HasDefaultValue() or spec.layer.GetNumTimeSamplesForPath(spec.path) > 0:
-            return spec.layer
-    return stack[0].layer if stack else None
-
-
-def resolve_asset(attr, value) -> tuple[str, list[tuple[str, int]] | None]:
-    """(resolved path, UDIM tiles [(path, tile)] or None) of an asset-valued attribute.
-
-    Uses the stage's resolved path, falling back to anchoring the authored path on the authoring layer (the
-    returned path may then not exist). ``<UDIM>`` paths list the tiles found next to the pattern.
-    """
-    path = str(getattr(value, "path", value) or "").strip()
-    resolved = str(getattr(value, "resolvedPath", "") or "")
-    layer = authoring_layer(attr)
-    if UsdShade.UdimUtils.IsUdimIdentifier(path):
-        anchor = layer or attr.GetStage().GetRootLayer()
-        tiles = UsdShade.UdimUtils.ResolveUdimTilePaths(resolved or path, anchor)
-        pattern = UsdShade.UdimUtils.ResolveUdimPath(path, anchor) or path
-        return str(pattern), [(str(p), int(t)) for p, t in tiles]
-    if resolved:
-        return resolved, None
-    if layer is not None and path and not os.path.isabs(path):
-        anchored = layer.ComputeAbsolutePath(path)
-        if anchored == path and layer.realPath and not Ar.IsPackageRelativePath(layer.realPath):
-            anchored = os.path.normpath(os.path.join(os.path.dirname(layer.realPath), path))
-        return str(anchored), None
-    return path, None
-
-
-def read_asset_image(resolved: str, colorspace: str = "auto", keep_top_down: bool = False) -> LoadedImage:
-    """``textures.read_image`` of a resolved asset path, including files inside .usdz packages."""
-    if Ar.IsPackageRelativePath(resolved):
-        asset = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(resolved))
-        if asset is None:
-            raise ImageError(f"cannot open {resolved}")
-        data = asset.GetBuffer()
-        inner = Ar.SplitPackageRelativePathInner(resolved)[1]
-        with tempfile.TemporaryDirectory(prefix="drt-tex-") as tmp:
-            local = os.path.join(tmp, "image" + os.path.splitext(inner)[1].lower())
-            with open(local, "wb") as f:
-                f.write(data)
-            return read_image(local, colorspace, keep_top_down=keep_top_down)
-    return read_image(resolved, colorspace, keep_top_down=keep_top_down)
-
-
-class TextureFiles:
-    """Images loaded once per (file, colour space) for one import; failures warn once per file."""
-
-    def __init__(self, warn):
-        self.warn = warn
-        self._cache: dict[tuple, tuple[Texture | None, tuple | None]] = {}
-        self.textures: list[Texture] = []
-
-    def load(self, name: str, tiles: list[tuple[str, int]] | None, colorspace: str,
-             where: str) -> tuple[Texture | None, tuple[str, str] | None]:
-        """(Texture or None, the file's wrap modes or None) for a resolved file or UDIM tile set."""
-        key = (name, tuple(tiles) if tiles is not None else None, colorspace)
-        hit = self._cache.get(key)
-        if hit is not None:
-            return hit
-        texture, wrap = None, None
-        try:
-            if tiles is not None:
-                if not tiles:
-                    raise ImageError(f"no UDIM tiles found for {name}")
-                loaded = [read_asset_image(p, colorspace) for p, _ in tiles]
-                texture = image_texture(name, loaded, [t for _, t in tiles])
-            else:
-                loaded = [read_asset_image(name, colorspace)]
-                texture = image_texture(name, loaded)
-            wrap = loaded[0].wrap_metadata
-            small = [im for im in loaded if im.downsampled]
-            if small:
-                w, h = small[0].original_size
-                self.warn("large textures downsampled to at most 4096 texels a side", f"{name} ({w}x{h})")
-        except (ImageError, OSError, RuntimeError) as e:
-            self.warn("texture files missing or unreadable: those inputs use their UsdUVTexture fallback",
-                      f"{name} ({' '.join(str(e).split())[:160]}; {where})")
-            texture = None
-        if texture is not None:
-            self.textures.append(texture)
-        self._cache[key] = (texture, wrap)
-        return texture, wrap
-
-
 # ---------------------------------------------------------------------------------------------------------------
 # Representative constants of textured inputs
-
-
-def _expanded_rgba(im: np.ndarray) -> np.ndarray:
-    im = np.asarray(im, np.float32)
-    c = im.shape[-1]
-    if c == 1:
-        return np.concatenate([im, im, im, np.ones_like(im)], -1)
-    if c == 2:
-        return np.concatenate([im[..., :1]] * 3 + [im[..., 1:2]], -1)
-    if c == 3:
-        return np.concatenate([im, np.ones_like(im[..., :1])], -1)
-    return im[..., :4]
-
-
-def _select(rgba: np.ndarray, output: str) -> np.ndarray:
-    """The connected output of RGBA values (..., 4) -> (..., 3) for rgb, (..., 1) for one channel."""
-    if output in ("rgb", "rgba"):
-        return rgba[..., :3]
-    return rgba[..., "rgba".index(output): "rgba".index(output) + 1]
-
-
-def _mean_rgba(texture: Texture) -> np.ndarray:
-    """Mean RGBA (4,) of a texture (channel-expanded, area-weighted over UDIM tiles)."""
-    total, area = np.zeros(4), 0.0
-    for im in texture.images:
-        c = np.asarray(im, np.float32).reshape(-1, im.shape[-1]).mean(0, dtype=np.float64)
-        total += _expanded_rgba(c[None])[0] * (im.shape[0] * im.shape[1])
-        area += im.shape[0] * im.shape[1]
-    return total / max(area, 1.0)
-
-
-def _texture_mean(ti: TextureInput, means: dict[int, np.ndarray]) -> np.ndarray:
-    """Mean value (3,) or (1,) of a textured input over its texture (``means``: cache of ``_mean_rgba``)."""
-    if ti.texture is None:
-        return _select(np.asarray(ti.fallback, np.float64), ti.output)
-    mean = means.get(id(ti.texture))
-    if mean is None:
-        mean = means[id(ti.texture)] = _mean_rgba(ti.texture)
-    return _select(mean * np.asarray(ti.scale) + np.asarray(ti.bias), ti.output)
 
 
 def _texture_coverage(ti: TextureInput, threshold: float) -> float:
     """Fraction of a textured opacity that an opacityThreshold keeps."""
     if ti.texture is None:
-        return float(_select(np.asarray(ti.fallback, np.float64), ti.output)[0] >= threshold)
+        return float(select_post(np.asarray(ti.fallback, np.float64), ti, 1)[0] >= threshold)
     kept, area = 0.0, 0.0
     for im in ti.texture.images:
-        v = _select(_expanded_rgba(im) * np.asarray(ti.scale, np.float32) + np.asarray(ti.bias, np.float32),
-                    ti.output)[..., 0]
+        rgba = expand_rgba(np.asarray(im, np.float32))
+        v = select_post(rgba * np.asarray(ti.scale, np.float32) + np.asarray(ti.bias, np.float32), ti, 1)[..., 0]
         kept += float(np.count_nonzero(v >= threshold))
         area += v.size
     return kept / max(area, 1.0)
@@ -303,8 +150,7 @@ class MaterialTable:
         self._ids: dict[tuple, int] = {}
         self._surfaces: dict[str, tuple] = {}
         self._uv_sets: dict[str, tuple[str, ...]] = {}
-        self._nodes: dict[tuple, TextureInput | None] = {}
-        self._means: dict[int, np.ndarray] = {}  # id(Texture) -> mean RGBA (the textures live in self.files)
+        self.net = Network(frame, warn, self.files)
 
     # -- public ---------------------------------------------------------------------------------------------------
     @property
@@ -390,8 +236,10 @@ class MaterialTable:
                 return self._add(("usd", path), Material(name=path, **fields))
             color = display_color(prim, self.frame)
             f = dict(fields)
-            for name, fallback in uses_display:
-                f[name] = color if color is not None else fallback
+            for name, fallback, scale in uses_display:  # displayColor (or the reader's fallback) x network scale
+                c = color if color is not None else fallback
+                f[name] = tuple(float(x) * k for x, k in zip(np.resize(c, 3), scale)) if isinstance(c, tuple) \
+                    else float(np.resize(c, 1)[0]) * scale[0]
             return self._add(("usd", path, color), Material(name=path, **f))
         color = display_color(prim, self.frame)
         return self._add(("fallback", path, color), Material(name=path, diffuse_color=color or GREY))
@@ -401,13 +249,9 @@ class MaterialTable:
         hit = self._surfaces.get(path)
         if hit is not None:
             return hit
-        shader = None
-        src = mat.ComputeSurfaceSource()
-        if src and src[0] and src[0].GetPrim().IsValid():
-            shader = src[0]
-        if shader is None or _shader_id(shader) not in PREVIEW_SURFACE_IDS:
-            what = _shader_id(shader) if shader is not None else self._other_surface(mat)
-            self.warn(f"materials without a UsdPreviewSurface ({what}) shaded with displayColor or grey 0.18", path)
+        shader, what = self._surface_shader(mat)
+        if shader is None:
+            self.warn(f"materials without a supported surface ({what}) shaded with displayColor or grey 0.18", path)
             hit = ("fallback", None, ())
         else:
             hit = self._preview_fields(mat, shader, path)
@@ -415,34 +259,54 @@ class MaterialTable:
         return hit
 
     @staticmethod
-    def _other_surface(mat: UsdShade.Material) -> str:
-        for out in mat.GetSurfaceOutputs():
-            src = out.GetConnectedSources()[0] if out.HasConnectedSource() else []
-            if src:
-                return _shader_id(UsdShade.Shader(src[0].source.GetPrim()))
-        return "no surface shader"
+    def _surface_shader(mat: UsdShade.Material):
+        """(surface shader prim of a supported model, None) or (None, what was found instead)."""
+        found = []
+        for ctx in SURFACE_CONTEXTS:
+            src = mat.ComputeSurfaceSource(ctx)  # the context's output, else the universal one
+            if src and src[0] and src[0].GetPrim().IsValid():
+                sid = shader_id(src[0].GetPrim())
+                if surface_model(sid) is not None:
+                    return src[0].GetPrim(), None
+                found.append(sid)
+        for out in mat.GetSurfaceOutputs():  # other render contexts (ri, ...): supported or named in the warning
+            for attr in out.GetValueProducingAttributes():
+                if UsdShade.Output.IsOutput(attr):
+                    sid = shader_id(attr.GetPrim())
+                    if surface_model(sid) is not None:
+                        return attr.GetPrim(), None
+                    if sid not in found:
+                        found.append(sid)
+        return None, (", ".join(found) if found else "no surface shader")
 
-    def _preview_fields(self, mat: UsdShade.Material, shader: UsdShade.Shader, path: str) -> tuple:
+    def _preview_fields(self, mat: UsdShade.Material, shader, path: str) -> tuple:
         fields: dict = {}
         display_fields: list = []
         textures: dict[str, TextureInput] = {}
         uv_sets: list[str] = []
+        signals = surface_inputs(self.net, shader, path)
         for inp_name, (field_name, default) in _INPUTS.items():
-            value, how = self._input_value(shader, inp_name, path)
-            if how == "display":
-                display_fields.append((field_name, _as_field(value, default) or default))
+            sig = signals.get(inp_name)
+            value = None
+            if isinstance(sig, Display):
+                display_fields.append((field_name, _as_field(sig.fallback, default) or default,
+                                       tuple(float(x) for x in sig.scale)))
                 continue
-            if isinstance(how, TextureInput):
+            if isinstance(sig, UV):
+                self.warn("texture coordinates connected to surface inputs ignored", f"{path} ({inp_name})")
+            elif isinstance(sig, Tex):
+                value = tex_mean(sig.ti, 3)
                 if field_name == "use_specular_workflow":
                     self.warn("textured useSpecularWorkflow ignored (the constant is used)", path)
                 else:
-                    textures[inp_name] = how
-                    if how.uv_primvar is not None:
-                        uv_sets.append(how.uv_primvar)
-                    value = _texture_mean(how, self._means)
+                    textures[inp_name] = sig.ti
+                    if sig.ti.uv_primvar is not None:
+                        uv_sets.append(sig.ti.uv_primvar)
+            elif isinstance(sig, Const):
+                value = sig.value
             v = _as_field(value, default)
             fields[field_name] = default if v is None else v
-        if "opacity" not in textures:
+        if "opacity" not in textures and surface_model(shader_id(shader)) == PREVIEW:
             fields["opacity_keys"] = self._keys_in_shutter(shader, "opacity")
         ti = textures.get("opacity")
         if ti is not None and fields["opacity_threshold"] > 0 and "opacityThreshold" not in textures:
@@ -453,7 +317,8 @@ class MaterialTable:
         if nm is not None and nm.texture is not None:
             if nm.texture.colorspace == "sRGB":
                 self.warn("normal maps decoded as sRGB (author sourceColorSpace = \"raw\"); used as decoded", path)
-            if nm.scale[:3] == (1.0, 1.0, 1.0) and nm.bias[:3] == (0.0, 0.0, 0.0):
+            if (nm.scale[:3] == (1.0, 1.0, 1.0) and nm.bias[:3] == (0.0, 0.0, 0.0)
+                    and nm.post_scale == (1.0, 1.0, 1.0) and nm.post_bias == (0.0, 0.0, 0.0)):
                 self.warn("normal maps without scale 2 / bias -1 read as authored (values in [0, 1])", path)
         self._displacement(shader, path)
         if len(set(uv_sets)) > 1:
@@ -463,18 +328,9 @@ class MaterialTable:
         return ("preview", fields, tuple(display_fields))
 
     # -- inputs ---------------------------------------------------------------------------------------------------
-    def _resolved(self, node: UsdShade.Shader, name: str):
+    def _resolved(self, node, name: str):
         """(attribute, value) of a node input, following connections to interface inputs; (None, None) if absent."""
-        inp = node.GetInput(name)
-        if not inp:
-            return None, None
-        if inp.HasConnectedSource():
-            for attr in inp.GetValueProducingAttributes():
-                if UsdShade.Input.IsInput(attr):
-                    v = attr.Get(self.frame)
-                    if v is not None:
-                        return attr, v
-        return inp.GetAttr(), inp.Get(self.frame)
+        return self.net.raw(node.GetPrim() if hasattr(node, "GetPrim") else node, name)
 
     def _keys_in_shutter(self, node: UsdShade.Shader, name: str):
         """((s, value), ...) of a constant float input that changes during the shutter, else None.
@@ -494,145 +350,6 @@ class MaterialTable:
             return None
         return tuple(zip((float(x) for x in sh.normalise(times)), values))
 
-    def _value(self, node, name: str, default):
-        v = self._resolved(node, name)[1]
-        return default if v is None else v
-
-    def _source(self, inp: UsdShade.Input):
-        """(shader, output name) feeding an input, or (interface attribute, None), or (None, None)."""
-        for attr in inp.GetValueProducingAttributes():
-            if UsdShade.Input.IsInput(attr):
-                if attr.Get(self.frame) is not None:
-                    return attr, None
-                continue
-            if UsdShade.Output.IsOutput(attr):
-                return UsdShade.Shader(attr.GetPrim()), UsdShade.Output(attr).GetBaseName()
-        return None, None
-
-    def _input_value(self, shader: UsdShade.Shader, name: str, path: str):
-        """(value, how): how None (constant), "display" (value = reader fallback) or a TextureInput."""
-        inp = shader.GetInput(name)
-        if not inp:
-            return None, None
-        if not inp.HasConnectedSource():
-            return inp.Get(self.frame), None
-        src, output = self._source(inp)
-        if src is None:
-            return inp.GetAttr().Get(self.frame), None
-        if output is None:  # an interface input
-            return src.Get(self.frame), None
-        sid = _shader_id(src)
-        if sid in UV_TEXTURE_IDS:
-            ti = self._texture_node(src, output, path)
-            if ti is None:
-                self.warn("textures (UsdUVTexture) without a file: the input keeps its own value or the default",
-                          f"{path} ({name})")
-                return inp.GetAttr().Get(self.frame), None
-            return None, ti
-        if sid.startswith("UsdPrimvarReader") and self._varname(src) == "displayColor":
-            return self._value(src, "fallback", None), "display"
-        self.warn("UsdPreviewSurface inputs driven by unsupported nodes use their own value (or the default)",
-                  f"{path} ({name} <- {sid})")
-        return inp.GetAttr().Get(self.frame), None
-
-    def _varname(self, reader: UsdShade.Shader) -> str | None:
-        v = self._resolved(reader, "varname")[1]
-        return str(v) if v is not None else None
-
-    # -- texture networks -----------------------------------------------------------------------------------------
-    def _texture_node(self, tex: UsdShade.Shader, output: str, path: str) -> TextureInput | None:
-        """The TextureInput of a UsdUVTexture output (None: no file authored)."""
-        key = (str(tex.GetPath()), output)
-        if key in self._nodes:
-            return self._nodes[key]
-        attr, value = self._resolved(tex, "file")
-        ti = None
-        if attr is not None and value is not None and str(getattr(value, "path", value) or "").strip():
-            name, tiles = resolve_asset(attr, value)
-            texture, wrap_meta = self.files.load(name, tiles, self._colorspace(tex, attr), str(tex.GetPath()))
-            wraps = []
-            for w in ("wrapS", "wrapT"):
-                mode = str(self._value(tex, w, "useMetadata"))
-                if mode == "useMetadata":
-                    mode = (wrap_meta[0] if w == "wrapS" else wrap_meta[1]) if wrap_meta else "repeat"
-                if mode not in ("black", "clamp", "repeat", "mirror"):
-                    self.warn("unknown UsdUVTexture wrap modes treated as repeat", f"{tex.GetPath()} ({mode})")
-                    mode = "repeat"
-                wraps.append(mode)
-            if output not in ("r", "g", "b", "a", "rgb", "rgba"):
-                self.warn("unknown UsdUVTexture outputs read as rgb", f"{tex.GetPath()} ({output})")
-                output = "rgb"
-            uv_primvar, st, matrix, translation = self._st_source(tex, path)
-            ti = TextureInput(
-                texture=texture,
-                output=output,
-                scale=_vec(self._value(tex, "scale", None), 4, (1.0, 1.0, 1.0, 1.0)),
-                bias=_vec(self._value(tex, "bias", None), 4, (0.0, 0.0, 0.0, 0.0)),
-                fallback=_vec(self._value(tex, "fallback", None), 4, (0.0, 0.0, 0.0, 1.0)),
-                wrap_s=wraps[0],
-                wrap_t=wraps[1],
-                uv_primvar=uv_primvar,
-                st=st,
-                uv_matrix=matrix,
-                uv_translation=translation,
-            )
-        self._nodes[key] = ti
-        return ti
-
-    def _colorspace(self, tex: UsdShade.Shader, file_attr) -> str:
-        """"sRGB", "raw" or "auto" for a UsdUVTexture."""
-        token = self._resolved(tex, "sourceColorSpace")[1]
-        if token is None:
-            legacy = self._resolved(tex, "isSRGB")[1]
-            if legacy is not None and str(legacy) != "auto":
-                token = "sRGB" if str(legacy).lower() in ("true", "1", "yes", "srgb") else "raw"
-        token = str(token) if token is not None else "auto"
-        if token.lower() == "srgb":
-            return "sRGB"
-        if token == "raw":
-            return "raw"
-        if file_attr is not None and file_attr.HasColorSpace():
-            cs = str(file_attr.GetColorSpace()).lower()
-            if cs in _SRGB_NAMES:
-                return "sRGB"
-            if cs in _RAW_NAMES or cs.startswith("lin"):
-                return "raw"
-        return "auto"
-
-    def _st_source(self, tex: UsdShade.Shader, path: str):
-        """(uv primvar or None, constant st / reader fallback, 2x2 matrix, translation) of a texture's st."""
-        m = np.eye(2)
-        t = np.zeros(2)
-        node, name = tex, "st"
-        for _ in range(MAX_NODE_CHAIN):
-            inp = node.GetInput(name)
-            if not inp or not inp.HasConnectedSource():
-                st = _vec(inp.Get(self.frame) if inp else None, 2, (0.0, 0.0))
-                return None, st, _flat(m), (float(t[0]), float(t[1]))
-            src, output = self._source(inp)
-            if src is None or output is None:
-                st = _vec(src.Get(self.frame) if src is not None else inp.Get(self.frame), 2, (0.0, 0.0))
-                return None, st, _flat(m), (float(t[0]), float(t[1]))
-            sid = _shader_id(src)
-            if sid in TRANSFORM2D_IDS:
-                sx, sy = _vec(self._value(src, "scale", None), 2, (1.0, 1.0))
-                rot = math.radians(float(self._value(src, "rotation", 0.0) or 0.0))
-                tx, ty = _vec(self._value(src, "translation", None), 2, (0.0, 0.0))
-                c, s = math.cos(rot), math.sin(rot)
-                a = np.array([[c * sx, -s * sy], [s * sx, c * sy]])  # R(rotation) @ diag(scale)
-                t = m @ np.array([tx, ty]) + t
-                m = m @ a
-                node, name = src, "in"
-                continue
-            if sid.startswith("UsdPrimvarReader"):
-                varname = self._varname(src) or "st"
-                fb = _vec(self._value(src, "fallback", None), 2, (0.0, 0.0))
-                return varname, fb, _flat(m), (float(t[0]), float(t[1]))
-            self.warn("texture coordinates from unsupported nodes: a constant st (0, 0) is used",
-                      f"{path} ({sid})")
-            break
-        return None, (0.0, 0.0), _flat(m), (float(t[0]), float(t[1]))
-
     # -- extensions and ignored inputs ------------------------------------------------------------------------------
     def _absorption(self, mat: UsdShade.Material, shader: UsdShade.Shader, path: str):
         color, distance = (1.0, 1.0, 1.0), 1.0
@@ -651,11 +368,7 @@ class MaterialTable:
             distance = 1.0
         return color, distance
 
-    def _displacement(self, shader: UsdShade.Shader, path: str) -> None:
-        inp = shader.GetInput("displacement")
+    def _displacement(self, shader, path: str) -> None:
+        inp = UsdShade.ConnectableAPI(shader).GetInput("displacement")
         if inp and (inp.HasConnectedSource() or (inp.Get(self.frame) or 0.0) != 0.0):
             self.warn("UsdPreviewSurface displacement ignored", path)
-
-
-def _flat(m: np.ndarray) -> tuple[float, float, float, float]:
-    return (float(m[0, 0]), float(m[0, 1]), float(m[1, 0]), float(m[1, 1]))
