@@ -28,6 +28,7 @@ from pxr import Tf, Usd, UsdGeom, UsdRender, UsdShade
 from renderer.errors import SceneError, SettingsError
 from renderer.scene import model as sc
 from renderer.usd import camera as usd_camera
+from renderer.usd import curves as usd_curves
 from renderer.usd import lights as usd_lights
 from renderer.usd.geometry import PRIMITIVE_TYPES, primitive_signature, read_geometry
 from renderer.usd.materials import MaterialTable
@@ -148,6 +149,8 @@ class _Importer:
         self._vis_chain: dict[str, tuple[bool, tuple[float, ...]]] = {}
         self._proxies: list = []
         self._saw_render = False
+        self._density_camera = None  # (camera row matrix, aperture, focal length, width px, ortho) for curves
+        self._in_prototype = 0  # > 0 while reading PointInstancer prototypes (no single view)
 
     # -- top level ------------------------------------------------------------------------------------------------
     def run(self) -> sc.Scene:
@@ -161,6 +164,9 @@ class _Importer:
         self.shutter = self._shutter(cam_prim, settings)
         self.xf = TransformSampler(self.shutter)
         self.materials = MaterialTable(self.frame, warn, self.shutter)
+        if cam_prim is not None:
+            self._density_camera = usd_curves.density_camera(cam_prim, self.xf.world(cam_prim, [self.frame])[0],
+                                                             settings.resolution, self.frame)
 
         self._traverse()
         if not self._saw_render:
@@ -244,7 +250,7 @@ class _Importer:
                 it.PruneChildren()
                 if purpose != "guide":
                     self._guarded(self._visit_gprim, prim, purpose)
-            elif prim.IsA(UsdGeom.Mesh) or prim.GetTypeName() in PRIMITIVE_TYPES:
+            elif prim.IsA(UsdGeom.Mesh) or prim.GetTypeName() in PRIMITIVE_TYPES or usd_curves.handles(prim):
                 it.PruneChildren()
                 if purpose != "guide":
                     self._guarded(self._visit_gprim, prim, purpose)
@@ -334,10 +340,17 @@ class _Importer:
     def _mesh_index(self, prim) -> int | None:
         src = prim.GetPrimInPrototype() if prim.IsInstanceProxy() else prim
         shape = primitive_signature(prim, self.frame) or str(src.GetPath())  # equal spheres share one mesh
+        view = None
+        if usd_curves.handles(prim):  # tessellated for the camera: one mesh per placement seen from it
+            view = self._curves_view(prim)
+            shape = (str(prim.GetPath()), view is None)
         key = (shape, self.materials.key_of(prim))
         if key in self._mesh_cache:
             return self._mesh_cache[key]
-        geom = read_geometry(prim, self.shutter, self.warn)
+        if usd_curves.handles(prim):
+            geom = usd_curves.read_points_or_curves(prim, self.shutter, self.warn, view)
+        else:
+            geom = read_geometry(prim, self.shutter, self.warn)
         index = None
         if geom is not None:
             index = len(self.meshes)
@@ -350,11 +363,19 @@ class _Importer:
                 normals=geom.normals,
                 uvs=geom.uvs,
                 double_sided=geom.double_sided,
+                solid=getattr(geom, "solid", None),
             ))
             flat = geom.points.reshape(-1, 3)
             self._mesh_bounds.append(np.stack([flat.min(axis=0), flat.max(axis=0)]).astype(np.float64))
         self._mesh_cache[key] = index
         return index
+
+    def _curves_view(self, prim):
+        """The render camera seen from a points/curves prim at the frame, for tessellation density; None inside
+        PointInstancer prototypes (many placements) or without a camera."""
+        if self._density_camera is None or self._in_prototype:
+            return None
+        return usd_curves.view_in_object_space(*self._density_camera, self.xf.world(prim, [self.frame])[0])
 
     def _add_instances(self, meshes, names, times, rows, interval) -> None:
         """Instances of meshes[i] with row-vector world matrices rows[i] (N, K, 4, 4) at absolute times (K,)."""
@@ -478,6 +499,13 @@ class _Importer:
 
     def _subtree_placements(self, root, times) -> tuple[list[int], list[str], np.ndarray]:
         """Geometry under a prototype root (visibility and purpose at the frame, nested instancers expanded)."""
+        self._in_prototype += 1
+        try:
+            return self._subtree_placements_in(root, times)
+        finally:
+            self._in_prototype -= 1
+
+    def _subtree_placements_in(self, root, times) -> tuple[list[int], list[str], np.ndarray]:
         meshes: list[int] = []
         names: list[str] = []
         rows: list[np.ndarray] = []
@@ -503,7 +531,7 @@ class _Importer:
                 meshes += m
                 names += nm
                 rows.append(r)
-            elif prim.IsA(UsdGeom.Mesh) or prim.GetTypeName() in PRIMITIVE_TYPES:
+            elif prim.IsA(UsdGeom.Mesh) or prim.GetTypeName() in PRIMITIVE_TYPES or usd_curves.handles(prim):
                 it.PruneChildren()
                 mesh = self._mesh_index(prim)
                 if mesh is not None:
