@@ -15,9 +15,10 @@ a tolerance), and the polyline of samples is swept as
 
 * a **ribbon**: two vertices per sample, ``width`` wide across ``side`` (camera-facing for thin hair, or facing
   the authored ``normals``): 2 triangles per sub-segment;
-* a **tube**: ``sides`` vertices per sample on a rotation-minimising frame (double reflection, Wang et al. 2008),
-  radius scaled by ``pi / (sides sin(pi / sides))`` so the polygon's mean projected width (Cauchy: perimeter /
-  pi) equals the authored width: 2 ``sides`` triangles per sub-segment.
+* a **tube**: ``sides`` (even) vertices per sample on a rotation-minimising frame (double reflection, Wang et al.
+  2008) started across the view, so two vertices lie on the silhouette and the seen width is the authored one;
+  with no view the radius is scaled by ``pi / (sides sin(pi / sides))`` so the polygon's mean projected width
+  (Cauchy: perimeter / pi) is the authored width. 2 ``sides`` triangles per sub-segment.
 """
 from __future__ import annotations
 
@@ -251,11 +252,17 @@ def _any_perpendicular(t: np.ndarray) -> np.ndarray:
     return _unit(np.cross(t, a))
 
 
-def rotation_minimising_frames(p: np.ndarray, tan: np.ndarray, smp: Samples) -> np.ndarray:
-    """Unit normals u (N, 3) perpendicular to the tangents, transported along each polyline (double reflection)."""
+def rotation_minimising_frames(p: np.ndarray, tan: np.ndarray, smp: Samples,
+                                start: np.ndarray | None = None) -> np.ndarray:
+    """Unit normals u (N, 3) perpendicular to the tangents, transported along each polyline (double reflection)
+    from ``start`` (C', 3) at each polyline's first sample (any perpendicular when None)."""
     u = np.empty_like(p)
     st, cnt = smp.poly_start, smp.poly_count
-    u[st] = _any_perpendicular(tan[st])
+    first = _any_perpendicular(tan[st])
+    if start is not None:
+        s0 = start - np.sum(start * tan[st], axis=1, keepdims=True) * tan[st]
+        first = _unit(s0, first)
+    u[st] = first
     for k in range(1, int(cnt.max(initial=0))):
         live = cnt > k
         i = st[live] + k
@@ -304,16 +311,19 @@ def ribbon(p: np.ndarray, side: np.ndarray, facing: np.ndarray, width: np.ndarra
     return pts, tris, nrm, pair
 
 
-def tube(p: np.ndarray, u: np.ndarray, tan: np.ndarray, width: np.ndarray, sides: int, smp: Samples):
+def tube(p: np.ndarray, u: np.ndarray, tan: np.ndarray, width: np.ndarray, sides: int, smp: Samples,
+         mean_width: bool = True):
     """Tube of diameter ``width`` (N,) with ``sides`` sides around p (K, N, 3) on frames u (K, N, 3), tan (K, N, 3).
 
+    ``mean_width``: scale the polygon to the circle's mean projected width (orientation unknown); otherwise its
+    vertices lie on the circle, which with u across the view puts two of them exactly on the silhouette.
     Returns (points (K, N sides, 3), triangles, per-corner radial normals (from key 0), triangle -> sample pair).
     """
     th = 2.0 * np.pi * np.arange(sides) / sides
     c, s = np.cos(th), np.sin(th)
     v = np.cross(tan, u)
     radial = c[:, None] * u[..., None, :] + s[:, None] * v[..., None, :]  # (K, N, sides, 3)
-    r = 0.5 * width * (np.pi / (sides * np.sin(np.pi / sides)))  # equal mean projected width
+    r = 0.5 * width * ((np.pi / (sides * np.sin(np.pi / sides))) if mean_width else 1.0)
     pts = (p[..., None, :] + r[:, None, None] * radial).reshape(*p.shape[:-2], -1, 3)
     a, b = _strip_pairs(smp)
     j = np.arange(sides)
@@ -333,4 +343,5 @@ def tube_sides(radius_px: np.ndarray, max_sides: int = 24) -> np.ndarray:
     """Sides of a tube whose silhouette polygon stays within half a pixel of the circle of radius_px pixels."""
     r = np.maximum(np.asarray(radius_px, np.float64), 1e-9)
     n = np.pi / np.arccos(np.clip(1.0 - 0.5 / r, -1.0, 1.0))
-    return np.clip(np.ceil(n), 4, max_sides).astype(np.int64)
+    n = 2 * np.ceil(n / 2)  # even, so a vertex pair can sit on both sides of the silhouette
+    return np.clip(n, 4, max_sides).astype(np.int64)

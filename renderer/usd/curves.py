@@ -10,8 +10,8 @@ Curves (``widths`` are diameters; ``primvars:widths`` wins over ``widths``; unau
 * authored ``normals``: ribbons facing the (interpolated) normals, 2 triangles per sub-segment;
 * thinner than ``RIBBON_PX`` pixels: **camera-facing ribbons**, exact width, 2 triangles per sub-segment
   (a hair under two pixels wide looks the same as a tube; its shadows are as wide as seen from the camera);
-* wider: round tubes of 4..24 sides (the silhouette polygon within half a pixel of the circle), 2 sides
-  triangles per sub-segment;
+* wider: round tubes of 4..24 sides (the polygon within half a pixel of the circle, two vertices on the
+  silhouette, so the seen width is exact), 2 sides triangles per sub-segment;
 * cubic segments are cut into 1..16 sub-segments so the chord error stays under a quarter pixel (a hundredth
   of the segment when no camera is known).
 
@@ -358,8 +358,12 @@ def _curves(prim, keys, frame: float, warn, view: View | None, path: str) -> Cur
             shade = tc._unit(facing - np.sum(facing * ts[0], axis=-1, keepdims=True) * ts[0], facing)
             pts_, tris, nr, pair = tc.ribbon(ps, side, shade, ws, sub)
         else:
-            u = np.stack([tc.rotation_minimising_frames(ps[k], ts[k], sub) for k in range(len(ps))])
-            pts_, tris, nr, pair = tc.tube(ps, u, ts, ws, int(m), sub)
+            start = None
+            if view is not None:  # start across the view so two vertices sit on the silhouette
+                st = sub.poly_start
+                start = np.cross(ts[0, st], view.facing(ps[0, st]))
+            u = np.stack([tc.rotation_minimising_frames(ps[k], ts[k], sub, start) for k in range(len(ps))])
+            pts_, tris, nr, pair = tc.tube(ps, u, ts, ws, int(m), sub, mean_width=view is None)
         parts.append((pts_, tris, nr, sub.curve[pair], None))
     return _assemble(parts, times, len(counts))
 
