@@ -28,6 +28,7 @@ from pxr import Tf, Usd, UsdGeom, UsdRender, UsdShade
 from renderer.errors import SceneError, SettingsError
 from renderer.scene import model as sc
 from renderer.usd import camera as usd_camera
+from renderer.usd import csg as usd_csg
 from renderer.usd import curves as usd_curves
 from renderer.usd import lights as usd_lights
 from renderer.usd.geometry import PRIMITIVE_TYPES, primitive_signature, read_geometry
@@ -151,6 +152,7 @@ class _Importer:
         self._saw_render = False
         self._density_camera = None  # (camera row matrix, aperture, focal length, width px, ortho) for curves
         self._in_prototype = 0  # > 0 while reading PointInstancer prototypes (no single view)
+        self.csg = usd_csg.CsgGroups(self.warn)
 
     # -- top level ------------------------------------------------------------------------------------------------
     def run(self) -> sc.Scene:
@@ -204,6 +206,7 @@ class _Importer:
             up_axis=self._up_axis(),
             time_codes_per_second=float(stage.GetTimeCodesPerSecond()),
             render_settings=settings,
+            csg_operations=self.csg.finish(self.instances, self.meshes),
             warnings=warn.lines(),
             source=self.source,
         )
@@ -240,6 +243,7 @@ class _Importer:
                 if parent_info is not None:
                     purposes[str(prim.GetPath())] = parent_info
                 continue
+            self.csg.visit(prim)
             if self._statically_invisible(img):
                 it.PruneChildren()
                 continue
@@ -298,7 +302,9 @@ class _Importer:
         if mesh is None:
             return
         times, rows = self.xf.motion(prim)
+        first = len(self.instances)
         self._add_instances([mesh], [str(prim.GetPath())], times, rows[None], interval)
+        self.csg.place(prim, range(first, len(self.instances)))
 
     # -- visibility -----------------------------------------------------------------------------------------------
     def _visibility_chain(self, prim) -> tuple[bool, tuple[float, ...]]:
