@@ -8,6 +8,7 @@ import pytest
 from renderer.render import RenderOptions, frame_channels, prepare, render_frame
 from renderer.scene import tessellate_curves as tc
 from renderer.scene import tessellate_points as tp
+from renderer.usd.curves import nurbs_basis as tc_nurbs_basis
 from renderer.usd.importer import load_scene
 
 # ------------------------------------------------------------------------------------------- curve evaluation
@@ -258,20 +259,36 @@ def test_moving_points_streak_keeps_their_area(tmp_path):
     assert covered.max() - covered.min() > 5 * (move / PIXEL)  # six streaks across, each 5 px long
 
 
-def test_nurbs_curves_warn_by_name(tmp_path):
-    body = """def NurbsCurves "Wire"
-{
-    int[] curveVertexCounts = [4]
-    point3f[] points = [(0,0,0), (1,1,0), (2,0,0), (3,1,0)]
-    int[] order = [4]
-    double[] knots = [0,0,0,0,1,1,1,1]
-}
-def Points "P"
-{
-    point3f[] points = [(0,0,0)]
-}"""
-    path = tmp_path / "n.usda"
-    path.write_text(scene_text(body))
-    scene = load_scene(path, 0.0)
-    assert any("NurbsCurves" in w and "/Wire" in w for w in scene.warnings)
-    assert len(scene.meshes) == 1  # the point, default width 1
+def test_nurbs_circle_is_round(tmp_path):
+    """The rational quadratic circle (9 control points, weights 1 and sqrt(2)/2) renders as a ring of radius 1."""
+    h = np.sqrt(0.5)
+    body = f"""def NurbsCurves "Ring"
+{{
+    int[] curveVertexCounts = [9]
+    point3f[] points = [(1,0,0), (1,1,0), (0,1,0), (-1,1,0), (-1,0,0), (-1,-1,0), (0,-1,0), (1,-1,0), (1,0,0)]
+    double[] pointWeights = [1, {h}, 1, {h}, 1, {h}, 1, {h}, 1]
+    int[] order = [3]
+    double[] knots = [0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1]
+    float[] widths = [0.1] (interpolation = "constant")
+}}"""
+    a, scene = coverage(tmp_path, scene_text(body))
+    assert not any("Nurbs" in w for w in scene.warnings)
+    p = scene.meshes[0].points[0].astype(float)
+    r = np.hypot(p[:, 0], p[:, 1])
+    assert np.all(np.abs(r - 1.0) <= 0.05 + 1e-3) and np.all(np.abs(p[:, 2]) <= 0.05 + 1e-3)
+    ang = np.sort(np.arctan2(p[:, 1], p[:, 0]))
+    assert np.diff(ang).max() < 0.25  # all the way round (32 samples: 0.2 rad apart)
+    assert a.sum() == pytest.approx(2 * np.pi * 0.1 / PIXEL ** 2, rel=0.04)
+
+
+def test_nurbs_basis_partition_of_unity():
+    knots = np.array([0, 0, 0, 0, 1, 2, 3, 3, 3, 3], float)
+    u = np.linspace(0, 3, 31)
+    b = tc_nurbs_basis(knots, 4, u)
+    np.testing.assert_allclose(b.sum(1), 1.0, atol=1e-12)
+    assert b[0, 0] == 1.0 and b[-1, -1] == pytest.approx(1.0)
+
+
+def test_points_without_widths_use_the_default(tmp_path):
+    a, _ = coverage(tmp_path, scene_text('def Points "P"\n{\n    point3f[] points = [(0,0,0)]\n}'))
+    assert a.sum() == pytest.approx(np.pi * 0.25 / PIXEL ** 2, rel=0.08)  # diameter 1

@@ -20,7 +20,8 @@ points under ``DISC_PX`` pixels are camera-facing hexagons (4 triangles); larger
 320 triangles by size. With no camera (automatic framing) or inside PointInstancer prototypes the view is
 unknown: curves are 6-sided tubes, points 80-triangle spheres.
 
-NurbsCurves are not rendered (one warning naming the prim).
+NurbsCurves are evaluated (rational, Cox-de Boor) at ``NURBS_SAMPLES`` points per knot span of their ``ranges``
+and rendered as linear curves through those points; their vertex widths go through the same basis.
 """
 from __future__ import annotations
 
@@ -41,6 +42,7 @@ DISC_PX = 3.0  # points smaller than this on screen are camera-facing discs
 TOLERANCE_PX = 0.25  # chord error of cubic segments, pixels
 NO_VIEW_SIDES = 6
 NO_VIEW_SPHERE = 1
+NURBS_SAMPLES = 8  # samples per non-empty knot span of a NurbsCurves curve
 
 CURVE_TYPES = ("BasisCurves", "HermiteCurves")
 HANDLED_TYPES = ("Points", "BasisCurves", "HermiteCurves", "NurbsCurves")
@@ -144,9 +146,6 @@ def read_points_or_curves(prim, shutter: Shutter, warn, view: View | None) -> Cu
     """Tessellate a Points/BasisCurves/HermiteCurves prim; None (with a warning) when it cannot be rendered."""
     kind = prim.GetTypeName()
     path = str(prim.GetPath())
-    if kind == "NurbsCurves":
-        warn("NurbsCurves are not rendered", path)
-        return None
     keys = _keys(prim, shutter, warn, path)
     if keys is None:
         warn("points or curves without points skipped", path)
@@ -256,6 +255,87 @@ def _hermite_to_bezier(prim, counts, pts, frame: float, warn, path):
     return np.asarray([c for c in out_counts if c > 0], np.int64), np.concatenate(out, axis=1)
 
 
+def nurbs_basis(knots: np.ndarray, order: int, u: np.ndarray) -> np.ndarray:
+    """(len(u), n) B-spline basis functions of the given order (degree + 1) at u (Cox-de Boor), n = len(knots) -
+    order; u in [knots[order - 1], knots[n]] (the last span closed at its end)."""
+    knots = np.asarray(knots, np.float64)
+    n = len(knots) - order
+    u = np.asarray(u, np.float64)
+    last = np.nonzero(knots[1:] > knots[:-1])[0]
+    end_span = last[last < n][-1] if np.any(last < n) else order - 1
+    span = np.clip(np.searchsorted(knots, u, side="right") - 1, order - 1, end_span)
+    b = np.zeros((len(u), len(knots) - 1))
+    b[np.arange(len(u)), span] = 1.0
+    for k in range(2, order + 1):
+        nb = np.zeros((len(u), len(knots) - k))
+        for i in range(len(knots) - k):
+            d1 = knots[i + k - 1] - knots[i]
+            d2 = knots[i + k] - knots[i + 1]
+            if d1 > 0:
+                nb[:, i] += (u - knots[i]) / d1 * b[:, i]
+            if d2 > 0:
+                nb[:, i] += (knots[i + k] - u) / d2 * b[:, i + 1]
+        b = nb
+    return b[:, :n]
+
+
+def _nurbs_polylines(prim, counts, pts, frame: float, warn, path):
+    """NurbsCurves sampled into polylines: (counts, points (K, N, 3), vertex widths (values, "vertex") or None)."""
+    nc = UsdGeom.NurbsCurves(prim)
+    order = nc.GetOrderAttr().Get(frame)
+    knots = nc.GetKnotsAttr().Get(frame)
+    if order is None or knots is None or len(order) != len(counts):
+        warn("NurbsCurves without one order per curve skipped", path)
+        return None
+    order = np.asarray(order, np.int64)
+    knots = np.asarray(knots, np.float64)
+    if len(knots) != int(np.sum(counts + order)):
+        warn("NurbsCurves whose knots do not number points + order per curve skipped", path)
+        return None
+    weights = nc.GetPointWeightsAttr().Get(frame)
+    weights = np.asarray(weights, np.float64) if weights is not None and len(weights) == pts.shape[1] else None
+    ranges = nc.GetRangesAttr().Get(frame)
+    ranges = np.asarray(ranges, np.float64).reshape(-1, 2) if ranges is not None and len(ranges) == len(counts) \
+        else None
+    w = _interp_values(prim, "widths", nc.GetWidthsAttr(), nc.GetWidthsInterpolation(), frame)
+    out_counts, out_pts, out_w = [], [], []
+    v0 = k0 = 0
+    for i, (c, o) in enumerate(zip(counts, order)):
+        c, o = int(c), int(o)
+        kn = knots[k0:k0 + c + o]
+        cps = pts[:, v0:v0 + c]
+        wt = weights[v0:v0 + c] if weights is not None else np.ones(c)
+        if c >= o >= 2 and np.all(np.diff(kn) >= 0):
+            lo, hi = (kn[o - 1], kn[c]) if ranges is None else ranges[i]
+            lo, hi = max(lo, kn[o - 1]), min(hi, kn[c])
+            breaks = np.unique(np.clip(kn, lo, hi))
+            if len(breaks) >= 2:
+                u = np.concatenate([np.linspace(a, b, NURBS_SAMPLES, endpoint=False)
+                                    for a, b in zip(breaks[:-1], breaks[1:])] + [breaks[-1:]])
+                basis = nurbs_basis(kn, o, u) * wt[None, :]
+                basis /= np.where(basis.sum(1, keepdims=True) != 0, basis.sum(1, keepdims=True), 1.0)
+                out_counts.append(len(u))
+                out_pts.append(np.einsum("nv,kvc->knc", basis, cps))
+                if w is not None and w[1] == "vertex" and len(w[0]) >= v0 + c:
+                    out_w.append(basis @ w[0].reshape(-1)[v0:v0 + c])
+        v0 += c
+        k0 += c + o
+    if len(out_counts) < len(counts):
+        warn("NurbsCurves with invalid order, knots or ranges skipped", path)
+    if not out_counts:
+        return None
+    widths = None
+    if w is not None:
+        if w[1] == "vertex":
+            widths = (np.concatenate(out_w), "vertex") if len(out_w) == len(out_counts) else None
+        elif w[1] in ("constant", "uniform"):
+            widths = w if w[1] == "constant" or len(out_counts) == len(counts) else None
+        if widths is None:
+            warn("NurbsCurves widths not per point, per curve or constant use their mean", path)
+            widths = (np.array([float(np.mean(w[0]))]), "constant")
+    return np.asarray(out_counts, np.int64), np.concatenate(out_pts, axis=1), widths
+
+
 def _curves(prim, keys, frame: float, warn, view: View | None, path: str) -> CurveGeom | None:
     times, pts = keys
     curves = UsdGeom.Curves(prim)
@@ -267,7 +347,15 @@ def _curves(prim, keys, frame: float, warn, view: View | None, path: str) -> Cur
     if np.any(counts < 0) or int(counts.sum()) != pts.shape[1]:
         warn("curves whose curveVertexCounts do not add up to their points skipped", path)
         return None
-    if prim.GetTypeName() == "HermiteCurves":
+    nurbs_widths = None
+    if prim.GetTypeName() == "NurbsCurves":
+        hit = _nurbs_polylines(prim, counts, pts, frame, warn, path)
+        if hit is None:
+            return None
+        counts, pts, nurbs_widths = hit
+        ctype, basis, wrap = "linear", "bezier", "nonperiodic"
+        widths_ok_for = "basis"
+    elif prim.GetTypeName() == "HermiteCurves":
         hit = _hermite_to_bezier(prim, counts, pts, frame, warn, path)
         if hit is None:
             return None
@@ -310,6 +398,8 @@ def _curves(prim, keys, frame: float, warn, view: View | None, path: str) -> Cur
 
     width = np.full(len(smp.seg), DEFAULT_WIDTH)
     w = _interp_values(prim, "widths", curves.GetWidthsAttr(), curves.GetWidthsInterpolation(), frame)
+    if nurbs_widths is not None:
+        w = nurbs_widths
     if w is not None:
         vals, interp = w
         if widths_ok_for == "hermite" and interp == "vertex":
@@ -323,6 +413,9 @@ def _curves(prim, keys, frame: float, warn, view: View | None, path: str) -> Cur
 
     normals = None
     nrm = _interp_values(prim, "normals", curves.GetNormalsAttr(), curves.GetNormalsInterpolation(), frame)
+    if nrm is not None and prim.GetTypeName() == "NurbsCurves":
+        warn("normals of NurbsCurves ignored (rendered as tubes)", path)
+        nrm = None
     if nrm is not None:
         interp = nrm[1]
         if widths_ok_for == "hermite" and interp == "vertex":
