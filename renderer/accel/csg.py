@@ -16,8 +16,8 @@ operand carves a moving hole: the result is motion-blurred like any surface. Sha
 ``1 - opacity`` at every state-changing crossing before the light, so transparency and shadows follow the
 carved surface. The walk costs a few bottom-level traversals per group per ray and nothing for scenes
 without groups. Limits: a ray grazing an edge shared by two triangles can count a crossing twice (a speck),
-and the subtracted surfaces of a ``difference`` keep their winding (for glass, they refract as seen from
-inside that operand).
+the subtracted surfaces of a ``difference`` keep their winding (for glass, they refract as seen from inside
+that operand), and an emissive operand is sampled as a light over its whole surface, carved parts included.
 """
 from __future__ import annotations
 
