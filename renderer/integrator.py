@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import warp as wp
 
+from renderer.accel.csg import csg_closest
 from renderer.accel.intersect import (
     BIG,
     Geometry,
@@ -274,6 +275,8 @@ def trace_wave_kernel(
     while alive != 0:
         rays += 1
         hit = intersect_closest(geo, origin, rd, t_far, s)
+        if geo.csg_groups > 0:
+            hit = csg_closest(geo, origin, rd, s, hit)
         # UsdLux area lights are not in the BVH: rays after the first bounce may reach them directly
         if bounce > 0:
             for li in range(lights.count):

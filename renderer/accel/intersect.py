@@ -76,6 +76,15 @@ class Geometry:
     inst_vis_from: wp.array(dtype=wp.float32)
     inst_vis_to: wp.array(dtype=wp.float32)
     keys: MotionKeys
+    # --- CSG groups (``accel.csg``): members are skipped by the ordinary walks and walked per group instead
+    inst_csg: wp.array(dtype=wp.int32)  # per instance: its CSG group, or -1
+    inst_csg_operand: wp.array(dtype=wp.int32)  # per instance: its operand within the group (0..29)
+    csg_groups: int
+    csg_op: wp.array(dtype=wp.int32)  # per group: CSG_UNION / CSG_INTERSECTION / CSG_DIFFERENCE
+    csg_operands: wp.array(dtype=wp.int32)  # per group: number of operands
+    csg_first: wp.array(dtype=wp.int32)  # per group: first member in csg_members
+    csg_count: wp.array(dtype=wp.int32)  # per group: member instances
+    csg_members: wp.array(dtype=wp.int32)  # instance indices, grouped
 
 
 @wp.struct
@@ -288,7 +297,7 @@ def intersect_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, tmax: float, s: f
             first = -(a + 1)
             for i in range(b):
                 inst = geo.tlas_prim[first + i]
-                if instance_visible(geo, inst, s):
+                if instance_visible(geo, inst, s) and geo.inst_csg[inst] < 0:
                     w2o = instance_world_to_object(geo, inst, s)
                     ro_o = wp.transform_point(w2o, ro)
                     rd_o = wp.transform_vector(w2o, rd)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import warp as wp
 
+from renderer.accel.csg import csg_transmittance
 from renderer.accel.intersect import (
     BIG,
     Geometry,
@@ -97,7 +98,7 @@ def transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd
             first = -(a + 1)
             for i in range(b):
                 inst = geo.tlas_prim[first + i]
-                if instance_visible(geo, inst, s) and tr > 0.0:
+                if instance_visible(geo, inst, s) and tr > 0.0 and geo.inst_csg[inst] < 0:
                     w2o = instance_world_to_object(geo, inst, s)
                     tr = blas_transmittance(geo, mats, tex, geo.inst_mesh[inst], wp.transform_point(w2o, ro),
                                             wp.transform_vector(w2o, rd), tmax, s, tr)
@@ -110,4 +111,6 @@ def transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd
             if box_entry(lo_b, hi_b, ro, inv_d, tmax) < BIG:
                 stack[sp] = b
                 sp += 1
+    if tr > 0.0 and geo.csg_groups > 0:
+        tr = csg_transmittance(geo, mats, tex, ro, rd, tmax, s, tr)
     return tr

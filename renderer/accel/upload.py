@@ -12,6 +12,7 @@ import numpy as np
 import warp as wp
 
 from renderer.accel.build import Bvh, build_bvh
+from renderer.accel.csg import OPERATIONS as CSG_OPERATIONS
 from renderer.accel.intersect import Geometry
 from renderer.motion.kernels import upload_keys
 from renderer.motion.transform import matrix_at
@@ -131,6 +132,22 @@ def _v3(a, device):
     return wp.array(a, dtype=wp.vec3, device=device)
 
 
+def upload_csg(g: Geometry, scene: Scene, device: str = "cpu") -> None:
+    """The CSG group tables of ``accel.csg``: per instance its group and operand, per group its members."""
+    groups = [inst.csg_group for inst in scene.instances]
+    g.inst_csg = _i32(groups or [-1], device)
+    g.inst_csg_operand = _i32([inst.csg_operand for inst in scene.instances] or [0], device)
+    ng = len(scene.csg_operations)
+    members = [[i for i, grp in enumerate(groups) if grp == k] for k in range(ng)]
+    g.csg_groups = ng
+    g.csg_op = _i32([CSG_OPERATIONS[op] for op in scene.csg_operations] or [0], device)
+    g.csg_operands = _i32([1 + max([scene.instances[i].csg_operand for i in m] or [0]) for m in members] or [0],
+                          device)
+    g.csg_count = _i32([len(m) for m in members] or [0], device)
+    g.csg_first = _i32(np.cumsum([0] + [len(m) for m in members])[:-1] if ng else [0], device)
+    g.csg_members = _i32([i for m in members for i in m] or [0], device)
+
+
 def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, GeometryStats]:
     """Build both BVH levels of a scene and upload everything a ray needs."""
     import time
@@ -220,6 +237,7 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     g.inst_w2o = wp.array(np.array([np.linalg.inv(m) for m in o2w], np.float32), dtype=wp.mat44, device=device)
     g.inst_vis_from = _f32([inst.visible_from for inst in scene.instances] or [0.0], device)
     g.inst_vis_to = _f32([inst.visible_to for inst in scene.instances] or [1.0], device)
+    upload_csg(g, scene, device)
 
     leaf_bytes = 3 * 12 * sum(len(x) for x in v0)  # the leaf-ordered still triangles
     nbytes = sum(b.nbytes for b in blas) + tlas.nbytes + leaf_bytes

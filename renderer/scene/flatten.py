@@ -22,7 +22,7 @@ MERGED_LIMIT = 1 << 23  # triangles the merged mesh may reach through copies of 
 
 def _is_still(scene: Scene, inst: Instance) -> bool:
     return (inst.transform.num_keys == 1 and not scene.meshes[inst.mesh].deforming
-            and inst.visible_from <= 0.0 and inst.visible_to >= 1.0)
+            and inst.visible_from <= 0.0 and inst.visible_to >= 1.0 and inst.csg_group < 0)
 
 
 def flatten_still_instances(scene: Scene) -> Scene:

@@ -72,6 +72,10 @@ class Instance:
     # absent for camera, shadow and light rays alike.
     visible_from: float = 0.0
     visible_to: float = 1.0
+    # Constructive solid geometry: index into Scene.csg_operations (-1: an ordinary instance) and the operand
+    # this closed mesh belongs to (0 is the one others are subtracted from in a difference).
+    csg_group: int = -1
+    csg_operand: int = 0
 
 
 @dataclass(eq=False)
@@ -269,6 +273,8 @@ class Scene:
     up_axis: str = "Y"
     time_codes_per_second: float = 24.0
     render_settings: RenderSettingsInfo = field(default_factory=RenderSettingsInfo)
+    # CSG groups: the operation of each ("union", "intersection", "difference"); members name it on Instance
+    csg_operations: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     source: str = ""  # file it came from, for messages
 

@@ -29,6 +29,8 @@ from renderer.errors import SceneError, SettingsError
 from renderer.scene import model as sc
 from renderer.subdiv import MAX_LEVEL
 from renderer.usd import camera as usd_camera
+from renderer.usd import csg as usd_csg
+from renderer.usd import curves as usd_curves
 from renderer.usd import lights as usd_lights
 from renderer.usd.geometry import PRIMITIVE_TYPES, collapse_keys, primitive_signature, read_geometry
 from renderer.usd.linking import apply_linking
@@ -167,6 +169,9 @@ class _Importer:
         self._mesh_lights: list = []  # (MeshLightAPI prim, its instance indices)
         self._mesh_light_instances: dict[int, object] = {}  # instance index -> its MeshLightAPI prim
         self._light_prims: list = []  # (Light, the prim it came from), for linking
+        self._density_camera = None  # (camera row matrix, aperture, focal length, width px, ortho) for curves
+        self._in_prototype = 0  # > 0 while reading PointInstancer prototypes (no single view)
+        self.csg = usd_csg.CsgGroups(self.warn)
 
     # -- top level ------------------------------------------------------------------------------------------------
     def run(self) -> sc.Scene:
@@ -183,6 +188,9 @@ class _Importer:
         self.materials = MaterialTable(self.frame, warn, self.shutter)
         self.detail = self._subdivision_detail(cam_prim, settings)
         self.skinning = Skinning(self.shutter, warn)
+        if cam_prim is not None:
+            self._density_camera = usd_curves.density_camera(cam_prim, self.xf.world(cam_prim, [self.frame])[0],
+                                                             settings.resolution, self.frame)
 
         self._traverse()
         if not self._saw_render:
@@ -228,6 +236,7 @@ class _Importer:
             up_axis=self._up_axis(),
             time_codes_per_second=float(stage.GetTimeCodesPerSecond()),
             render_settings=settings,
+            csg_operations=self.csg.finish(self.instances, self.meshes),
             warnings=warn.lines(),
             source=self.source,
         )
@@ -279,6 +288,7 @@ class _Importer:
                 if parent_info is not None:
                     purposes[str(prim.GetPath())] = parent_info
                 continue
+            self.csg.visit(prim)
             if self._statically_invisible(img):
                 it.PruneChildren()
                 continue
@@ -289,7 +299,7 @@ class _Importer:
                 it.PruneChildren()
                 if purpose != "guide":
                     self._guarded(self._visit_gprim, prim, purpose)
-            elif prim.IsA(UsdGeom.Mesh) or prim.GetTypeName() in PRIMITIVE_TYPES:
+            elif prim.IsA(UsdGeom.Mesh) or prim.GetTypeName() in PRIMITIVE_TYPES or usd_curves.handles(prim):
                 it.PruneChildren()
                 first = len(self.instances)
                 if purpose != "guide":
@@ -341,7 +351,9 @@ class _Importer:
         if mesh is None:
             return
         times, rows = self.xf.motion(prim)
+        first = len(self.instances)
         self._add_instances([mesh], [str(prim.GetPath())], times, rows[None], interval)
+        self.csg.place(prim, range(first, len(self.instances)))
 
     def _skinned(self, prim, skin, interval) -> bool:
         """A skinned gprim: skinned points (meshes) or a skinned transform (implicit primitives) at every key,
@@ -413,16 +425,23 @@ class _Importer:
         skinning, which carries authored normals along (subdivision surfaces make their own)."""
         src = prim.GetPrimInPrototype() if prim.IsInstanceProxy() else prim
         shape = primitive_signature(prim, self.frame) or str(src.GetPath())  # equal spheres share one mesh
+        view = None
+        if usd_curves.handles(prim):  # tessellated for the camera: one mesh per placement seen from it
+            view = self._curves_view(prim)
+            shape = (str(prim.GetPath()), view is None)
         if keys is not None:
             shape = ("skinned", str(prim.GetPath()))  # instances of a skinned mesh deform on their own
         key = (shape, self.materials.key_of(prim))
         if key in self._mesh_cache:
             return self._mesh_cache[key]
-        if world is None and prim.IsA(UsdGeom.Mesh):
-            world = self.xf.world(prim, [self.frame])[0]
-        geom = read_geometry(prim, self.shutter, self.warn, self.detail, world, keys)
-        if geom is not None and skin is not None and geom.normals is not None and geom.subdivision_level is None:
-            geom.normals = self._skinned_normals(prim, skin, geom)
+        if usd_curves.handles(prim):
+            geom = usd_curves.read_points_or_curves(prim, self.shutter, self.warn, view)
+        else:
+            if world is None and prim.IsA(UsdGeom.Mesh):
+                world = self.xf.world(prim, [self.frame])[0]
+            geom = read_geometry(prim, self.shutter, self.warn, self.detail, world, keys)
+            if geom is not None and skin is not None and geom.normals is not None and geom.subdivision_level is None:
+                geom.normals = self._skinned_normals(prim, skin, geom)
         index = None
         if geom is not None:
             index = len(self.meshes)
@@ -435,6 +454,7 @@ class _Importer:
                 normals=geom.normals,
                 uvs=geom.uvs,
                 double_sided=geom.double_sided,
+                solid=getattr(geom, "solid", None),
             ))
             flat = geom.points.reshape(-1, 3)
             self._mesh_bounds.append(np.stack([flat.min(axis=0), flat.max(axis=0)]).astype(np.float64))
@@ -450,6 +470,13 @@ class _Importer:
         n = np.einsum("tki,tkij->tkj", geom.normals.astype(np.float64), mats[geom.triangles])
         ln = np.linalg.norm(n, axis=2, keepdims=True)
         return np.where(ln > 0, n / np.where(ln > 0, ln, 1.0), geom.normals).astype(np.float32)
+
+    def _curves_view(self, prim):
+        """The render camera seen from a points/curves prim at the frame, for tessellation density; None inside
+        PointInstancer prototypes (many placements) or without a camera."""
+        if self._density_camera is None or self._in_prototype:
+            return None
+        return usd_curves.view_in_object_space(*self._density_camera, self.xf.world(prim, [self.frame])[0])
 
     def _add_instances(self, meshes, names, times, rows, interval) -> None:
         """Instances of meshes[i] with row-vector world matrices rows[i] (N, K, 4, 4) at absolute times (K,)."""
@@ -583,6 +610,13 @@ class _Importer:
 
     def _subtree_placements(self, root, times) -> tuple[list[int], list[str], np.ndarray]:
         """Geometry under a prototype root (visibility and purpose at the frame, nested instancers expanded)."""
+        self._in_prototype += 1
+        try:
+            return self._subtree_placements_in(root, times)
+        finally:
+            self._in_prototype -= 1
+
+    def _subtree_placements_in(self, root, times) -> tuple[list[int], list[str], np.ndarray]:
         meshes: list[int] = []
         names: list[str] = []
         rows: list[np.ndarray] = []
@@ -608,7 +642,7 @@ class _Importer:
                 meshes += m
                 names += nm
                 rows.append(r)
-            elif prim.IsA(UsdGeom.Mesh) or prim.GetTypeName() in PRIMITIVE_TYPES:
+            elif prim.IsA(UsdGeom.Mesh) or prim.GetTypeName() in PRIMITIVE_TYPES or usd_curves.handles(prim):
                 it.PruneChildren()
                 mesh = self._mesh_index(prim)
                 if usd_lights.is_light(prim):
