@@ -1,8 +1,9 @@
 """A job's files under the data directory: tile checkpoints, frame EXRs; the tile grid of a frame.
 
     <data>/jobs/<job id>/tiles/<frame index>/<tile index>.npz   filtered sums of one finished tile
-    <data>/jobs/<job id>/frames/<frame index>.exr               the frame, written atomically by a worker
-    <data>/jobs/<job id>/STOP                                   the job was canceled or failed: stop its tiles
+    <data>/jobs/<job id>/frames/<frame index>.exr               the frame, written atomically
+
+Only the service reads and writes them (workers return tiles as task results and never see this directory).
 
 A checkpoint is written to a temporary file in its directory and renamed over its name, so a file that exists is
 complete: a service killed at any moment resumes from the tiles on disk, and assembling them gives the same bits
@@ -45,15 +46,6 @@ class JobFiles:
 
     def frame(self, frame_idx: int) -> Path:
         return self.root / "frames" / f"{frame_idx}.exr"
-
-    @property
-    def stop_flag(self) -> Path:
-        """Exists once the job is canceled or failed: workers stop its running tiles between sample waves."""
-        return self.root / "STOP"
-
-    def stop(self) -> None:
-        self.root.mkdir(parents=True, exist_ok=True)
-        self.stop_flag.touch()
 
     def remove_tiles(self, frame_idx: int) -> None:
         shutil.rmtree(self.root / "tiles" / str(frame_idx), ignore_errors=True)

@@ -84,8 +84,7 @@ def cancel_job(runtime: RuntimeDep, job_id: str):
         raise ApiError(404, errors.JOB_NOT_FOUND) from None
     except sm.IllegalTransition as e:
         raise ApiError(409, errors.cannot_cancel(e.current.value)) from None
-    JobFiles(runtime.settings.data_dir, job_id).stop()  # running tiles stop at their next sample wave
-    runtime.scheduler.wake()
+    runtime.scheduler.wake()  # it cancels the job's tasks: running tiles stop at their next sample wave
     return job_public(row)
 
 

@@ -10,7 +10,7 @@ import pytest
 from PIL import Image
 
 from renderer.exr import read_exr
-from service import worker
+from service import inspection, worker
 from service.api.deps import get_settings
 
 from service_helpers import (CONTRACT_LIMITS, assert_same_exr, cli_render, http_contract, service_settings, submit,
@@ -266,7 +266,7 @@ def test_token_through_dependency_override(client, tmp_path):
 
 
 def test_health_metrics_and_docs(client, card):
-    assert client.get("/healthz").json() == {"status": "ok", "workers": 1, "threads": 2}
+    assert client.get("/healthz").json() == {"status": "ok", "cluster": "reachable", "workers": 1, "threads": 2}
     job = wait_job(client, submit(client, card, SMALL).json()["id"])
     r = client.get("/metrics")
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/plain")
@@ -294,21 +294,21 @@ def test_each_frame_is_prepared_once_per_worker(client, card):
 _calls: dict = {}
 
 
-def flaky_tile(task):
+def flaky_tile(task, scene):
     """Tile 0 fails on its first attempt (a transient fault), the rest render normally."""
     if task.tile[:2] == (0, 0) and not _calls.get("failed"):
         _calls["failed"] = True
         raise RuntimeError("transient")
-    return worker.render_tile_task(task)
+    return worker.render_tile_task(task, scene)
 
 
-def broken_tile(task):
+def broken_tile(task, scene):
     if task.tile[:2] == (0, 0):
         raise RuntimeError("boom")
-    return worker.render_tile_task(task)
+    return worker.render_tile_task(task, scene)
 
 
-def renderer_says_no(task):
+def renderer_says_no(task, scene):
     return {"error": "frame 0 has no light"}
 
 
@@ -373,13 +373,11 @@ def test_a_stopped_service_resumes_from_its_checkpoints(make_client, card, tmp_p
 
 def slow_inspection(task):
     time.sleep(3)
-    return worker.inspect_task(task)
+    return inspection.inspect_task(task)
 
 
 def test_a_scene_that_loads_too_long_is_422_and_the_service_carries_on(make_client, card, monkeypatch):
-    import service.submission
-
-    monkeypatch.setattr(service.submission, "inspect_task", slow_inspection)
+    monkeypatch.setattr(inspection, "inspect_task", slow_inspection)  # the pool's processes run this one
     client = make_client(inspect_timeout=0.5)
     r = submit(client, card, SMALL)
     assert (r.status_code, r.json()) == (422, {"detail": "the scene took longer than 0.5 s to load"})
@@ -391,20 +389,33 @@ def test_http_contract(make_client, card, tmp_path):
     http_contract(make_client(**CONTRACT_LIMITS), card, tmp_path)
 
 
-def test_a_running_tile_stops_when_its_job_is_stopped(card, tmp_path):
-    """Dask cannot interrupt a task: the tile itself looks for the job's STOP file between sample waves."""
+def test_a_running_tile_stops_when_its_future_is_cancelled(card):
+    import hashlib
+
+    """Dask cannot interrupt a task: the tile looks between sample waves whether Dask released it (no file)."""
+    from distributed import Client, LocalCluster
+
     from schemas import JobCreate
-    from service.checkpoints import JobFiles
     from service.spec import RenderSpec
 
-    files = JobFiles(tmp_path, "job")
-    spec = RenderSpec.from_settings(JobCreate(width=64, height=64, spp=4096), str(card), "sha")
-    task = worker.TileTask(spec=spec, frame=0.0, tile=(0, 0, 64, 64), width=64, height=64,
-                           stop_flag=str(files.stop_flag))
-    worker.prepared(spec, 0.0)  # load and prepare first: time only the tile
-    stopper = threading.Timer(0.3, files.stop)
-    stopper.start()
-    t0 = time.perf_counter()
-    assert worker.render_tile_task(task) == {"stopped": True}
-    assert time.perf_counter() - t0 < 3.0  # 16M samples would take well over 10 s
-    stopper.join()
+    data = card.read_bytes()
+    sha = hashlib.sha256(data).hexdigest()
+    spec = RenderSpec.from_settings(JobCreate(width=64, height=64, spp=4096), card.name, sha)
+    task = worker.TileTask(spec=spec, frame=0.0, tile=(0, 0, 64, 64), width=64, height=64)
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
+            Client(cluster, set_as_default=False) as client:
+        scene = client.submit(worker.scene_package, sha, card.name, data, pure=False)
+        small = worker.TileTask(spec=spec, frame=0.0, tile=(0, 0, 1, 1), width=64, height=64)
+        assert "arrays" in client.submit(worker.render_tile_task, small, scene, pure=False).result()  # prepared
+        before = worker.stats()["stopped"]
+        fut = client.submit(worker.render_tile_task, task, scene, pure=False)
+        deadline = time.monotonic() + 30
+        while not any(fut.key in keys for keys in client.processing().values()):
+            assert time.monotonic() < deadline
+            time.sleep(0.02)
+        time.sleep(0.3)
+        t0 = time.perf_counter()
+        fut.cancel()
+        while worker.stats()["stopped"] == before:
+            assert time.perf_counter() - t0 < 3.0, "16M samples would take well over 10 s"
+            time.sleep(0.02)
