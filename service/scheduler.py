@@ -46,7 +46,7 @@ from .engine import ClusterUnavailable, Engine
 from .settings import ServiceSettings
 from .spec import RenderSpec
 from .uploads import SceneStore
-from .worker import FrameTask, TileTask, frame_image_task, render_tile_task, scene_package
+from .worker import FrameTask, TileTask, exr_attributes, frame_image_task, render_tile_task, scene_package
 
 log = logging.getLogger("drt.scheduler")
 
@@ -342,7 +342,7 @@ class Scheduler:
     def _frame_image(self, plan: JobPlan, frame: FramePlan, result: dict) -> None:
         try:
             write_exr(plan.files.frame(frame.idx), result["channels"], half=plan.spec.half,
-                      attributes=result["attributes"])
+                      attributes=exr_attributes(result["attributes"]))
         except FileNotFoundError:  # the job's files are gone: it was deleted
             self._drop(plan.job_id)
             return

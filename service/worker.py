@@ -256,6 +256,34 @@ def frame_image_task(task: FrameTask, scene: ScenePackage) -> dict:
 
     try:
         prep = prepared(task.spec, task.frame, scene, task.cache_size)
-        return {"channels": frame_channels(prep, task.sums), "attributes": frame_attributes(prep)}
+        attributes = {k: PortableTimeCode.of(v) if type(v).__name__ == "TimeCode" else v
+                      for k, v in frame_attributes(prep).items()}
+        return {"channels": frame_channels(prep, task.sums), "attributes": attributes}
     except RenderError as e:
         return {"error": _one_line(e)}
+
+
+TIMECODE_FIELDS = ("hours", "minutes", "seconds", "frame", "dropFrame", "colorFrame", "fieldPhase", "bgf0", "bgf1",
+                   "bgf2")
+
+
+@dataclass(frozen=True)
+class PortableTimeCode:
+    """An ``OpenEXR.TimeCode`` in a form that pickles (the binding's own does not). Binary groups are not carried:
+    ``renderer.exr.timecode_from_frame`` leaves them 0."""
+
+    fields: tuple[int, ...]
+
+    @classmethod
+    def of(cls, tc) -> "PortableTimeCode":
+        return cls(tuple(int(getattr(tc, f)) for f in TIMECODE_FIELDS))
+
+    def timecode(self):
+        import OpenEXR
+
+        return OpenEXR.TimeCode(*self.fields, *(0,) * 8)
+
+
+def exr_attributes(attributes: dict) -> dict:
+    """``frame_image_task``'s attributes as ``write_exr`` takes them (time codes rebuilt)."""
+    return {k: v.timecode() if isinstance(v, PortableTimeCode) else v for k, v in attributes.items()}
