@@ -7,7 +7,8 @@ address (scenes travel through Dask, tiles come back as results; see ``service.w
 
 **Outages.** A watcher thread keeps the client connected: the Dask client reconnects by itself for
 ``DRT_SCHEDULER_TIMEOUT`` seconds and then closes for good, so when it has closed (or never connected) the watcher
-makes a new one, backing off from 0.5 s to 10 s between attempts. Every future of a lost connection is cancelled by
+makes a new one, backing off from 0.5 s to 5 s between attempts (each first knocks on the scheduler's TCP port for
+at most 2 s, so that an attempt never waits out a whole connection timeout). Every future of a lost connection is cancelled by
 Dask with the reason ``scheduler-connection-lost``; the scheduler resubmits those tiles without counting an
 attempt. The watcher also caches the cluster's facts (reachable, workers, threads) once a second, so ``/healthz``
 and the scheduler never wait on a scheduler that does not answer. ``submit`` raises ``ClusterUnavailable`` while
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import logging
 import os
+import socket
 import threading
 import time
 from dataclasses import dataclass
@@ -26,7 +28,7 @@ from .settings import ServiceSettings
 
 log = logging.getLogger("drt.engine")
 
-BACKOFF_FIRST, BACKOFF_MAX = 0.5, 10.0  # seconds between attempts to make a new client
+BACKOFF_FIRST, BACKOFF_MAX = 0.5, 5.0  # seconds between attempts to make a new client
 FACTS_EVERY = 1.0  # seconds between refreshes of the cached cluster facts
 
 
@@ -86,9 +88,19 @@ class Engine:
         return self
 
     # -- connection ---------------------------------------------------------------------------------------------
+    def _knock(self) -> None:
+        """OSError unless the external scheduler's TCP port accepts a connection (cheap, at most 2 s)."""
+        address = self.settings.scheduler_address or ""
+        if self.cluster is not None or not address.startswith("tcp://"):
+            return
+        host, _, port = address[len("tcp://"):].rpartition(":")
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=2):
+            pass
+
     def _connect(self, timeout: float) -> None:
         from distributed import Client
 
+        self._knock()
         target = self.cluster if self.cluster is not None else self.settings.scheduler_address
         client = Client(target, set_as_default=False, timeout=timeout if self.cluster is not None
                         else self.settings.scheduler_timeout)
