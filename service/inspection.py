@@ -4,18 +4,28 @@
 the first frame loaded with the renderer (camera path, settings bounds), the resolution. It answers
 ``{"error": message}`` for anything wrong with the scene (the API's 422) or the facts the job needs.
 
-``InspectionPool`` runs it in ``size`` processes of its own (spawned, warmed up with pxr and the renderer imported),
+``InspectionPool`` runs it in ``size`` processes of its own (``python -m service.inspection``, talking over two pipes
+of their own, warmed up with pxr and the renderer imported; not ``multiprocessing``'s spawn, which would run the
+embedding program's main script again in each child),
 so pxr never parses untrusted bytes in the API process, the answer does not wait behind tiles on the cluster, and
 it works while the cluster is away. A scene that loads for longer than ``timeout`` seconds is refused (422) and the
 process stuck on it is killed and replaced; a process that dies loading a scene (a crash in pxr) is 422 too.
+
+Answers are remembered (the last ``CACHE_SIZE``), keyed by the upload's content hash, its name, the frames and the
+settings that reach the loader (not the seed): the same bytes give the same answer, so a pipeline that submits one
+scene many times (seeds, priorities, tile sizes) pays for one inspection.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
-import multiprocessing
+import os
 import queue
+import subprocess
+import sys
 import threading
 import time
+from collections import OrderedDict
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from pathlib import Path
@@ -29,6 +39,7 @@ from .uploads import StoredScene, UploadError, check_asset_paths, hide_dir
 log = logging.getLogger("drt.inspection")
 
 CRASHED = "loading the scene crashed a worker"
+CACHE_SIZE = 256
 
 
 @dataclass(frozen=True)
@@ -83,37 +94,49 @@ def _composition_problem(path: Path) -> str | None:
     return f"scene has {len(errors)} composition error(s): {first}"
 
 
-def _serve(conn: Connection) -> None:
+def _serve(requests: Connection, answers: Connection) -> None:
     """A pool process: import what inspections need once, then answer (fn, task) requests until the pipe closes."""
     import renderer.render  # noqa: F401 - warm-up: pxr, Warp and the importer, before the first request
     import renderer.usd_scene  # noqa: F401
 
-    conn.send("ready")
+    answers.send("ready")
     while True:
         try:
-            fn, task = conn.recv()
+            fn, task = requests.recv()
         except (EOFError, OSError):
             return
         try:
             result = fn(task)
         except Exception as e:  # noqa: BLE001 - reported as the scene's problem, never a dead pool process
             result = {"error": f"scene could not be loaded: {type(e).__name__}: {' '.join(str(e).split())}"}
-        conn.send(result)
+        answers.send(result)
 
 
 class _Proc:
-    def __init__(self, ctx):
-        self.conn, child = ctx.Pipe()
-        self.process = ctx.Process(target=_serve, args=(child,), name="drt-inspect", daemon=True)
-        self.process.start()
-        child.close()
+    """One inspection process and the two pipes to it (stdout stays free for whatever pxr or Warp print)."""
+
+    def __init__(self):
+        to_child_r, to_child_w = os.pipe()
+        from_child_r, from_child_w = os.pipe()
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+        self.process = subprocess.Popen([sys.executable, "-m", "service.inspection", str(to_child_r),
+                                         str(from_child_w)], pass_fds=(to_child_r, from_child_w), env=env,
+                                        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+        os.close(to_child_r)
+        os.close(from_child_w)
+        self.requests = Connection(to_child_w, readable=False)
+        self.answers = Connection(from_child_r, writable=False)
         self.ready = False
 
     def kill(self) -> None:
-        if self.process.is_alive():
+        if self.process.poll() is None:
             self.process.kill()
-        self.process.join(timeout=10)
-        self.conn.close()
+        try:
+            self.process.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            pass
+        self.requests.close()
+        self.answers.close()
 
 
 class InspectionPool:
@@ -122,16 +145,16 @@ class InspectionPool:
     def __init__(self, size: int, timeout: float, fn=None):
         self.timeout = timeout
         self.fn = fn  # None: this module's inspect_task, looked up at each call
-        self._ctx = multiprocessing.get_context("spawn")  # a clean interpreter: no threads or locks inherited
         self._idle: queue.Queue = queue.Queue()
         self._closed = False
         self._lock = threading.Lock()
         self._all: set[_Proc] = set()
+        self._answers: OrderedDict = OrderedDict()
         for _ in range(max(1, size)):
             self._idle.put(self._spawn())
 
     def _spawn(self) -> _Proc:
-        p = _Proc(self._ctx)
+        p = _Proc()
         with self._lock:
             self._all.add(p)
         return p
@@ -150,20 +173,34 @@ class InspectionPool:
         return self.run(task)
 
     def run(self, task: InspectTask) -> dict:
+        # The stored path is content-addressed (<sha>/<name>) and the seed never changes what loads.
+        key = (task.frames, dataclasses.replace(task.spec, seed=0))
+        with self._lock:
+            if key in self._answers:
+                self._answers.move_to_end(key)
+                return self._answers[key]
+        result = self._run(task)
+        with self._lock:
+            self._answers[key] = result
+            while len(self._answers) > CACHE_SIZE:
+                self._answers.popitem(last=False)
+        return result
+
+    def _run(self, task: InspectTask) -> dict:
         p = self._idle.get()
         try:
             if not p.ready:  # first use: wait for its imports (not counted against the scene's time)
-                if not p.conn.poll(120) or p.conn.recv() != "ready":
+                if not p.answers.poll(120) or p.answers.recv() != "ready":
                     raise EOFError
                 p.ready = True
-            p.conn.send((self.fn or inspect_task, task))
+            p.requests.send((self.fn or inspect_task, task))
             t0 = time.monotonic()
-            if not p.conn.poll(self.timeout):
+            if not p.answers.poll(self.timeout):
                 log.warning("a scene took longer than %g s to load; restarting its inspection process",
                             self.timeout)
                 self._retire(p)
                 raise ApiError(422, f"the scene took longer than {self.timeout:g} s to load")
-            result = p.conn.recv()
+            result = p.answers.recv()
             log.debug("inspected in %.1f ms", 1e3 * (time.monotonic() - t0))
         except (EOFError, OSError, BrokenPipeError):
             log.warning("an inspection process died loading a scene; starting another")
@@ -179,3 +216,7 @@ class InspectionPool:
             self._all.clear()
         for p in procs:
             p.kill()
+
+
+if __name__ == "__main__":  # a pool process: python -m service.inspection REQUESTS_FD ANSWERS_FD
+    _serve(Connection(int(sys.argv[1]), writable=False), Connection(int(sys.argv[2]), readable=False))

@@ -72,7 +72,8 @@ def list_jobs(
 
 @router.get("/{job_id}", response_model=JobPublic)
 def get_job(store: StoreDep, job_id: str):
-    return job_public(_job(store, job_id))
+    # The API's hot path: the body is serialized once here, not validated again against the response model.
+    return Response(job_public(_job(store, job_id)).model_dump_json(), media_type="application/json")
 
 
 @router.post("/{job_id}/cancel", response_model=JobPublic, responses={409: {"model": ErrorBody}})
