@@ -9,12 +9,13 @@ objects, about 0.2 ms instead of 1.5-2 ms of SQLAlchemy session and query overhe
 
 Concurrency: the API's threads and the scheduler's thread share one engine. Every state change is a single
 conditional ``UPDATE`` (``WHERE state IN (...)``) so a claim or a transition is atomic, and write transactions
-start with ``BEGIN IMMEDIATE`` so that two writers never deadlock upgrading a read lock (SQLite's
-``busy_timeout`` then simply queues them).
+start with ``BEGIN IMMEDIATE`` so that two writers never deadlock upgrading a read lock; writers of this process
+queue on a lock (``_write``), and ``busy_timeout`` covers any other process.
 """
 from __future__ import annotations
 
 import base64
+import contextlib
 import json
 import sqlite3
 import threading
@@ -183,6 +184,7 @@ class Store:
         self._local = threading.local()
         self._readers: list[sqlite3.Connection] = []
         self._readers_lock = threading.Lock()
+        self._write_lock = threading.Lock()
         Base.metadata.create_all(self.engine)
         # Claims left by requests that were in flight when the service stopped can never complete.
         with self._write() as s:
@@ -209,8 +211,12 @@ class Store:
     def _read(self) -> Session:
         return Session(self.engine, expire_on_commit=False)
 
-    def _write(self) -> Session:
-        return Session(self._writer, expire_on_commit=False)
+    @contextlib.contextmanager
+    def _write(self):
+        """A session for one write transaction. This process is the database's only writer, so writers queue on a
+        lock here: SQLite's own busy handler would make a waiting writer sleep in steps of up to 100 ms."""
+        with self._write_lock, Session(self._writer, expire_on_commit=False) as s:
+            yield s
 
     # -- jobs ---------------------------------------------------------------------------------------------------
     def create_job(self, *, job_id: str, priority: int, settings_json: str, scene_sha256: str, scene_name: str,

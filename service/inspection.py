@@ -13,10 +13,12 @@ process stuck on it is killed and replaced; a process that dies loading a scene 
 
 Answers are remembered (the last ``CACHE_SIZE``), keyed by the upload's content hash, its name, the frames and the
 settings that reach the loader (not the seed): the same bytes give the same answer, so a pipeline that submits one
-scene many times (seeds, priorities, tile sizes) pays for one inspection.
+scene many times (seeds, priorities, tile sizes) pays for one inspection, and a burst of identical submissions
+waits for the one inspection under way rather than queueing one each.
 """
 from __future__ import annotations
 
+import concurrent.futures
 import dataclasses
 import logging
 import os
@@ -150,6 +152,7 @@ class InspectionPool:
         self._lock = threading.Lock()
         self._all: set[_Proc] = set()
         self._answers: OrderedDict = OrderedDict()
+        self._pending: dict = {}  # key -> Future of the inspection under way
         for _ in range(max(1, size)):
             self._idle.put(self._spawn())
 
@@ -179,11 +182,27 @@ class InspectionPool:
             if key in self._answers:
                 self._answers.move_to_end(key)
                 return self._answers[key]
-        result = self._run(task)
+            pending = self._pending.get(key)
+            if pending is None:
+                pending = self._pending[key] = concurrent.futures.Future()
+                mine = True
+            else:
+                mine = False
+        if not mine:
+            return pending.result()  # raises the same ApiError (timeout, crash) as the inspection it waited for
+        try:
+            result = self._run(task)
+        except BaseException as e:
+            with self._lock:
+                del self._pending[key]
+            pending.set_exception(e)
+            raise
         with self._lock:
+            del self._pending[key]
             self._answers[key] = result
             while len(self._answers) > CACHE_SIZE:
                 self._answers.popitem(last=False)
+        pending.set_result(result)
         return result
 
     def _run(self, task: InspectTask) -> dict:
