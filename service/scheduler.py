@@ -53,6 +53,14 @@ log = logging.getLogger("drt.scheduler")
 FINISH = -1  # the "tile index" of a frame's assembly task in attempt records
 
 
+class UnreadableCheckpoints(Exception):
+    """Checkpoints of a frame that exist but cannot be read (a disk fault, a crash mid-write by another tool)."""
+
+    def __init__(self, tiles: set[int]):
+        super().__init__(f"unreadable tile checkpoints: {sorted(tiles)}")
+        self.tiles = tiles
+
+
 @dataclass
 class FramePlan:
     idx: int
@@ -230,6 +238,8 @@ class Scheduler:
                 except ClusterUnavailable as e:
                     log.info("cluster unavailable, holding work: %s", e)
                     return
+                except UnreadableCheckpoints as e:
+                    self._redo(plan, frame, e.tiles)
             if len(self._inflight) >= cap:
                 return
 
@@ -257,8 +267,14 @@ class Scheduler:
 
     def _frame_task(self, plan: JobPlan, frame: FramePlan) -> FrameTask:
         """The frame's checkpointed tiles, assembled (the sums ``render_frame`` would give: tiles are pure)."""
-        parts = [TileSums(tile=Tile(*box), arrays=load_tile(plan.files.tile(frame.idx, t)))
-                 for t, box in enumerate(plan.boxes)]
+        parts, bad = [], set()
+        for t, box in enumerate(plan.boxes):
+            try:
+                parts.append(TileSums(tile=Tile(*box), arrays=load_tile(plan.files.tile(frame.idx, t))))
+            except Exception:  # noqa: BLE001 - missing, truncated or garbage: np.load raises several kinds
+                bad.add(t)
+        if bad:
+            raise UnreadableCheckpoints(bad)
         return FrameTask(spec=plan.spec, frame=frame.time, sums=assemble(parts, plan.width, plan.height),
                          cache_size=self.settings.scene_cache_size)
 
@@ -338,6 +354,16 @@ class Scheduler:
         else:
             frame.inflight.discard(tile_idx)
             frame.queue.appendleft(tile_idx)
+
+    def _redo(self, plan: JobPlan, frame: FramePlan, tiles: set[int]) -> None:
+        """Render tiles again whose checkpoints cannot be read (not the tiles' fault: no attempt is counted)."""
+        log.warning("job %s frame %g: %d tile checkpoint(s) unreadable, rendering them again", plan.job_id,
+                    frame.time, len(tiles))
+        for t in tiles:
+            plan.files.tile(frame.idx, t).unlink(missing_ok=True)
+        self.store.forget_tiles(plan.job_id, frame.idx, tiles)
+        frame.done -= tiles
+        frame.queue.extend(sorted(tiles))
 
     def _frame_image(self, plan: JobPlan, frame: FramePlan, result: dict) -> None:
         try:

@@ -21,7 +21,7 @@ USD_LENS_UNITS_PER_SCENE_UNIT = 10.0
 
 @dataclass(frozen=True)
 class RenderSpec:
-    scene_path: str  # the stored upload (inside the data directory)
+    scene_path: str  # the scene file: the stored upload (inspection), or its name (tasks: workers use their copy)
     scene_sha256: str
     camera: str | None = None
     shutter: tuple[float, float] | None = None

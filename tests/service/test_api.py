@@ -371,6 +371,29 @@ def test_a_stopped_service_resumes_from_its_checkpoints(make_client, card, tmp_p
     assert_same_exr(tmp_path / "got.exr", tmp_path / "want.exr")
 
 
+def test_an_unreadable_checkpoint_is_rendered_again(make_client, card, tmp_path):
+    client = make_client(threads_per_worker=1, max_in_flight=1)
+    settings = {**SLOW, "spp": 64}
+    job_id = submit(client, card, settings).json()["id"]
+    deadline = time.monotonic() + 60
+    while client.get(f"/v1/jobs/{job_id}").json()["tiles_done"] < 6:
+        assert time.monotonic() < deadline
+        time.sleep(0.02)
+    make_client.stop(client)
+    tiles = sorted((tmp_path / "data" / "jobs" / job_id / "tiles" / "0").glob("*.npz"))
+    assert tiles
+    tiles[0].write_bytes(b"not a checkpoint")  # exists, so the resumed plan trusts it until it is read
+    client2 = make_client(threads_per_worker=2)
+    done_before = client2.get(f"/v1/jobs/{job_id}").json()["tiles_done"]
+    job = wait_job(client2, job_id)
+    assert job["state"] == "succeeded" and job["error"] is None, job
+    assert client2.app.state.runtime.scheduler.tiles_completed == job["tiles_total"] - done_before + 1
+    assert "drt_task_failures_total 0" in client2.get("/metrics").text
+    (tmp_path / "got.exr").write_bytes(client2.get(job["frames"][0]["exr_url"]).content)
+    cli_render(card, tmp_path / "want.exr", "--width", 64, "--height", 64, "--spp", 64)
+    assert_same_exr(tmp_path / "got.exr", tmp_path / "want.exr")
+
+
 def slow_inspection(task):
     time.sleep(3)
     return inspection.inspect_task(task)
