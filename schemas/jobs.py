@@ -71,6 +71,7 @@ class ErrorBody(BaseModel):
 
 
 class Health(BaseModel):
-    status: str
-    workers: int
-    threads: int
+    status: str = Field(description='"ok", or "degraded" while the render cluster is unreachable')
+    cluster: str = Field("reachable", description='"reachable" or "unreachable" (the Dask scheduler)')
+    workers: int = Field(description="Dask workers connected now")
+    threads: int = Field(description="their threads")

@@ -1,7 +1,9 @@
 """A job's files under the data directory: tile checkpoints, frame EXRs; the tile grid of a frame.
 
     <data>/jobs/<job id>/tiles/<frame index>/<tile index>.npz   filtered sums of one finished tile
-    <data>/jobs/<job id>/frames/<frame index>.exr               the frame, written atomically by a worker
+    <data>/jobs/<job id>/frames/<frame index>.exr               the frame, written atomically
+
+Only the service reads and writes them (workers return tiles as task results and never see this directory).
 
 A checkpoint is written to a temporary file in its directory and renamed over its name, so a file that exists is
 complete: a service killed at any moment resumes from the tiles on disk, and assembling them gives the same bits

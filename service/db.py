@@ -3,15 +3,22 @@
 Tables: ``jobs`` (one row per job), ``frames`` (one per frame of a job), ``tiles`` (one per tile that was
 attempted: attempts, done, seconds: the checkpoint record), ``idempotency`` (Idempotency-Key -> job).
 
+Reads of one job (``get_job``: the status request, the API's hot path) skip the ORM: one plain ``sqlite3``
+connection per thread reads the job and its frames in one snapshot and fills detached ``JobRow``/``FrameRow``
+objects, about 0.2 ms instead of 1.5-2 ms of SQLAlchemy session and query overhead under the GIL.
+
 Concurrency: the API's threads and the scheduler's thread share one engine. Every state change is a single
 conditional ``UPDATE`` (``WHERE state IN (...)``) so a claim or a transition is atomic, and write transactions
-start with ``BEGIN IMMEDIATE`` so that two writers never deadlock upgrading a read lock (SQLite's
-``busy_timeout`` then simply queues them).
+start with ``BEGIN IMMEDIATE`` so that two writers never deadlock upgrading a read lock; writers of this process
+queue on a lock (``_write``), and ``busy_timeout`` covers any other process.
 """
 from __future__ import annotations
 
 import base64
+import contextlib
 import json
+import sqlite3
+import threading
 import time
 from collections import defaultdict
 from dataclasses import dataclass
@@ -105,6 +112,11 @@ class IdempotencyRow(Base):
     created_at: Mapped[float] = mapped_column(Float)
 
 
+_JOB_COLUMNS = tuple(c.name for c in JobRow.__table__.columns)
+_SELECT_JOB = f"SELECT {', '.join(_JOB_COLUMNS)} FROM jobs WHERE id = ?"
+_SELECT_FRAMES = "SELECT idx, time, tiles_done, done FROM frames WHERE job_id = ? ORDER BY idx"
+
+
 class JobNotFound(Exception):
     pass
 
@@ -156,7 +168,10 @@ def decode_cursor(cursor: str) -> int:
 class Store:
     def __init__(self, path: Path):
         path.parent.mkdir(parents=True, exist_ok=True)
-        self.engine = create_engine(f"sqlite:///{path}", connect_args={"check_same_thread": False, "timeout": 60})
+        # One connection per busy thread: status requests run on up to 40 threads at once, and SQLAlchemy's default
+        # pool of 5 (+10) made them queue for a connection rather than for the database (WAL: readers never wait).
+        self.engine = create_engine(f"sqlite:///{path}", connect_args={"check_same_thread": False, "timeout": 60},
+                                    pool_size=16, max_overflow=48, pool_timeout=60)
 
         @event.listens_for(self.engine, "connect")
         def _connect(dbapi_conn, _record):
@@ -171,6 +186,11 @@ class Store:
             conn.exec_driver_sql("BEGIN IMMEDIATE" if conn.get_execution_options().get("drt_write") else "BEGIN")
 
         self._writer = self.engine.execution_options(drt_write=True)
+        self._path = path
+        self._local = threading.local()
+        self._readers: list[sqlite3.Connection] = []
+        self._readers_lock = threading.Lock()
+        self._write_lock = threading.Lock()
         Base.metadata.create_all(self.engine)
         self._migrate()
         # Claims left by requests that were in flight when the service stopped can never complete.
@@ -185,13 +205,32 @@ class Store:
                 s.connection().exec_driver_sql("ALTER TABLE jobs ADD COLUMN client VARCHAR(80)")
 
     def close(self) -> None:
+        with self._readers_lock:
+            for conn in self._readers:
+                conn.close()
+            self._readers.clear()
         self.engine.dispose()
+
+    def _reader(self) -> sqlite3.Connection:
+        conn = getattr(self._local, "conn", None)
+        if conn is None:
+            conn = sqlite3.connect(self._path, check_same_thread=False, isolation_level=None, timeout=60)
+            conn.execute("PRAGMA busy_timeout=60000")
+            conn.execute("PRAGMA query_only=ON")
+            self._local.conn = conn
+            with self._readers_lock:
+                self._readers.append(conn)
+        return conn
 
     def _read(self) -> Session:
         return Session(self.engine, expire_on_commit=False)
 
-    def _write(self) -> Session:
-        return Session(self._writer, expire_on_commit=False)
+    @contextlib.contextmanager
+    def _write(self):
+        """A session for one write transaction. This process is the database's only writer, so writers queue on a
+        lock here: SQLite's own busy handler would make a waiting writer sleep in steps of up to 100 ms."""
+        with self._write_lock, Session(self._writer, expire_on_commit=False) as s:
+            yield s
 
     # -- jobs ---------------------------------------------------------------------------------------------------
     def create_job(self, *, job_id: str, priority: int, settings_json: str, scene_sha256: str, scene_name: str,
@@ -215,10 +254,18 @@ class Store:
         return self.get_job(job_id)
 
     def get_job(self, job_id: str) -> JobRow:
-        with self._read() as s:
-            row = s.scalar(select(JobRow).where(JobRow.id == job_id))
-        if row is None:
+        """The job with its frames, detached (a snapshot: both read in one transaction)."""
+        conn = self._reader()
+        conn.execute("BEGIN")
+        try:
+            job = conn.execute(_SELECT_JOB, (job_id,)).fetchone()
+            frames = conn.execute(_SELECT_FRAMES, (job_id,)).fetchall() if job is not None else []
+        finally:
+            conn.execute("COMMIT")
+        if job is None:
             raise JobNotFound(job_id)
+        row = JobRow(**dict(zip(_JOB_COLUMNS, job)))
+        row.frames = [FrameRow(job_id=job_id, idx=i, time=t, tiles_done=n, done=bool(d)) for i, t, n, d in frames]
         return row
 
     def list_jobs(self, state: JobState | None, limit: int, before_seq: int | None) -> tuple[list[JobRow], int | None]:

@@ -5,7 +5,8 @@ from schemas import JobState
 
 
 def render(counts: dict[JobState, int], *, tiles_completed: int, tiles_failed: int, tiles_per_second: float,
-           tiles_in_flight: int, tiles_pending: int, workers: int, threads: int) -> str:
+           tiles_in_flight: int, tiles_pending: int, workers: int, threads: int, tiles_lost: int = 0,
+           cluster_reachable: bool = True) -> str:
     out: list[str] = []
 
     def metric(name: str, kind: str, help_: str, samples: list[tuple[str, float]]) -> None:
@@ -25,6 +26,9 @@ def render(counts: dict[JobState, int], *, tiles_completed: int, tiles_failed: i
            [("", tiles_failed)])
     metric("drt_tiles_per_second", "gauge", "Tiles finished per second over the last minute.",
            [("", float(tiles_per_second))])
+    metric("drt_tasks_lost_total", "counter", "Tasks lost with the scheduler connection and resubmitted "
+           "(not failures).", [("", tiles_lost)])
+    metric("drt_cluster_reachable", "gauge", "1 while the Dask scheduler is reachable.", [("", int(cluster_reachable))])
     metric("drt_workers", "gauge", "Dask workers connected.", [("", workers)])
     metric("drt_worker_threads", "gauge", "Dask worker threads connected.", [("", threads)])
     return "\n".join(out) + "\n"

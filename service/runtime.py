@@ -6,9 +6,10 @@ from dataclasses import dataclass
 
 from .db import Store
 from .engine import Engine
+from .inspection import InspectionPool
 from .scheduler import Scheduler
 from .settings import ServiceSettings
-from .submission import DaskInspector, Inspector, Submitter
+from .submission import Inspector, Submitter
 from .uploads import SceneStore
 
 log = logging.getLogger("drt.service")
@@ -29,20 +30,24 @@ class Runtime:
         settings.data_dir.mkdir(parents=True, exist_ok=True)
         store = Store(settings.db_path)
         scenes = SceneStore(settings.data_dir / "scenes", settings.max_upload_bytes)
+        inspector = InspectionPool(settings.inspect_processes, settings.inspect_timeout)
         engine = Engine(settings)
         try:
             engine.start()
         except BaseException:
+            inspector.close()
             store.close()
             raise
         scheduler = Scheduler(settings, store, engine, scenes)
-        submitter = Submitter(settings, store, scenes, on_created=scheduler.wake)
+        submitter = Submitter(settings, store, scenes, on_created=scheduler.wake, cluster_available=engine.available)
         scheduler.start()
         log.info("drt service ready (data in %s)", settings.data_dir)
         return cls(settings=settings, store=store, scenes=scenes, engine=engine, scheduler=scheduler,
-                   submitter=submitter, inspector=DaskInspector(engine, settings.inspect_timeout))
+                   submitter=submitter, inspector=inspector)
 
     def close(self) -> None:
         self.scheduler.stop()
         self.engine.close()
+        if isinstance(self.inspector, InspectionPool):
+            self.inspector.close()
         self.store.close()

@@ -4,14 +4,19 @@ Each turn it reads the active jobs from the database (priority, then first-in fi
 ``max_in_flight`` tasks submitted (default: twice the cluster's worker threads), so that a new high-priority job
 or a cancellation takes effect within about one tile's time, and waits for a task to finish or a wake-up.
 
-* A finished tile is checkpointed (atomically) on disk, then recorded in the database. When all tiles of a frame
-  are recorded, a worker assembles them and writes the frame's EXR; the frame is marked done and its tile
-  checkpoints are removed. The job succeeds when every frame is done.
-* A job that left the active states (canceled, failed, deleted) has its queued tasks cancelled, its running
-  tiles told to stop through a Dask event (``service.stopping``), and late results dropped.
+* Workers see no file of the service: a job's scene goes to the cluster once per connection as a ``scene_package``
+  task carrying the upload's bytes, and every tile task depends on it (Dask copies it to each worker that needs it).
+* A finished tile comes back as the task's result; this thread checkpoints it (atomically) on disk, then records
+  it in the database. When all tiles of a frame are recorded, they are assembled here, a worker turns the sums into
+  the EXR's channels and header (it holds the prepared frame), and this thread writes the EXR atomically; the frame
+  is marked done and its tile checkpoints are removed. The job succeeds when every frame is done.
+* A job that left the active states (canceled, failed, deleted) has its tasks cancelled (running tiles stop at their next
+  sample wave) and late results dropped.
 * A task that raises (including a worker that died three times running it, Dask's ``KilledWorker``) is submitted
   again up to ``tile_retries`` times, one database record per attempt, then the job fails with the message.
   A renderer error (bad scene or settings) fails the job at once: trying again would give the same answer.
+  A task lost with the connection to the scheduler (Dask cancels every future then) is not a failure: it is
+  submitted again, without counting an attempt, once the engine has reconnected.
 * On start, jobs found ``running`` resume: tiles whose checkpoints are on disk are not rendered again.
 
 All job state lives in the database; the plans held here are a cache of it, rebuilt after a restart.
@@ -26,23 +31,34 @@ import time
 import uuid
 from dataclasses import dataclass, field
 
+from pathlib import Path
+
 from sqlalchemy.exc import IntegrityError
 
+from renderer.film.exr import write_exr
+from renderer.render import Tile, TileSums, assemble
 from schemas import JobCreate, JobState
 
 from . import jobs as sm
-from .checkpoints import JobFiles, TileBox, save_tile, tile_grid
+from .checkpoints import JobFiles, TileBox, load_tile, save_tile, tile_grid
 from .db import JobNotFound, Store
-from .engine import Engine
+from .engine import ClusterUnavailable, Engine
 from .settings import ServiceSettings
 from .spec import RenderSpec
-from .stopping import StopSignals, new_key
 from .uploads import SceneStore
-from .worker import FrameTask, TileTask, finish_frame_task, render_tile_task
+from .worker import FrameTask, TileTask, exr_attributes, frame_image_task, render_tile_task, scene_package
 
 log = logging.getLogger("drt.scheduler")
 
 FINISH = -1  # the "tile index" of a frame's assembly task in attempt records
+
+
+class UnreadableCheckpoints(Exception):
+    """Checkpoints of a frame that exist but cannot be read (a disk fault, a crash mid-write by another tool)."""
+
+    def __init__(self, tiles: set[int]):
+        super().__init__(f"unreadable tile checkpoints: {sorted(tiles)}")
+        self.tiles = tiles
 
 
 @dataclass
@@ -61,14 +77,14 @@ class JobPlan:
     job_id: str
     state: JobState
     priority: int
-    spec: RenderSpec
+    spec: RenderSpec  # its scene_path is the upload's file name: workers get the bytes, never a path of ours
+    scene_file: Path  # the stored upload, in the data directory
     width: int
     height: int
     spp: int
     boxes: list[TileBox]
     frames: list[FramePlan]
     files: JobFiles
-    stop_key: str  # the Dask event that stops this plan's running tiles
 
     def next_work(self) -> tuple[FramePlan, int] | None:
         """(frame, tile index) to submit next, or (frame, FINISH) to assemble a frame, or None."""
@@ -89,6 +105,7 @@ class InFlight:
     tile_idx: int
     future: object
     submitted: float
+    generation: int  # the engine's client the future belongs to
 
 
 class Scheduler:
@@ -103,10 +120,12 @@ class Scheduler:
         self._plans: dict[str, JobPlan] = {}
         self._order: list[JobPlan] = []
         self._inflight: dict[str, InFlight] = {}
+        self._scene_futures: dict[str, tuple[int, object]] = {}  # sha -> (engine generation, scene_package future)
+        self._generation = 0
         self._tile_times: collections.deque = collections.deque(maxlen=4096)
         self.tiles_completed = 0
         self.tiles_failed = 0
-        self.stops = StopSignals(engine.client)
+        self.tiles_lost = 0  # tasks lost with the scheduler connection and resubmitted (not failures)
 
     # -- lifecycle -------------------------------------------------------------------------------------------
     def start(self) -> None:
@@ -144,7 +163,6 @@ class Scheduler:
                 self._sync()
                 self._fill()
                 self._wait_and_handle()
-                self.stops.sweep()
             except Exception:  # noqa: BLE001 - the loop must outlive any one bad turn (database busy, etc.)
                 log.exception("scheduler turn failed; retrying")
                 self._stop.wait(1.0)
@@ -166,6 +184,13 @@ class Scheduler:
                 return
 
     def _sync(self) -> None:
+        if self._generation != self.engine.generation:
+            self._generation = self.engine.generation
+            self._scene_futures.clear()
+            # The futures of an older client are gone (Dask cancelled them with the connection); their done
+            # callbacks normally brought them back already, this catches any that did not.
+            for key in [k for k, rec in self._inflight.items() if rec.generation != self._generation]:
+                self._on_done(key)
         heads = self.store.active_jobs()
         active = {row.id for row in heads}
         for job_id in [j for j in self._plans if j not in active]:
@@ -194,6 +219,8 @@ class Scheduler:
         return self.settings.max_in_flight or 2 * max(1, self.engine.threads())
 
     def _fill(self) -> None:
+        if not self.engine.available():
+            return  # the engine is reconnecting; queued work waits (nothing is charged)
         cap = self._capacity()
         for plan in list(self._order):
             if all(f.finished for f in plan.frames):  # e.g. stopped between its last frame and its success
@@ -206,7 +233,13 @@ class Scheduler:
                 frame, tile_idx = work
                 if plan.state == sm.QUEUED and not self._claim(plan):
                     break  # canceled meanwhile: the plan is dropped
-                self._submit(plan, frame, tile_idx)
+                try:
+                    self._submit(plan, frame, tile_idx)
+                except ClusterUnavailable as e:
+                    log.info("cluster unavailable, holding work: %s", e)
+                    return
+                except UnreadableCheckpoints as e:
+                    self._redo(plan, frame, e.tiles)
             if len(self._inflight) >= cap:
                 return
 
@@ -219,21 +252,46 @@ class Scheduler:
         plan.state = sm.RUNNING
         return True
 
+    def _scene(self, plan: JobPlan):
+        """The future of the job's scene package on the current client (submitted once per scene and client)."""
+        generation = self.engine.generation
+        held = self._scene_futures.get(plan.spec.scene_sha256)
+        if held is not None and held[0] == generation and held[1].status in ("pending", "finished"):
+            return held[1]
+        data = plan.scene_file.read_bytes()
+        key = f"drt-scene-{plan.spec.scene_sha256[:16]}-{uuid.uuid4().hex[:8]}"
+        fut = self.engine.submit(scene_package, plan.spec.scene_sha256, plan.spec.scene_path, data, key=key,
+                                 priority=plan.priority + 2)
+        self._scene_futures[plan.spec.scene_sha256] = (generation, fut)
+        return fut
+
+    def _frame_task(self, plan: JobPlan, frame: FramePlan) -> FrameTask:
+        """The frame's checkpointed tiles, assembled (the sums ``render_frame`` would give: tiles are pure)."""
+        parts, bad = [], set()
+        for t, box in enumerate(plan.boxes):
+            try:
+                parts.append(TileSums(tile=Tile(*box), arrays=load_tile(plan.files.tile(frame.idx, t))))
+            except Exception:  # noqa: BLE001 - missing, truncated or garbage: np.load raises several kinds
+                bad.add(t)
+        if bad:
+            raise UnreadableCheckpoints(bad)
+        return FrameTask(spec=plan.spec, frame=frame.time, sums=assemble(parts, plan.width, plan.height),
+                         cache_size=self.settings.scene_cache_size)
+
     def _submit(self, plan: JobPlan, frame: FramePlan, tile_idx: int) -> None:
         s = self.settings
-        if tile_idx == FINISH:
-            task = FrameTask(spec=plan.spec, frame=frame.time, output=str(plan.files.frame(frame.idx)),
-                             tiles=tuple((str(plan.files.tile(frame.idx, t)), plan.boxes[t])
-                                         for t in range(len(plan.boxes))), cache_size=s.scene_cache_size)
-            fn, kind, priority = finish_frame_task, "frame", plan.priority + 1
-        else:
-            task = TileTask(spec=plan.spec, frame=frame.time, tile=plan.boxes[tile_idx], width=plan.width,
-                            height=plan.height, cache_size=s.scene_cache_size,
-                            stop_key=plan.stop_key)
-            fn, kind, priority = render_tile_task, "tile", plan.priority
-        key = f"drt-{kind}-{plan.job_id}-{frame.idx}-{tile_idx}-{uuid.uuid4().hex[:8]}"
         try:
-            future = self.engine.submit(fn, task, key=key, priority=priority)
+            scene = self._scene(plan)
+            if tile_idx == FINISH:
+                task = self._frame_task(plan, frame)
+                fn, kind, priority = frame_image_task, "frame", plan.priority + 1
+            else:
+                task = TileTask(spec=plan.spec, frame=frame.time, tile=plan.boxes[tile_idx], width=plan.width,
+                                height=plan.height, cache_size=s.scene_cache_size)
+                fn, kind, priority = render_tile_task, "tile", plan.priority
+            key = f"drt-{kind}-{plan.job_id}-{frame.idx}-{tile_idx}-{uuid.uuid4().hex[:8]}"
+            generation = self.engine.generation
+            future = self.engine.submit(fn, task, scene, key=key, priority=priority)
         except BaseException:
             if tile_idx != FINISH:
                 frame.queue.appendleft(tile_idx)  # not submitted: it stays to do (the cluster may be back later)
@@ -242,7 +300,7 @@ class Scheduler:
             frame.finishing = True
         else:
             frame.inflight.add(tile_idx)
-        self._inflight[key] = InFlight(plan.job_id, frame.idx, tile_idx, future, time.monotonic())
+        self._inflight[key] = InFlight(plan.job_id, frame.idx, tile_idx, future, time.monotonic(), generation)
         future.add_done_callback(lambda fut, key=key: self._events.put(("done", key)))
 
     # -- results -----------------------------------------------------------------------------------------------
@@ -263,21 +321,58 @@ class Scheduler:
             try:
                 result = fut.result()
             except Exception as e:  # noqa: BLE001 - fetching the result can fail if its worker just died
-                self._failed_attempt(plan, frame, rec.tile_idx, f"{type(e).__name__}: {e}")
+                if not self.engine.available() or rec.generation != self.engine.generation:
+                    self._lost(plan, frame, rec.tile_idx, f"{type(e).__name__}: {e}")
+                else:
+                    self._failed_attempt(plan, frame, rec.tile_idx, f"{type(e).__name__}: {e}")
                 return
             if result.get("stopped"):
                 return  # the job was canceled or failed while this tile ran; the plan is being dropped
             if "error" in result:
                 self._fail(plan.job_id, result["error"])
             elif rec.tile_idx == FINISH:
-                self._frame_written(plan, frame)
+                self._frame_image(plan, frame, result)
             else:
                 self._tile_rendered(plan, frame, rec.tile_idx, result)
         elif fut.status == "error":
             exc = fut.exception()
             self._failed_attempt(plan, frame, rec.tile_idx, f"{type(exc).__name__}: {exc}")
-        else:  # cancelled or lost without our asking (scheduler restart): render it again
-            self._failed_attempt(plan, frame, rec.tile_idx, f"task {fut.status}")
+        else:
+            # Cancelled without our asking (we forget a future before we cancel it): Dask cancels every future
+            # when the connection to the scheduler is lost. Not the tile's fault: it is submitted again.
+            reason = getattr(getattr(fut, "_state", None), "exception", None)
+            self._lost(plan, frame, rec.tile_idx, str(reason) if reason else f"task {fut.status}")
+
+    def _lost(self, plan: JobPlan, frame: FramePlan, tile_idx: int, why: str) -> None:
+        """A task the cluster lost: do it again, without counting an attempt."""
+        self.tiles_lost += 1
+        log.info("job %s: %s lost (%s); resubmitting", plan.job_id,
+                 f"frame {frame.time:g} assembly" if tile_idx == FINISH else f"tile {tile_idx}",
+                 " ".join(why.split())[:200])
+        if tile_idx == FINISH:
+            frame.finishing = False
+        else:
+            frame.inflight.discard(tile_idx)
+            frame.queue.appendleft(tile_idx)
+
+    def _redo(self, plan: JobPlan, frame: FramePlan, tiles: set[int]) -> None:
+        """Render tiles again whose checkpoints cannot be read (not the tiles' fault: no attempt is counted)."""
+        log.warning("job %s frame %g: %d tile checkpoint(s) unreadable, rendering them again", plan.job_id,
+                    frame.time, len(tiles))
+        for t in tiles:
+            plan.files.tile(frame.idx, t).unlink(missing_ok=True)
+        self.store.forget_tiles(plan.job_id, frame.idx, tiles)
+        frame.done -= tiles
+        frame.queue.extend(sorted(tiles))
+
+    def _frame_image(self, plan: JobPlan, frame: FramePlan, result: dict) -> None:
+        try:
+            write_exr(plan.files.frame(frame.idx), result["channels"], half=plan.spec.half,
+                      attributes=exr_attributes(result["attributes"]))
+        except FileNotFoundError:  # the job's files are gone: it was deleted
+            self._drop(plan.job_id)
+            return
+        self._frame_written(plan, frame)
 
     def _tile_rendered(self, plan: JobPlan, frame: FramePlan, tile_idx: int, result: dict) -> None:
         frame.inflight.discard(tile_idx)
@@ -331,21 +426,20 @@ class Scheduler:
             self.store.transition(job_id, sm.FAILED, error=message)
         except (sm.IllegalTransition, JobNotFound):
             pass
-        self._drop(job_id)  # its other running tiles need not finish
+        self._drop(job_id)  # its other running tiles stop at their next sample wave
 
     def _drop(self, job_id: str) -> None:
-        """Forget a job that is no longer active: cancel its tasks still queued on Dask, stop its running ones."""
+        """Forget a job that is no longer active: cancel its tasks (queued ones never run, running ones stop)."""
         plan = self._plans.pop(job_id, None)
         self._order = [p for p in self._order if p.job_id != job_id]
         doomed = [k for k, rec in self._inflight.items() if rec.job_id == job_id]
         futures = [self._inflight.pop(k).future for k in doomed]
+        if plan is not None and not any(p.spec.scene_sha256 == plan.spec.scene_sha256 for p in self._plans.values()):
+            held = self._scene_futures.pop(plan.spec.scene_sha256, None)
+            if held is not None:
+                futures.append(held[1])  # no other job needs the scene: workers may forget its bytes
         if futures:
-            if plan is not None:
-                self.stops.stop(plan.stop_key)  # cancelling a future does not interrupt a running task
-            try:
-                self.engine.client.cancel(futures)
-            except Exception:  # noqa: BLE001 - best effort: their results are ignored anyway
-                log.debug("cancelling futures failed", exc_info=True)
+            self.engine.cancel(futures)
 
     # -- plans ---------------------------------------------------------------------------------------------------
     def _load(self, row) -> JobPlan | None:
@@ -369,6 +463,6 @@ class Scheduler:
         if row.job_state == sm.RUNNING:
             log.info("resuming job %s: %d of %d tiles checkpointed", row.id, row.tiles_done, row.tiles_total)
         return JobPlan(job_id=row.id, state=row.job_state, priority=row.priority,
-                       spec=RenderSpec.from_settings(settings, str(path), row.scene_sha256), width=row.width,
-                       height=row.height, spp=settings.spp, boxes=boxes, frames=frames, files=files,
-                       stop_key=new_key(row.id))
+                       spec=RenderSpec.from_settings(settings, row.scene_name, row.scene_sha256), scene_file=path,
+                       width=row.width, height=row.height, spp=settings.spp, boxes=boxes, frames=frames,
+                       files=files)

@@ -41,6 +41,9 @@ class ServiceSettings(BaseSettings):
     max_in_flight: int = Field(0, ge=0, description="tiles submitted to Dask at once (0: twice the worker threads)")
     tile_retries: int = Field(2, ge=0, le=20, description="extra attempts for a tile whose task failed")
     inspect_timeout: float = Field(120.0, gt=0, description="seconds to load a scene when a job is submitted")
+    inspect_processes: int = Field(2, ge=1, le=64, description="local processes that inspect submitted scenes")
+    scheduler_timeout: float = Field(
+        30.0, gt=0, description="seconds the Dask client reconnects by itself before the service makes a new one")
     scene_cache_size: int = Field(2, ge=1, le=64, description="prepared scenes kept per worker process")
     poll_interval: float = Field(0.5, gt=0, description="scheduler wake-up interval, seconds")
     dashboard_url: str | None = Field(
@@ -49,7 +52,7 @@ class ServiceSettings(BaseSettings):
     @field_validator("data_dir")
     @classmethod
     def _absolute(cls, v: Path) -> Path:
-        # Tasks carry paths into the data directory to worker processes, whose working directory may differ.
+        # The service's threads and processes (inspection) must agree on it whatever their working directory.
         return v.expanduser().absolute()
 
     @field_validator("api_token", "scheduler_address", "dashboard_url", mode="before")

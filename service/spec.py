@@ -18,7 +18,7 @@ from schemas import JobCreate
 
 @dataclass(frozen=True)
 class RenderSpec:
-    scene_path: str  # the stored upload (inside the data directory)
+    scene_path: str  # the scene file: the stored upload (inspection), or its name (tasks: workers use their copy)
     scene_sha256: str
     camera: str | None = None
     shutter: tuple[float, float] | None = None

@@ -1,11 +1,12 @@
 """Creating a job from an upload: settings, size, Idempotency-Key, scene safety and inspection, then the queue.
 
-Order matters, cheapest and most certain first: settings JSON (422) and the file's extension (422); the upload is
-streamed to disk with a byte limit (413) and hashed; the Idempotency-Key is claimed (a replay returns the first
-job; the same key with a different request is 422; while the first request is still running, 409); a ``.usdz``'s
-entries are checked; a worker checks every asset path, composes the stage and loads the first frame (422 with the
-renderer's message); the job's cost against the farm's limits (``service.limits``: 422) is checked once from the
-settings alone (before the upload is looked at, when they give the resolution) and again with the scene's real
+Order matters, cheapest and most certain first: settings JSON (422) and the file's extension (422); while the
+render cluster is unreachable, 503 (with ``Retry-After``); the upload is streamed to disk with a byte limit (413)
+and hashed; the Idempotency-Key is claimed (a replay returns the first job; the same key with a different request
+is 422; while the first request is still running, 409); a ``.usdz``'s entries are checked; a local inspection
+process checks every asset path, composes the stage and loads the first frame (422 with the renderer's message;
+``service.inspection``); the job's cost against the farm's limits (``service.limits``: 422) is checked once from
+the settings alone (before the upload is looked at, when they give the resolution) and again with the scene's real
 resolution and frames, the queue's length too; only then is the job queued.
 
 Idempotency: the request's identity is the scene's content hash, its file name and the canonical settings JSON. A
@@ -26,12 +27,9 @@ from schemas.settings import FRAMES_TAGS
 from . import errors, limits
 from .checkpoints import tile_count
 from .db import JobRow, Store
-from .engine import Engine
 from .errors import ApiError
 from .settings import ServiceSettings
-from .spec import RenderSpec
 from .uploads import SceneStore, StoredScene, UploadError, check_usdz, new_job_id, safe_name, scene_extension
-from .worker import InspectTask, inspect_task
 
 log = logging.getLogger("drt.submission")
 
@@ -58,52 +56,17 @@ class Inspector(Protocol):
     def __call__(self, stored: StoredScene, settings: JobCreate) -> dict: ...
 
 
-class DaskInspector:
-    """Inspects an upload on a worker: pxr parses untrusted bytes there, not in the API process."""
-
-    def __init__(self, engine: Engine, timeout: float):
-        self.engine = engine
-        self.timeout = timeout
-
-    def __call__(self, stored: StoredScene, settings: JobCreate) -> dict:
-        from distributed import TimeoutError as DaskTimeout
-        from distributed.scheduler import KilledWorker
-
-        frames = settings.frame_times()
-        task = InspectTask(spec=RenderSpec.from_settings(settings, str(stored.path), stored.sha256),
-                           frames=tuple(frames) if frames else None)
-        # Highest priority: a user is waiting on this answer, while tiles can wait a moment.
-        fut = self.engine.submit(inspect_task, task, key=f"drt-inspect-{new_job_id()}", priority=1_000_000)
-        try:
-            return fut.result(timeout=self.timeout)
-        except (TimeoutError, DaskTimeout):
-            self._abandon(fut)
-            raise ApiError(422, f"the scene took longer than {self.timeout:g} s to load") from None
-        except KilledWorker:
-            raise ApiError(422, "loading the scene crashed a worker") from None
-        except Exception as e:  # noqa: BLE001 - the cluster itself failed us, not the input
-            log.warning("inspection failed: %s: %s", type(e).__name__, e)
-            raise ApiError(503, errors.CLUSTER_UNAVAILABLE) from None
-
-    def _abandon(self, fut) -> None:
-        """A task cannot be interrupted, so a scene that loads forever would hold a worker thread forever: restart
-        the worker process running it (its other tasks are rescheduled by Dask; tiles are pure)."""
-        try:
-            busy = [w for w, keys in self.engine.client.processing().items() if fut.key in keys]
-            fut.cancel()
-            if busy and self.engine.restartable():
-                log.warning("restarting worker(s) %s stuck loading a scene", busy)
-                self.engine.client.restart_workers(workers=busy, raise_for_error=False)
-        except Exception:  # noqa: BLE001 - best effort; the request is answered either way
-            log.warning("could not restart the worker stuck on %s", fut.key, exc_info=True)
+RETRY_AFTER = "5"  # seconds a client is asked to wait after a 503
 
 
 class Submitter:
-    def __init__(self, settings: ServiceSettings, store: Store, scenes: SceneStore, on_created=lambda: None):
+    def __init__(self, settings: ServiceSettings, store: Store, scenes: SceneStore, on_created=lambda: None,
+                 cluster_available=lambda: True):
         self.settings = settings
         self.store = store
         self.scenes = scenes
         self.on_created = on_created
+        self.cluster_available = cluster_available
 
     def submit(self, upload: BinaryIO, filename: str | None, settings_text: str, idempotency_key: str | None,
                inspector: Inspector, client: str | None = None) -> tuple[JobRow, bool]:
@@ -120,6 +83,8 @@ class Submitter:
         if settings.width is not None and settings.height is not None:
             limits.check_cost(self.settings, width=settings.width, height=settings.height, spp=settings.spp,
                               frames=len(frames) if frames is not None else 1)
+        if not self.cluster_available():
+            raise ApiError(503, errors.CLUSTER_UNAVAILABLE, headers={"Retry-After": RETRY_AFTER})
         try:
             tmp, sha, size = self.scenes.receive(upload)
         except UploadError as e:

@@ -5,6 +5,7 @@ is its time code: ``12`` for 12.0, ``12.5`` for 12.5.
 """
 from __future__ import annotations
 
+import functools
 import time
 from datetime import datetime, timezone
 
@@ -34,6 +35,12 @@ def _dt(t: float | None) -> datetime | None:
     return None if t is None else datetime.fromtimestamp(t, tz=timezone.utc)
 
 
+@functools.lru_cache(maxsize=4096)
+def _settings(settings_json: str) -> JobCreate:
+    """A job's settings never change: parse each once (status requests are the API's hot path)."""
+    return JobCreate.model_validate_json(settings_json)
+
+
 def job_public(row: JobRow) -> JobPublic:
     base = job_url(row.id)
     frames = []
@@ -59,5 +66,5 @@ def job_public(row: JobRow) -> JobPublic:
         width=row.width, height=row.height, tiles_done=row.tiles_done, tiles_total=row.tiles_total,
         samples_per_second=sps, frames=frames, error=row.error, warnings=row.warnings,
         scene=SceneInfo(filename=row.scene_name, sha256=row.scene_sha256, bytes=row.scene_bytes),
-        settings=JobCreate.model_validate_json(row.settings_json), created_at=_dt(row.created_at),
+        settings=_settings(row.settings_json), created_at=_dt(row.created_at),
         updated_at=_dt(row.updated_at), started_at=_dt(row.started_at), finished_at=_dt(row.finished_at))

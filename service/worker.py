@@ -1,46 +1,141 @@
-"""What runs on the Dask workers: scene inspection, tile rendering, frame assembly; and the per-process scene cache.
+"""What runs on the Dask workers: tile rendering and a frame's EXR channels; the per-process scene caches.
 
-Tasks are pure functions of their arguments (a ``RenderSpec``, a frame, a tile), so Dask may run them anywhere
-and run them again after a worker dies: the result is the same bits.
+A worker needs nothing but the scheduler's address. It never sees the service's data directory: the uploaded
+scene reaches it through Dask (a ``ScenePackage``, the upload's bytes, is the result of a ``scene_package`` task on
+which every tile task depends, so Dask copies it to a worker once and recomputes it if the worker holding it dies),
+tiles go back as task results, and the service alone writes checkpoints, frames and the database.
 
-**Scene cache.** Loading a USD frame and building its BVH costs far more than a small tile, so each worker
-process keeps the last few ``PreparedScene``s, keyed by (scene content hash, frame, everything that affects
-loading and preparing). Threads of one worker share them (Warp launches release the GIL), and a per-key lock
-makes sure that a frame is prepared once per process even when its tiles arrive together.
+Tasks are pure functions of their arguments (a ``RenderSpec``, the scene's bytes, a frame, a tile), so Dask may run
+them anywhere and run them again after a worker dies: the result is the same bits.
+
+**Caches, per worker process.** (1) A package is written once to a private temporary directory of the process
+(``scene files``), keyed by its content hash, and its USD stage is opened once and kept in a ``Usd.StageCache``, so
+the 24 frames of an animation load their stage once per worker, not once per frame. (2) The last few
+``PreparedScene``s (a frame loaded and its BVH built), keyed by (content hash, frame, everything that affects
+loading and preparing). Threads of one worker share them (Warp launches release the GIL), and a per-key lock makes
+sure that a frame is prepared once per process even when its tiles arrive together.
+
+**Stopping.** Dask cannot interrupt a running task. When the service cancels a tile's future (its job was canceled
+or failed), the scheduler releases the task and the worker marks it ``cancelled``; ``render_tile`` looks at that
+mark between sample waves and stops. No file, no round trip.
 
 **Errors.** A ``RenderError`` (bad scene, bad settings: the user's to fix) is returned as ``{"error": message}``,
-never retried. Anything else raises, so Dask's ``retries`` and the scheduler's bounded resubmission apply.
+never retried. Anything else raises, so the scheduler's bounded resubmission applies.
 """
 from __future__ import annotations
 
+import atexit
+import dataclasses
+import hashlib
 import os
+import shutil
+import tempfile
 import threading
 import time
 from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
-from .checkpoints import TileBox, load_tile
 from .spec import RenderSpec
-from .stopping import dask_should_stop
 
-_cache: OrderedDict = OrderedDict()
+TileBox = tuple[int, int, int, int]  # x0, y0, x1, y1: pixels [x0, x1) x [y0, y1), y down
+
+_cache: OrderedDict = OrderedDict()  # (sha, cache key) -> PreparedScene
 _cache_lock = threading.Lock()
 _key_locks: dict = {}
-_stats = {"prepared": 0, "tiles": 0, "running": 0}  # running: tiles rendering now
+_stats = {"prepared": 0, "tiles": 0, "running": 0, "stopped": 0, "packages": 0, "stages": 0}
+PACKAGES_KEPT = 4  # scene packages (files and open stages) kept per process
 
 
-def _one_line(e: BaseException, spec: RenderSpec | None = None) -> str:
+# -- scene packages ---------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class ScenePackage:
+    """An uploaded scene as bytes: one USD layer or a ``.usdz`` package (all its assets inside)."""
+
+    sha256: str
+    name: str  # the upload's file name (messages name it; the extension tells pxr the format)
+    data: bytes
+
+    def __repr__(self) -> str:  # never print megabytes into a log
+        return f"ScenePackage({self.sha256[:12]}, {self.name!r}, {len(self.data)} bytes)"
+
+
+def scene_package(sha256: str, name: str, data: bytes) -> ScenePackage:
+    """The Dask task whose result is a scene (its bytes travel with the task; the hash is checked)."""
+    if hashlib.sha256(data).hexdigest() != sha256:
+        raise ValueError(f"scene package {sha256[:12]} arrived corrupted")
+    return ScenePackage(sha256, name, data)
+
+
+class _LocalScene:
+    """A package written to this process's private directory, with its stage cache and a lock for loading."""
+
+    def __init__(self, root: Path, pkg: ScenePackage):
+        from pxr import Usd
+
+        self.dir = root / pkg.sha256
+        self.dir.mkdir(parents=True, exist_ok=True)
+        self.path = self.dir / pkg.name
+        tmp = self.dir / f".{pkg.name}.part"
+        tmp.write_bytes(pkg.data)
+        os.replace(tmp, self.path)
+        self.stages = Usd.StageCache()
+        self.lock = threading.Lock()  # one frame loads at a time from the shared stage
+
+    def load(self, spec: RenderSpec, frame: float | None):
+        from pxr import Usd
+
+        with self.lock, Usd.StageCacheContext(self.stages):
+            before = self.stages.Size()
+            scene = dataclasses.replace(spec, scene_path=str(self.path)).load(frame)
+            if self.stages.Size() > before:
+                with _cache_lock:
+                    _stats["stages"] += 1
+        return scene
+
+    def remove(self) -> None:
+        self.stages.Clear()
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+
+_scene_root: Path | None = None
+_scenes: OrderedDict = OrderedDict()  # sha -> _LocalScene
+_scenes_lock = threading.Lock()
+
+
+def _root() -> Path:
+    global _scene_root
+    if _scene_root is None:
+        _scene_root = Path(tempfile.mkdtemp(prefix=f"drt-worker-{os.getpid()}-"))
+        atexit.register(shutil.rmtree, _scene_root, True)
+    return _scene_root
+
+
+def local_scene(pkg: ScenePackage) -> _LocalScene:
+    """This process's copy of a package (written on first use; the oldest beyond PACKAGES_KEPT removed)."""
+    with _scenes_lock:
+        local = _scenes.get(pkg.sha256)
+        if local is None:
+            local = _scenes[pkg.sha256] = _LocalScene(_root(), pkg)
+            _stats["packages"] += 1
+            while len(_scenes) > PACKAGES_KEPT:
+                _scenes.popitem(last=False)[1].remove()
+        else:
+            _scenes.move_to_end(pkg.sha256)
+        return local
+
+
+def _one_line(e: BaseException) -> str:
+    """One line, without this process's private directory (clients see their own file names only)."""
     text = " ".join(str(e).split()) or type(e).__name__
-    if spec is not None:  # never show clients where the server keeps their files
-        from .uploads import hide_dir
-
-        text = hide_dir(text, Path(spec.scene_path).parent)
+    if _scene_root is not None:
+        for d in sorted({str(s.dir) for s in _scenes.values()}, key=len, reverse=True):
+            text = text.replace(d + os.sep, "").replace(d, ".")
     return text
 
 
-def prepared(spec: RenderSpec, frame: float, capacity: int = 2):
+def prepared(spec: RenderSpec, frame: float, scene: ScenePackage, capacity: int = 2):
     """The PreparedScene of one frame of a job, from this process's cache or freshly loaded and prepared."""
     key = (spec.scene_sha256, spec.cache_key(frame))
     with _cache_lock:
@@ -56,7 +151,7 @@ def prepared(spec: RenderSpec, frame: float, capacity: int = 2):
         from renderer.render import prepare
 
         init_warp()
-        prep = prepare(spec.load(frame), spec.options())
+        prep = prepare(local_scene(scene).load(spec, frame), spec.options())
         with _cache_lock:
             _cache[key] = prep
             _stats["prepared"] += 1
@@ -69,13 +164,19 @@ def prepared(spec: RenderSpec, frame: float, capacity: int = 2):
 def stats() -> dict:
     """Counters of this process (tests read them through ``client.run``)."""
     with _cache_lock:
-        return dict(_stats, cached=len(_cache), pid=os.getpid())
+        return dict(_stats, cached=len(_cache), pid=os.getpid(), cwd=os.getcwd(),
+                    scene_dir=str(_scene_root) if _scene_root else None)
 
 
 def clear_cache() -> None:
     with _cache_lock:
         _cache.clear()
+    with _scenes_lock:
+        while _scenes:
+            _scenes.popitem()[1].remove()
 
+
+# -- tiles ------------------------------------------------------------------------------------------------------
 
 @dataclass(frozen=True)
 class TileTask:
@@ -85,125 +186,110 @@ class TileTask:
     width: int  # the resolution the job was planned at
     height: int
     cache_size: int = 2
-    stop_key: str | None = None  # a Dask event set when the job is stopped (canceled, failed, deleted)
 
 
-def _stop_check(should_stop: Callable[[], bool] | None):
-    """``render_tile``'s wave callback: raise Cancelled once ``should_stop()`` says so (Dask cannot interrupt a
-    running task, so a long tile of a canceled job would otherwise run to its end)."""
-    if should_stop is None:
+def _stop_check(every: float = 0.1):
+    """``render_tile``'s wave callback: raise Cancelled once Dask has released this task (looked at most every
+    ``every`` s). Outside a Dask worker (tests calling the task directly) there is nothing to look at."""
+    try:
+        from distributed import get_worker
+
+        w = get_worker()
+        key = w.get_current_task()
+    except (ImportError, ValueError):
         return None
     from renderer.errors import Cancelled
 
+    last = time.monotonic()
+
     def on_wave(_done: int, _total: int) -> None:
-        if should_stop():
-            raise Cancelled("job stopped")
+        nonlocal last
+        now = time.monotonic()
+        if now - last >= every:
+            last = now
+            ts = w.state.tasks.get(key)
+            if ts is None or ts.state in ("cancelled", "released", "forgotten"):
+                raise Cancelled("job stopped")
 
     return on_wave
 
 
-def render_tile_task(task: TileTask) -> dict:
+def render_tile_task(task: TileTask, scene: ScenePackage) -> dict:
     from renderer.errors import Cancelled, RenderError
     from renderer.render import Tile, render_tile
 
     try:
-        prep = prepared(task.spec, task.frame, task.cache_size)
+        prep = prepared(task.spec, task.frame, scene, task.cache_size)
         if (prep.width, prep.height) != (task.width, task.height):
             return {"error": f"frame {task.frame:g} renders at {prep.width}x{prep.height}, "
                              f"not at the job's {task.width}x{task.height}"}
         t0 = time.perf_counter()
-        should_stop = dask_should_stop(task.stop_key) if task.stop_key else None
         with _cache_lock:
-            _stats["running"] += 1
+            _stats["running"] += 1  # tiles rendering now (tests watch a deleted job's tiles stop)
         try:
-            sums = render_tile(prep, Tile(*task.tile), on_wave=_stop_check(should_stop))
+            sums = render_tile(prep, Tile(*task.tile), on_wave=_stop_check())
         finally:
             with _cache_lock:
                 _stats["running"] -= 1
         seconds = time.perf_counter() - t0
     except Cancelled:
+        with _cache_lock:
+            _stats["stopped"] += 1
         return {"stopped": True}
     except RenderError as e:
-        return {"error": _one_line(e, task.spec)}
+        return {"error": _one_line(e)}
     with _cache_lock:
         _stats["tiles"] += 1
     return {"arrays": sums.arrays, "rays": sums.rays, "nonfinite": sums.nonfinite, "seconds": seconds,
             "pid": os.getpid()}
 
 
+# -- frames -----------------------------------------------------------------------------------------------------
+
 @dataclass(frozen=True)
 class FrameTask:
     spec: RenderSpec
     frame: float
-    tiles: tuple[tuple[str, TileBox], ...]  # (checkpoint path, tile box)
-    output: str
+    sums: dict  # the frame's assembled filtered sums (renderer.render.assemble of its checkpointed tiles)
     cache_size: int = 2
 
 
-def finish_frame_task(task: FrameTask) -> dict:
-    """Assemble a frame's checkpointed tiles and write its EXR atomically (the same bits as ``drt render``)."""
+def frame_image_task(task: FrameTask, scene: ScenePackage) -> dict:
+    """The frame's EXR channels and header attributes (``write_frame``'s, so the service's EXR has the same bits
+    as ``drt render``'s): ``{"channels", "attributes"}`` or ``{"error"}``. The service writes the file."""
     from renderer.errors import RenderError
-    from renderer.render import Tile, TileSums, assemble, write_frame
+    from renderer.render import frame_attributes, frame_channels
 
     try:
-        prep = prepared(task.spec, task.frame, task.cache_size)
-        parts = [TileSums(tile=Tile(*box), arrays=load_tile(Path(p))) for p, box in task.tiles]
-        sums = assemble(parts, prep.width, prep.height)
-        zeroed = write_frame(task.output, prep, sums, half=task.spec.half)
+        prep = prepared(task.spec, task.frame, scene, task.cache_size)
+        attributes = {k: PortableTimeCode.of(v) if type(v).__name__ == "TimeCode" else v
+                      for k, v in frame_attributes(prep).items()}
+        return {"channels": frame_channels(prep, task.sums), "attributes": attributes}
     except RenderError as e:
-        return {"error": _one_line(e, task.spec)}
-    return {"zeroed": zeroed}
+        return {"error": _one_line(e)}
+
+
+TIMECODE_FIELDS = ("hours", "minutes", "seconds", "frame", "dropFrame", "colorFrame", "fieldPhase", "bgf0", "bgf1",
+                   "bgf2")
 
 
 @dataclass(frozen=True)
-class InspectTask:
-    spec: RenderSpec
-    frames: tuple[float, ...] | None  # None: the stage's start time code
+class PortableTimeCode:
+    """An ``OpenEXR.TimeCode`` in a form that pickles (the binding's own does not). Binary groups are not carried:
+    ``renderer.film.exr.timecode_from_frame`` leaves them 0."""
+
+    fields: tuple[int, ...]
+
+    @classmethod
+    def of(cls, tc) -> "PortableTimeCode":
+        return cls(tuple(int(getattr(tc, f)) for f in TIMECODE_FIELDS))
+
+    def timecode(self):
+        import OpenEXR
+
+        return OpenEXR.TimeCode(*self.fields, *(0,) * 8)
 
 
-def inspect_task(task: InspectTask) -> dict:
-    """Check an upload before it is queued: asset paths, composition, the first frame, resolution.
-
-    Returns ``{"error": message}`` for anything wrong with the scene or settings (the API answers 422), else
-    ``{"frames", "width", "height", "exposure_scale", "warnings"}``.
-    """
-    from .uploads import UploadError, check_asset_paths
-
-    path = Path(task.spec.scene_path)
-    try:
-        check_asset_paths(path)  # before anything composes the stage
-        problem = _composition_problem(path)
-        if problem:
-            return {"error": problem}
-        from renderer.render import MAX_PIXELS, resolve_resolution
-
-        frames = task.frames
-        scene = task.spec.load(frames[0] if frames else None)
-        options = task.spec.options().validate()
-        width, height = resolve_resolution(scene, options)
-        if width * height > MAX_PIXELS:
-            return {"error": f"image of {width}x{height} pixels is too large"}
-        return {"frames": list(frames) if frames else [float(scene.frame)], "width": width, "height": height,
-                "exposure_scale": float(2.0 ** scene.camera.exposure), "warnings": list(scene.warnings)}
-    except UploadError as e:
-        return {"error": _one_line(e, task.spec)}
-    except Exception as e:  # noqa: BLE001 - untrusted input: whatever fails is reported, never a 500
-        from renderer.errors import RenderError
-
-        if isinstance(e, RenderError):
-            return {"error": _one_line(e, task.spec)}
-        return {"error": f"scene could not be loaded: {type(e).__name__}: {_one_line(e, task.spec)}"}
-
-
-def _composition_problem(path: Path) -> str | None:
-    """A reference or payload to a prim that does not exist (or any other composition error), as one line."""
-    from pxr import Usd
-
-    stage = Usd.Stage.Open(str(path), Usd.Stage.LoadAll)
-    errors = stage.GetCompositionErrors() if stage is not None else []
-    if not errors:
-        return None
-    from .uploads import hide_dir
-
-    first = hide_dir(" ".join(str(errors[0]).split()), path.parent)
-    return f"scene has {len(errors)} composition error(s): {first}"
+def exr_attributes(attributes: dict) -> dict:
+    """``frame_image_task``'s attributes as ``write_exr`` takes them (time codes rebuilt)."""
+    return {k: v.timecode() if isinstance(v, PortableTimeCode) else v for k, v in attributes.items()}

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 from fastapi import APIRouter
-from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import PlainTextResponse, Response
 
 from schemas import Health
@@ -16,10 +15,13 @@ router = APIRouter(tags=["health"])
 
 @router.get("/healthz", response_model=Health)
 async def healthz(runtime: RuntimeDep):
-    """200 while the service runs; ``workers``/``threads`` say what the cluster has right now."""
-    workers = await run_in_threadpool(runtime.engine.workers)
-    threads = await run_in_threadpool(runtime.engine.threads)
-    return Health(status="ok", workers=workers, threads=threads)
+    """200 while the service runs (it still answers status requests and downloads while the cluster is away);
+    ``cluster`` says whether the Dask scheduler is reachable, ``workers``/``threads`` what it has. Answers from
+    facts the engine refreshes once a second: never waits on the scheduler."""
+    facts = runtime.engine.facts()
+    return Health(status="ok" if facts.reachable else "degraded",
+                  cluster="reachable" if facts.reachable else "unreachable", workers=facts.workers,
+                  threads=facts.threads)
 
 
 # response_class=Response (no media type of its own): the errors are then documented as JSON, which they are.
@@ -29,8 +31,10 @@ async def healthz(runtime: RuntimeDep):
 def get_metrics(runtime: RuntimeDep):
     """Jobs by state, queue depth, tiles in flight and pending, tiles/s, task failures, cluster size."""
     sch = runtime.scheduler
+    facts = runtime.engine.facts()
     text = metrics.render(runtime.store.counts_by_state(), tiles_completed=sch.tiles_completed,
                           tiles_failed=sch.tiles_failed, tiles_per_second=sch.tiles_per_second(),
                           tiles_in_flight=sch.in_flight(), tiles_pending=sch.pending_tiles(),
-                          workers=runtime.engine.workers(), threads=runtime.engine.threads())
+                          workers=facts.workers, threads=facts.threads, tiles_lost=sch.tiles_lost,
+                          cluster_reachable=facts.reachable)
     return PlainTextResponse(text, media_type="text/plain; version=0.0.4; charset=utf-8")

@@ -77,7 +77,8 @@ def list_jobs(
 
 @router.get("/{job_id}", response_model=JobPublic, responses=answers(404, 422))
 def get_job(store: StoreDep, job_id: str):
-    return job_public(_job(store, job_id))
+    # The API's hot path: the body is serialized once here, not validated again against the response model.
+    return Response(job_public(_job(store, job_id)).model_dump_json(), media_type="application/json")
 
 
 @router.post("/{job_id}/cancel", response_model=JobPublic, responses=answers(404, 409, 422))
@@ -89,7 +90,7 @@ def cancel_job(runtime: RuntimeDep, job_id: str):
         raise ApiError(404, errors.JOB_NOT_FOUND) from None
     except sm.IllegalTransition as e:
         raise ApiError(409, errors.cannot_cancel(e.current.value)) from None
-    runtime.scheduler.wake()  # it drops the job and signals its running tiles to stop at their next sample wave
+    runtime.scheduler.wake()  # it cancels the job's tasks: running tiles stop at their next sample wave
     return job_public(row)
 
 
@@ -99,7 +100,7 @@ def retry_job(runtime: RuntimeDep, job_id: str):
     row = _job(runtime.store, job_id)
     if not sm.can_move(row.job_state, sm.QUEUED):
         raise ApiError(409, errors.cannot_retry(row.state))
-    # No stop signal to clear: each run of a job stops through its own Dask event (service.stopping).
+    # Nothing to clear: a stopped run's tiles were cancelled on Dask; the new run submits new tasks.
     try:
         row = runtime.store.transition(job_id, sm.QUEUED)
     except JobNotFound:

@@ -25,13 +25,13 @@ ROOT = HERE.parent.parent
 DEMO = ROOT / "examples" / "demo.usda"
 
 
-def broken_tile(task):
+def broken_tile(task, scene):
     """Fail the tiles of one scene (a failed job in the list), render the others."""
     from service import worker
 
     if Path(task.spec.scene_path).name == "lighting_v3.usda":
         raise RuntimeError("worker ran out of memory loading /World/Set/Hero (26.1 GiB requested)")
-    return worker.render_tile_task(task)
+    return worker.render_tile_task(task, scene)
 
 
 def main(out: Path) -> None:

@@ -32,7 +32,7 @@ def service_settings(data_dir: Path, **overrides):
     from service.settings import ServiceSettings
 
     base = dict(data_dir=data_dir, processes=False, workers=1, threads_per_worker=2, poll_interval=0.05,
-                inspect_timeout=60)
+                inspect_timeout=60, inspect_processes=1)
     base.update(overrides)
     return ServiceSettings(**base)
 

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import io
-import threading
 import time
 
 import numpy as np
@@ -10,7 +9,7 @@ import pytest
 from PIL import Image
 
 from renderer.film.exr import read_exr
-from service import worker
+from service import inspection, worker
 from service.api.deps import get_settings
 
 from service_helpers import (CONTRACT_LIMITS, assert_same_exr, cli_render, http_contract, service_settings, submit,
@@ -264,7 +263,7 @@ def test_token_through_dependency_override(client, tmp_path):
 
 
 def test_health_metrics_and_docs(client, card):
-    assert client.get("/healthz").json() == {"status": "ok", "workers": 1, "threads": 2}
+    assert client.get("/healthz").json() == {"status": "ok", "cluster": "reachable", "workers": 1, "threads": 2}
     job = wait_job(client, submit(client, card, SMALL).json()["id"])
     r = client.get("/metrics")
     assert r.status_code == 200 and r.headers["content-type"].startswith("text/plain")
@@ -292,21 +291,21 @@ def test_each_frame_is_prepared_once_per_worker(client, card):
 _calls: dict = {}
 
 
-def flaky_tile(task):
+def flaky_tile(task, scene):
     """Tile 0 fails on its first attempt (a transient fault), the rest render normally."""
     if task.tile[:2] == (0, 0) and not _calls.get("failed"):
         _calls["failed"] = True
         raise RuntimeError("transient")
-    return worker.render_tile_task(task)
+    return worker.render_tile_task(task, scene)
 
 
-def broken_tile(task):
+def broken_tile(task, scene):
     if task.tile[:2] == (0, 0):
         raise RuntimeError("boom")
-    return worker.render_tile_task(task)
+    return worker.render_tile_task(task, scene)
 
 
-def renderer_says_no(task):
+def renderer_says_no(task, scene):
     return {"error": "frame 0 has no light"}
 
 
@@ -369,15 +368,36 @@ def test_a_stopped_service_resumes_from_its_checkpoints(make_client, card, tmp_p
     assert_same_exr(tmp_path / "got.exr", tmp_path / "want.exr")
 
 
+def test_an_unreadable_checkpoint_is_rendered_again(make_client, card, tmp_path):
+    client = make_client(threads_per_worker=1, max_in_flight=1)
+    settings = {**SLOW, "spp": 64}
+    job_id = submit(client, card, settings).json()["id"]
+    deadline = time.monotonic() + 60
+    while client.get(f"/v1/jobs/{job_id}").json()["tiles_done"] < 6:
+        assert time.monotonic() < deadline
+        time.sleep(0.02)
+    make_client.stop(client)
+    tiles = sorted((tmp_path / "data" / "jobs" / job_id / "tiles" / "0").glob("*.npz"))
+    assert tiles
+    tiles[0].write_bytes(b"not a checkpoint")  # exists, so the resumed plan trusts it until it is read
+    client2 = make_client(threads_per_worker=2)
+    done_before = client2.get(f"/v1/jobs/{job_id}").json()["tiles_done"]
+    job = wait_job(client2, job_id)
+    assert job["state"] == "succeeded" and job["error"] is None, job
+    assert client2.app.state.runtime.scheduler.tiles_completed == job["tiles_total"] - done_before + 1
+    assert "drt_task_failures_total 0" in client2.get("/metrics").text
+    (tmp_path / "got.exr").write_bytes(client2.get(job["frames"][0]["exr_url"]).content)
+    cli_render(card, tmp_path / "want.exr", "--width", 64, "--height", 64, "--spp", 64)
+    assert_same_exr(tmp_path / "got.exr", tmp_path / "want.exr")
+
+
 def slow_inspection(task):
     time.sleep(3)
-    return worker.inspect_task(task)
+    return inspection.inspect_task(task)
 
 
 def test_a_scene_that_loads_too_long_is_422_and_the_service_carries_on(make_client, card, monkeypatch):
-    import service.submission
-
-    monkeypatch.setattr(service.submission, "inspect_task", slow_inspection)
+    monkeypatch.setattr(inspection, "inspect_task", slow_inspection)  # the pool's processes run this one
     client = make_client(inspect_timeout=0.5)
     r = submit(client, card, SMALL)
     assert (r.status_code, r.json()) == (422, {"detail": "the scene took longer than 0.5 s to load"})
@@ -389,27 +409,33 @@ def test_http_contract(make_client, card, tmp_path):
     http_contract(make_client(**CONTRACT_LIMITS), card, tmp_path)
 
 
-def test_a_running_tile_stops_when_its_job_is_stopped(make_client, card):
-    """Dask cannot interrupt a task: the tile asks the Dask scheduler for its stop event between sample waves (no
-    shared disk involved), and a tile whose event is never set renders on."""
+def test_a_running_tile_stops_when_its_future_is_cancelled(card):
+    """Dask cannot interrupt a task: the tile looks between sample waves whether Dask released it (no file)."""
+    import hashlib
+
+    from distributed import Client, LocalCluster
+
     from schemas import JobCreate
     from service.spec import RenderSpec
-    from service.stopping import StopSignals, new_key
 
-    engine = make_client(threads_per_worker=1).app.state.runtime.engine
-    spec = RenderSpec.from_settings(JobCreate(width=64, height=64, spp=4096), str(card), "sha")
-    key = new_key("job")
-    task = worker.TileTask(spec=spec, frame=0.0, tile=(0, 0, 64, 64), width=64, height=64, stop_key=key)
-    engine.client.submit(worker.prepared, spec, 0.0, pure=False).result()  # load first: time only the tile
-    future = engine.submit(worker.render_tile_task, task, key="tile-1")
-    time.sleep(0.5)
-    signals = StopSignals(engine.client, grace=0.0)
-    t0 = time.perf_counter()
-    signals.stop(key)
-    assert future.result(timeout=30) == {"stopped": True}
-    assert time.perf_counter() - t0 < 3.0  # 16M samples would take well over 10 s
-    signals.sweep()  # cleared: the event no longer exists on the Dask scheduler
-    assert not engine.client.sync(engine.client.scheduler.event_is_set, name=key)
-
-    small = worker.TileTask(spec=spec, frame=0.0, tile=(0, 0, 8, 8), width=64, height=64, stop_key=new_key("job"))
-    assert "arrays" in engine.submit(worker.render_tile_task, small, key="tile-2").result(timeout=60)
+    data = card.read_bytes()
+    sha = hashlib.sha256(data).hexdigest()
+    spec = RenderSpec.from_settings(JobCreate(width=64, height=64, spp=4096), card.name, sha)
+    task = worker.TileTask(spec=spec, frame=0.0, tile=(0, 0, 64, 64), width=64, height=64)
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
+            Client(cluster, set_as_default=False) as client:
+        scene = client.submit(worker.scene_package, sha, card.name, data, pure=False)
+        small = worker.TileTask(spec=spec, frame=0.0, tile=(0, 0, 1, 1), width=64, height=64)
+        assert "arrays" in client.submit(worker.render_tile_task, small, scene, pure=False).result()  # prepared
+        before = worker.stats()["stopped"]
+        fut = client.submit(worker.render_tile_task, task, scene, pure=False)
+        deadline = time.monotonic() + 30
+        while not any(fut.key in keys for keys in client.processing().values()):
+            assert time.monotonic() < deadline
+            time.sleep(0.02)
+        time.sleep(0.3)
+        t0 = time.perf_counter()
+        fut.cancel()
+        while worker.stats()["stopped"] == before:
+            assert time.perf_counter() - t0 < 3.0, "16M samples would take well over 10 s"
+            time.sleep(0.02)

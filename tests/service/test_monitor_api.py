@@ -143,13 +143,13 @@ def test_a_canceled_job_retried_resumes_and_equals_drt_render(server, card, tmp_
 _failures = {"left": 0}
 
 
-def failing_tile(task):
+def failing_tile(task, scene):
     from service import worker
 
     if task.tile[:2] == (0, 0) and _failures["left"] > 0:
         _failures["left"] -= 1
         raise RuntimeError("worker fell over")
-    return worker.render_tile_task(task)
+    return worker.render_tile_task(task, scene)
 
 
 def test_a_failed_job_retried_gets_fresh_attempts(server, card, monkeypatch):

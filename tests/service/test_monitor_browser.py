@@ -170,7 +170,7 @@ def test_cancel_retry_delete_from_the_page(server, tab, card):
     assert server.http.get(f"/v1/jobs/{job_id}").status_code == 404
 
 
-def _explode(task):
+def _explode(task, scene):
     raise RuntimeError(f"{HTML} & <b>not bold</b>")
 
 
