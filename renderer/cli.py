@@ -94,6 +94,8 @@ def add_render_settings(p: argparse.ArgumentParser) -> None:
                    help=f"bounces after the camera ray, 0..{MAX_DEPTH} (default {d.max_depth}; 1 = direct lighting only)")
     p.add_argument("--clamp", type=_non_negative, default=d.clamp, metavar="X",
                    help="clamp each sample's radiance to X per channel to cut fireflies (default 0 = off)")
+    p.add_argument("--unbiased", action="store_true",
+                   help="no path regularization: turn off the default indirect clamp and glossy filter")
 
 
 def new_parser() -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
@@ -153,7 +155,8 @@ def request_from_args(args: argparse.Namespace):
 
     options = RenderOptions(width=args.width, height=args.height, spp=args.spp, seed=args.seed,
                             filter=args.filter, time_filter=args.time_filter, dof=not args.no_dof,
-                            aovs=tuple(dict.fromkeys(args.aov)), max_depth=args.max_depth, clamp=args.clamp)
+                            aovs=tuple(dict.fromkeys(args.aov)), max_depth=args.max_depth, clamp=args.clamp,
+                            unbiased=args.unbiased)
     lens = LensOverrides(focal_length=args.focal_length, f_stop=args.f_stop, focus_distance=args.focus_distance)
     return RenderRequest(scene_path=args.scene, frame=args.frame, camera=args.camera,
                          shutter=tuple(args.shutter) if args.shutter else None,

@@ -15,6 +15,8 @@ AOV_NAMES = ("depth", "normal", "albedo")
 MAX_DEPTH = 64
 MAX_SPP = 1 << 16
 MAX_PIXELS = 16384 * 16384
+INDIRECT_CLAMP = 10.0  # default indirect clamp (Cycles' default too)
+GLOSSY_FILTER = 1.0  # default glossy filter k
 
 
 @dataclass(frozen=True)
@@ -30,7 +32,21 @@ class RenderOptions:
     dof: bool = True
     aovs: tuple[str, ...] = ()
     max_depth: int = 8  # bounces after the camera ray; 1 = direct lighting only
-    clamp: float = 0.0  # maximum radiance of a sample per channel, 0 = off (fireflies are never cut silently)
+    clamp: float = 0.0  # maximum radiance of a sample per channel, 0 = off (the direct/all clamp)
+    # Path regularization, the production default (README "Noise defaults"); ``unbiased`` turns it all off.
+    unbiased: bool = False
+    indirect_clamp: float = INDIRECT_CLAMP  # largest channel of a contribution after > 1 bounce, 0 = off
+    glossy_filter: float = GLOSSY_FILTER  # later lobes roughened to >= k x the path's roughness so far, 0 = off
+
+    @property
+    def path_indirect_clamp(self) -> float:
+        """The indirect clamp in effect (0 when unbiased)."""
+        return 0.0 if self.unbiased else float(self.indirect_clamp)
+
+    @property
+    def path_glossy_filter(self) -> float:
+        """The glossy filter in effect (0 when unbiased)."""
+        return 0.0 if self.unbiased else float(self.glossy_filter)
 
     def validate(self) -> "RenderOptions":
         if self.filter not in FILTERS:
@@ -48,6 +64,9 @@ class RenderOptions:
             raise SettingsError(f"max_depth must be between 0 and {MAX_DEPTH}, got {self.max_depth}")
         if not (self.clamp >= 0.0 and math.isfinite(self.clamp)):
             raise SettingsError(f"clamp must be a finite number >= 0, got {self.clamp}")
+        for name, v in (("indirect_clamp", self.indirect_clamp), ("glossy_filter", self.glossy_filter)):
+            if not (v >= 0.0 and math.isfinite(v)):
+                raise SettingsError(f"{name} must be a finite number >= 0, got {v}")
         for a in self.aovs:
             if a not in AOV_NAMES:
                 raise SettingsError(f"unknown AOV {a!r} (choose from {', '.join(AOV_NAMES)})")

@@ -160,6 +160,8 @@ def render_tile(prep: PreparedScene, tile: Tile,
     settings = PathSettings()
     settings.max_depth = int(opts.max_depth)
     settings.clamp = float(opts.clamp)
+    settings.indirect_clamp = opts.path_indirect_clamp
+    settings.glossy_filter = opts.path_glossy_filter
     settings.time_filter = TIME_FILTERS[opts.time_filter]
     settings.frame_s = frame_shutter_time(prep.scene)
     settings.seed = wp.uint32(opts.seed)
@@ -277,6 +279,9 @@ def frame_attributes(prep: PreparedScene) -> dict:
         "drt/frame": float(scene.frame),
         "drt/camera": scene.camera.name,
         "drt/spp": int(o.spp),
+        "drt/unbiased": int(o.unbiased),
+        "drt/indirectClamp": o.path_indirect_clamp,
+        "drt/glossyFilter": o.path_glossy_filter,
         "drt/seed": int(o.seed),
         "drt/filter": o.filter,
         "drt/timeFilter": o.time_filter,

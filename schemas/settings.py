@@ -90,6 +90,7 @@ class RenderSettings(_Strict):
     focus_distance: float | None = Field(None, gt=0, le=1.0e12, description="override, in scene units")
     max_depth: int = Field(8, ge=0, le=MAX_DEPTH, description="bounces after the camera ray (1: direct lighting only)")
     clamp: float = Field(0.0, ge=0, description="clamp each sample's radiance to this per channel (0: off)")
+    unbiased: bool = Field(False, description="no path regularization (default indirect clamp and glossy filter off)")
     aovs: list[AovName] = Field(default_factory=list, max_length=len(AOVS),
                                 description="extra channels: depth, normal, albedo")
     half: bool = Field(False, description="store colour and AOVs as HALF (depth stays FLOAT)")

@@ -217,7 +217,7 @@ def settings_from_args(args: argparse.Namespace) -> dict:
            "seed": args.seed, "tile": args.tile, "filter": args.filter, "time_filter": args.time_filter,
            "shutter": list(args.shutter) if args.shutter else None, "motion_blur": not args.no_motion_blur,
            "dof": not args.no_dof, "aovs": list(dict.fromkeys(args.aov)), "half": args.half,
-           "max_depth": args.max_depth, "clamp": args.clamp,
+           "max_depth": args.max_depth, "clamp": args.clamp, "unbiased": args.unbiased,
            "priority": args.priority, "focal_length": args.focal_length, "f_stop": args.f_stop,
            "focus_distance": args.focus_distance}
     return {k: v for k, v in out.items() if v is not None}

@@ -36,6 +36,7 @@ class RenderSpec:
     aovs: tuple[str, ...] = ()
     max_depth: int = 8
     clamp: float = 0.0
+    unbiased: bool = False
     half: bool = False
 
     @classmethod
@@ -46,7 +47,7 @@ class RenderSpec:
                    focus_distance=settings.focus_distance, width=settings.width, height=settings.height,
                    spp=settings.spp, seed=settings.seed, filter=settings.filter, time_filter=settings.time_filter,
                    dof=settings.dof, aovs=tuple(settings.aovs), max_depth=settings.max_depth, clamp=settings.clamp,
-                   half=settings.half)
+                   unbiased=settings.unbiased, half=settings.half)
 
     def cache_key(self, frame: float | None) -> tuple:
         """What a prepared scene depends on (not the file's path: the same content is the same scene)."""
@@ -58,7 +59,7 @@ class RenderSpec:
     def options(self) -> RenderOptions:
         return RenderOptions(width=self.width, height=self.height, spp=self.spp, seed=self.seed, filter=self.filter,
                              time_filter=self.time_filter, dof=self.dof, aovs=self.aovs, max_depth=self.max_depth,
-                             clamp=self.clamp)
+                             clamp=self.clamp, unbiased=self.unbiased)
 
     def request(self, frame: float | None) -> RenderRequest:
         """One frame of this job as the renderer's RenderRequest."""
