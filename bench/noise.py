@@ -48,12 +48,13 @@ def relmse(img: np.ndarray, ref: np.ndarray) -> float:
     return float(np.mean((img - ref) ** 2 / (ref ** 2 + 1e-2)))
 
 
-def drt(a, scene: str, out: str, spp: int, seed: int, *extra: str) -> float:
+def drt(a, scene: str, out: str, spp: int, seed: int, *extra: str, size: tuple[int, int] | None = None) -> float:
     """Render with drt; returns the render seconds it reports (scene load excluded, as for Cycles)."""
     cache = out + ".json"
     if os.path.exists(out) and os.path.exists(cache):
         return json.load(open(cache))["seconds"]
-    p = subprocess.run(["drt", "render", scene, "-o", out, "--width", str(a.w), "--height", str(a.h), "--spp",
+    w, h = size or (a.w, a.h)
+    p = subprocess.run(["drt", "render", scene, "-o", out, "--width", str(w), "--height", str(h), "--spp",
                         str(spp), "--seed", str(seed), "--threads", "2", "--quiet", *extra],
                        capture_output=True, text=True)
     if p.returncode:
@@ -87,6 +88,9 @@ def main() -> None:
     ap.add_argument("--h", type=int, default=180)
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--ref", type=int, default=1024)
+    ap.add_argument("--bias-w", type=int, default=160, help="bias renders' width (the image mean converges fast)")
+    ap.add_argument("--bias-h", type=int, default=90)
+    ap.add_argument("--bias-spp", type=int, default=256)
     ap.add_argument("--no-cycles", action="store_true")
     ap.add_argument("--bpy", default=os.environ.get("BPY", "/tmp/noise-bpy/bin/python"))
     a = ap.parse_args()
@@ -112,9 +116,10 @@ def main() -> None:
     for name in a.bias_scenes:
         scene, _ = SCENES[name]
         o = lambda k: f"{a.out}/{name}_{k}.exr"  # noqa: E731
-        drt(a, scene, o("drt_ref"), a.ref, 7)
-        drt(a, scene, o("drt_ref_unbiased"), a.ref, 7, "--unbiased")
-        md, mu = rgb(o("drt_ref")).mean((0, 1)), rgb(o("drt_ref_unbiased")).mean((0, 1))
+        size = (a.bias_w, a.bias_h)
+        drt(a, scene, o("bias_default"), a.bias_spp, 7, size=size)
+        drt(a, scene, o("bias_unbiased"), a.bias_spp, 7, "--unbiased", size=size)
+        md, mu = rgb(o("bias_default")).mean((0, 1)), rgb(o("bias_unbiased")).mean((0, 1))
         bias = (md - mu) / np.maximum(mu, 1e-6)
         rows.append(dict(scene=name, mean_default=md.tolist(), mean_unbiased=mu.tolist(), bias=bias.tolist()))
         print(f"{name}: converged mean default {md.round(4)} unbiased {mu.round(4)} "

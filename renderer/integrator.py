@@ -262,12 +262,13 @@ def trace_wave_kernel(
     region_x0: int,
     region_y0: int,
     region_w: int,
+    active: wp.array(dtype=wp.int32),  # region pixels still sampling (adaptive sampling); slot = position here
     wave_start: int,  # sample index of this wave's first sample
     wave: int,  # samples per pixel in this wave
 ):
     tid = wp.tid()
     j = tid % wave
-    pr = tid // wave
+    pr = active[tid // wave]
     px = region_x0 + pr % region_w
     py = region_y0 + pr // region_w
     pixel = wp.uint32(py * cam.width + px)

@@ -11,12 +11,14 @@ from renderer.errors import SettingsError
 
 FILTERS = {"box": 0, "triangle": 1, "gaussian": 2, "blackman-harris": 3}  # pixel reconstruction filters
 TIME_FILTERS = {"box": 0, "triangle": 1, "strobe": 2}  # shutter weightings
-AOV_NAMES = ("depth", "normal", "albedo")
+AOV_NAMES = ("depth", "normal", "albedo", "spp")
 MAX_DEPTH = 64
 MAX_SPP = 1 << 16
 MAX_PIXELS = 16384 * 16384
 INDIRECT_CLAMP = 10.0  # default indirect clamp (Cycles' default too)
 GLOSSY_FILTER = 1.0  # default glossy filter k
+MIN_SPP = 16  # default adaptive minimum
+MAX_TIME_LIMIT = 7 * 24 * 3600.0  # seconds
 
 
 @dataclass(frozen=True)
@@ -37,6 +39,11 @@ class RenderOptions:
     unbiased: bool = False
     indirect_clamp: float = INDIRECT_CLAMP  # largest channel of a contribution after > 1 bounce, 0 = off
     glossy_filter: float = GLOSSY_FILTER  # later lobes roughened to >= k x the path's roughness so far, 0 = off
+
+    # Adaptive sampling (README "Adaptive sampling"): 0 = off, every pixel takes spp samples
+    noise_threshold: float = 0.0
+    min_spp: int = MIN_SPP  # samples before a pixel may stop
+    time_limit: float = 0.0  # seconds of rendering for the frame, 0 = none; spp is then the cap
 
     @property
     def path_indirect_clamp(self) -> float:
@@ -67,6 +74,12 @@ class RenderOptions:
         for name, v in (("indirect_clamp", self.indirect_clamp), ("glossy_filter", self.glossy_filter)):
             if not (v >= 0.0 and math.isfinite(v)):
                 raise SettingsError(f"{name} must be a finite number >= 0, got {v}")
+        if not (0.0 <= self.noise_threshold < 1.0e3 and math.isfinite(self.noise_threshold)):
+            raise SettingsError(f"noise_threshold must be a number >= 0, got {self.noise_threshold}")
+        if not 1 <= self.min_spp <= MAX_SPP:
+            raise SettingsError(f"min_spp must be between 1 and {MAX_SPP}, got {self.min_spp}")
+        if not (0.0 <= self.time_limit <= MAX_TIME_LIMIT):
+            raise SettingsError(f"time_limit must be between 0 and {MAX_TIME_LIMIT:g} seconds, got {self.time_limit}")
         for a in self.aovs:
             if a not in AOV_NAMES:
                 raise SettingsError(f"unknown AOV {a!r} (choose from {', '.join(AOV_NAMES)})")

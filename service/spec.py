@@ -37,6 +37,9 @@ class RenderSpec:
     max_depth: int = 8
     clamp: float = 0.0
     unbiased: bool = False
+    noise_threshold: float = 0.0
+    min_spp: int = 16
+    time_limit: float = 0.0
     half: bool = False
 
     @classmethod
@@ -47,7 +50,8 @@ class RenderSpec:
                    focus_distance=settings.focus_distance, width=settings.width, height=settings.height,
                    spp=settings.spp, seed=settings.seed, filter=settings.filter, time_filter=settings.time_filter,
                    dof=settings.dof, aovs=tuple(settings.aovs), max_depth=settings.max_depth, clamp=settings.clamp,
-                   unbiased=settings.unbiased, half=settings.half)
+                   unbiased=settings.unbiased, noise_threshold=settings.noise_threshold,
+                   min_spp=settings.min_spp, time_limit=settings.time_limit, half=settings.half)
 
     def cache_key(self, frame: float | None) -> tuple:
         """What a prepared scene depends on (not the file's path: the same content is the same scene)."""
@@ -59,7 +63,8 @@ class RenderSpec:
     def options(self) -> RenderOptions:
         return RenderOptions(width=self.width, height=self.height, spp=self.spp, seed=self.seed, filter=self.filter,
                              time_filter=self.time_filter, dof=self.dof, aovs=self.aovs, max_depth=self.max_depth,
-                             clamp=self.clamp, unbiased=self.unbiased)
+                             clamp=self.clamp, unbiased=self.unbiased,
+                             noise_threshold=self.noise_threshold, min_spp=self.min_spp, time_limit=self.time_limit)
 
     def request(self, frame: float | None) -> RenderRequest:
         """One frame of this job as the renderer's RenderRequest."""

@@ -45,7 +45,7 @@ def test_frames_list_or_range():
     ('{"width": 0}', "invalid settings: width: Input should be greater than or equal to 1"),
     ('{"filter": "mitchell"}',
      "invalid settings: filter: Input should be 'gaussian', 'box', 'triangle' or 'blackman-harris'"),
-    ('{"aovs": ["beauty"]}', "invalid settings: aovs.0: Input should be 'depth', 'normal' or 'albedo'"),
+    ('{"aovs": ["beauty"]}', "invalid settings: aovs.0: Input should be 'depth', 'normal', 'albedo' or 'spp'"),
     ('{"shutter": [0.5, 0.25]}', "invalid settings: shutter: shutter open (0.5) is after close (0.25)"),
     ('{"frames": [1, 1]}', "invalid settings: frames: frames must be unique"),
     ('{"frames": []}', "invalid settings: frames: give at least one frame"),
