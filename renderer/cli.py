@@ -103,6 +103,9 @@ def add_render_settings(p: argparse.ArgumentParser) -> None:
                         "(default 0 = off)")
     p.add_argument("--min-spp", type=_positive_int, default=d.min_spp, metavar="N",
                    help=f"adaptive sampling: samples before a pixel may stop (default {d.min_spp})")
+    p.add_argument("--denoise", action="store_true",
+                   help="add an Open Image Denoise layer denoised.R/G/B (the beauty stays raw); "
+                        "needs pip install 'drt[denoise]'")
     p.add_argument("--time-limit", type=_non_negative, default=d.time_limit, metavar="SECONDS",
                    help="render progressively for at most this long (default 0 = no limit; --spp is then the "
                         f"cap, {TIME_LIMITED_SPP} unless given)")
@@ -170,7 +173,7 @@ def request_from_args(args: argparse.Namespace):
                             filter=args.filter, time_filter=args.time_filter, dof=not args.no_dof,
                             aovs=tuple(dict.fromkeys(args.aov)), max_depth=args.max_depth, clamp=args.clamp,
                             unbiased=args.unbiased, noise_threshold=args.noise_threshold,
-                            min_spp=args.min_spp, time_limit=args.time_limit)
+                            min_spp=args.min_spp, time_limit=args.time_limit, denoise=args.denoise)
     lens = LensOverrides(focal_length=args.focal_length, f_stop=args.f_stop, focus_distance=args.focus_distance)
     return RenderRequest(scene_path=args.scene, frame=args.frame, camera=args.camera,
                          shutter=tuple(args.shutter) if args.shutter else None,

@@ -44,6 +44,7 @@ class RenderOptions:
     noise_threshold: float = 0.0
     min_spp: int = MIN_SPP  # samples before a pixel may stop
     time_limit: float = 0.0  # seconds of rendering for the frame, 0 = none; spp is then the cap
+    denoise: bool = False  # add an OIDN-denoised layer (denoised.R/G/B); needs the [denoise] extra
 
     @property
     def path_indirect_clamp(self) -> float:

@@ -26,6 +26,7 @@ from renderer.camera import CameraSetup, ndc_matrix, setup_camera
 from renderer.device import init_warp
 from renderer.errors import Cancelled, SettingsError
 from renderer.film import film
+from renderer.film import denoise
 from renderer.film.adaptive import Convergence
 from renderer.film.exr import timecode_from_frame, write_exr
 from renderer.integrator import PathSettings, trace_wave_kernel
@@ -116,6 +117,8 @@ def load_kernels(device: str = "cpu") -> None:
 def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> PreparedScene:
     """Build the hierarchy and upload lights, materials and camera: once per (scene, frame)."""
     options.validate()
+    if options.denoise:
+        denoise.require()
     load_kernels(device)
     width, height = resolve_resolution(scene, options)
     if width * height > MAX_PIXELS:
@@ -286,13 +289,16 @@ def render_frame(prep: PreparedScene, *, tile_size: int = 64, threads: int = 2,
 
 
 def frame_channels(prep: PreparedScene, sums: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """EXR channels of a frame: premultiplied R, G, B, A and the requested AOVs."""
+    """EXR channels of a frame: premultiplied R, G, B, A, the requested AOVs and the denoised layer if asked."""
     r = film.resolve(sums, prep.camera.params.exposure_scale)
     ch = {"R": r["rgba"][..., 0], "G": r["rgba"][..., 1], "B": r["rgba"][..., 2], "A": r["rgba"][..., 3]}
     if "depth" in prep.options.aovs:
         ch["depth.Z"] = r["depth"]
     if "normal" in prep.options.aovs:
         ch.update({"N.X": r["normal"][..., 0], "N.Y": r["normal"][..., 1], "N.Z": r["normal"][..., 2]})
+    if prep.options.denoise:  # on the assembled frame: the filter needs the whole image around each pixel
+        d = denoise.denoise_rgb(r["rgba"][..., :3], r["albedo"], r["normal"])
+        ch.update({"denoised.R": d[..., 0], "denoised.G": d[..., 1], "denoised.B": d[..., 2]})
     if "spp" in prep.options.aovs and "spp" in sums:
         ch["spp.Y"] = sums["spp"]
     if "albedo" in prep.options.aovs:
@@ -322,6 +328,9 @@ def frame_attributes(prep: PreparedScene) -> dict:
         "drt/camera": scene.camera.name,
         "drt/spp": int(o.spp),
         "drt/unbiased": int(o.unbiased),
+        "drt/noiseThreshold": float(o.noise_threshold),
+        "drt/timeLimit": float(o.time_limit),
+        "drt/denoised": int(o.denoise),
         "drt/indirectClamp": o.path_indirect_clamp,
         "drt/glossyFilter": o.path_glossy_filter,
         "drt/seed": int(o.seed),

@@ -99,6 +99,7 @@ class RenderSettings(_Strict):
                                           "spp is then the cap); time-limited frames are not bit-reproducible")
     aovs: list[AovName] = Field(default_factory=list, max_length=len(AOVS),
                                 description="extra channels: depth, normal, albedo, spp")
+    denoise: bool = Field(False, description="add an Open Image Denoise layer denoised.R/G/B (beauty stays raw)")
     half: bool = Field(False, description="store colour and AOVs as HALF (depth stays FLOAT)")
 
     @field_validator("frames")

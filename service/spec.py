@@ -40,6 +40,7 @@ class RenderSpec:
     noise_threshold: float = 0.0
     min_spp: int = 16
     time_limit: float = 0.0
+    denoise: bool = False
     half: bool = False
 
     @classmethod
@@ -51,7 +52,8 @@ class RenderSpec:
                    spp=settings.spp, seed=settings.seed, filter=settings.filter, time_filter=settings.time_filter,
                    dof=settings.dof, aovs=tuple(settings.aovs), max_depth=settings.max_depth, clamp=settings.clamp,
                    unbiased=settings.unbiased, noise_threshold=settings.noise_threshold,
-                   min_spp=settings.min_spp, time_limit=settings.time_limit, half=settings.half)
+                   min_spp=settings.min_spp, time_limit=settings.time_limit, denoise=settings.denoise,
+                   half=settings.half)
 
     def cache_key(self, frame: float | None) -> tuple:
         """What a prepared scene depends on (not the file's path: the same content is the same scene)."""
@@ -64,7 +66,8 @@ class RenderSpec:
         return RenderOptions(width=self.width, height=self.height, spp=self.spp, seed=self.seed, filter=self.filter,
                              time_filter=self.time_filter, dof=self.dof, aovs=self.aovs, max_depth=self.max_depth,
                              clamp=self.clamp, unbiased=self.unbiased,
-                             noise_threshold=self.noise_threshold, min_spp=self.min_spp, time_limit=self.time_limit)
+                             noise_threshold=self.noise_threshold, min_spp=self.min_spp, time_limit=self.time_limit,
+                             denoise=self.denoise)
 
     def request(self, frame: float | None) -> RenderRequest:
         """One frame of this job as the renderer's RenderRequest."""

@@ -106,9 +106,20 @@ def _stop_check(flag: str | None, every: float = 0.1):
     return on_wave
 
 
+def _worker_threads() -> int:
+    """Threads of the Dask worker running this task (tiles rendering at once), 1 outside a worker."""
+    try:
+        from distributed import get_worker
+
+        w = get_worker()
+        return max(1, int(getattr(getattr(w, "state", w), "nthreads", 1)))
+    except (ImportError, ValueError):
+        return 1
+
+
 def render_tile_task(task: TileTask) -> dict:
     from renderer.errors import Cancelled, RenderError
-    from renderer.render import Tile, render_tile
+    from renderer.render import Tile, render_tile, tile_time_budget
 
     try:
         prep = prepared(task.spec, task.frame, task.cache_size)
@@ -116,7 +127,9 @@ def render_tile_task(task: TileTask) -> dict:
             return {"error": f"frame {task.frame:g} renders at {prep.width}x{prep.height}, "
                              f"not at the job's {task.width}x{task.height}"}
         t0 = time.perf_counter()
-        sums = render_tile(prep, Tile(*task.tile), on_wave=_stop_check(task.stop_flag))
+        tile = Tile(*task.tile)
+        budget = tile_time_budget(prep.options, tile, prep.width, prep.height, _worker_threads())
+        sums = render_tile(prep, tile, on_wave=_stop_check(task.stop_flag), time_budget=budget)
         seconds = time.perf_counter() - t0
     except Cancelled:
         return {"stopped": True}

@@ -80,3 +80,12 @@ def test_time_limit_is_respected_within_ten_percent(scene, limit):
     wall = time.perf_counter() - t0
     assert 0.5 * limit < wall < 1.1 * limit, wall
     assert r.sums["spp"].min() >= 1 and np.isfinite(r.sums["rgba"]).all()
+
+
+def test_tile_budgets_share_the_frame_limit_by_area():
+    from renderer.render import split_tiles, tile_time_budget
+
+    o = RenderOptions(time_limit=10.0)
+    tiles = split_tiles(100, 70, 32)
+    assert sum(tile_time_budget(o, t, 100, 70, threads=2) for t in tiles) == pytest.approx(20.0)
+    assert tile_time_budget(RenderOptions(), tiles[0], 100, 70) is None

@@ -27,6 +27,8 @@ def test_defaults_are_drt_render_defaults():
 
     o = RenderOptions()
     assert (s.max_depth, s.clamp) == (o.max_depth, o.clamp)
+    assert (s.unbiased, s.noise_threshold, s.min_spp, s.time_limit, s.denoise) == \
+        (o.unbiased, o.noise_threshold, o.min_spp, o.time_limit, o.denoise)
     assert JobCreate.model_fields["max_depth"].metadata[-1].le == MAX_DEPTH
     assert s.frame_times() is None
 
@@ -87,3 +89,11 @@ def test_spec_maps_settings_like_drt_render():
     halved = RenderSpec.from_settings(s.model_copy(update={"half": True}), "/y", "abc")
     assert spec.cache_key(1.0) == halved.cache_key(1.0)
     assert spec.cache_key(1.0) != spec.cache_key(2.0)
+
+
+def test_noise_settings_reach_the_renderer_options():
+    s = JobCreate(unbiased=True, noise_threshold=0.02, min_spp=8, time_limit=5.0, denoise=True, aovs=["spp"])
+    o = RenderSpec.from_settings(s, "/x/scene.usda", "sha").options()
+    assert (o.unbiased, o.noise_threshold, o.min_spp, o.time_limit, o.denoise, o.aovs) == \
+        (True, 0.02, 8, 5.0, True, ("spp",))
+    o.validate()
