@@ -68,7 +68,7 @@ def cycles(a, scene: str, out: str, spp: int, seed: int, motion: bool) -> float:
     cache = out + ".json"
     if os.path.exists(out) and os.path.exists(cache):
         return json.load(open(cache))["seconds"]
-    p = subprocess.run([a.bpy, f"{SHARED}/cycles_render.py", os.path.abspath(scene), out, str(a.w), str(a.h),
+    p = subprocess.run([a.bpy, f"{HERE}/cycles_render.py", os.path.abspath(scene), out, str(a.w), str(a.h),
                         str(spp), str(seed)] + (["motion"] if motion else []),
                        capture_output=True, text=True, env=dict(os.environ, HOME=a.out))
     if p.returncode:

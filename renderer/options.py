@@ -16,7 +16,7 @@ MAX_DEPTH = 64
 MAX_SPP = 1 << 16
 MAX_PIXELS = 16384 * 16384
 INDIRECT_CLAMP = 10.0  # default indirect clamp (Cycles' default too)
-GLOSSY_FILTER = 1.0  # default glossy filter k
+GLOSSY_FILTER = 0.7  # default glossy filter k: bias within 2 % on the bench scenes (README "Noise defaults")
 MIN_SPP = 16  # default adaptive minimum
 MAX_TIME_LIMIT = 7 * 24 * 3600.0  # seconds
 

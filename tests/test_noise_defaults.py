@@ -68,7 +68,7 @@ def test_glossy_filter_roughens_lobes_after_a_rough_bounce(scene):
 def test_settings_are_recorded_and_validated(scene):
     prep = prepare(scene, RenderOptions(width=8, height=8, spp=1))
     attrs = frame_attributes(prep)
-    assert attrs["drt/unbiased"] == 0 and attrs["drt/indirectClamp"] == 10.0 and attrs["drt/glossyFilter"] == 1.0
+    assert attrs["drt/unbiased"] == 0 and attrs["drt/indirectClamp"] == 10.0 and attrs["drt/glossyFilter"] == 0.7
     attrs = frame_attributes(prepare(scene, RenderOptions(width=8, height=8, spp=1, unbiased=True)))
     assert attrs["drt/unbiased"] == 1 and attrs["drt/indirectClamp"] == 0.0 and attrs["drt/glossyFilter"] == 0.0
     from renderer.errors import SettingsError
