@@ -14,6 +14,8 @@ import time
 
 from renderer.options import AOV_NAMES, FILTERS, MAX_DEPTH, TIME_FILTERS, RenderOptions
 
+TIME_LIMITED_SPP = 4096  # the sample cap of a time-limited render when --spp is not given
+
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line, exit 2 (argparse would print the usage block)
@@ -73,7 +75,7 @@ def add_render_settings(p: argparse.ArgumentParser) -> None:
     p.add_argument("--camera", default=None, metavar="PRIM_PATH", help="camera prim (default: render settings)")
     p.add_argument("--width", type=_positive_int, default=None)
     p.add_argument("--height", type=_positive_int, default=None)
-    p.add_argument("--spp", type=_positive_int, default=d.spp, help=f"samples per pixel (default {d.spp})")
+    p.add_argument("--spp", type=_positive_int, default=None, help=f"samples per pixel (default {d.spp})")
     p.add_argument("--seed", type=_seed, default=d.seed)
     p.add_argument("--filter", choices=list(FILTERS), default=d.filter, help=f"pixel filter (default {d.filter})")
     p.add_argument("--time-filter", choices=list(TIME_FILTERS), default=d.time_filter,
@@ -94,6 +96,19 @@ def add_render_settings(p: argparse.ArgumentParser) -> None:
                    help=f"bounces after the camera ray, 0..{MAX_DEPTH} (default {d.max_depth}; 1 = direct lighting only)")
     p.add_argument("--clamp", type=_non_negative, default=d.clamp, metavar="X",
                    help="clamp each sample's radiance to X per channel to cut fireflies (default 0 = off)")
+    p.add_argument("--unbiased", action="store_true",
+                   help="no path regularization: turn off the default indirect clamp and glossy filter")
+    p.add_argument("--noise-threshold", type=_non_negative, default=d.noise_threshold, metavar="E",
+                   help="adaptive sampling: a pixel stops once its error estimate is below E, e.g. 0.01 "
+                        "(default 0 = off)")
+    p.add_argument("--min-spp", type=_positive_int, default=d.min_spp, metavar="N",
+                   help=f"adaptive sampling: samples before a pixel may stop (default {d.min_spp})")
+    p.add_argument("--denoise", action="store_true",
+                   help="add an Open Image Denoise layer denoised.R/G/B (the beauty stays raw); "
+                        "needs pip install 'drt[denoise]'")
+    p.add_argument("--time-limit", type=_non_negative, default=d.time_limit, metavar="SECONDS",
+                   help="render progressively for at most this long (default 0 = no limit; --spp is then the "
+                        f"cap, {TIME_LIMITED_SPP} unless given)")
 
 
 def new_parser() -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
@@ -151,9 +166,14 @@ def request_from_args(args: argparse.Namespace):
     """The RenderRequest that ``drt render``'s flags describe."""
     from renderer.request import LensOverrides, RenderRequest
 
-    options = RenderOptions(width=args.width, height=args.height, spp=args.spp, seed=args.seed,
+    spp = args.spp
+    if spp is None:
+        spp = TIME_LIMITED_SPP if args.time_limit else RenderOptions().spp
+    options = RenderOptions(width=args.width, height=args.height, spp=spp, seed=args.seed,
                             filter=args.filter, time_filter=args.time_filter, dof=not args.no_dof,
-                            aovs=tuple(dict.fromkeys(args.aov)), max_depth=args.max_depth, clamp=args.clamp)
+                            aovs=tuple(dict.fromkeys(args.aov)), max_depth=args.max_depth, clamp=args.clamp,
+                            unbiased=args.unbiased, noise_threshold=args.noise_threshold,
+                            min_spp=args.min_spp, time_limit=args.time_limit, denoise=args.denoise)
     lens = LensOverrides(focal_length=args.focal_length, f_stop=args.f_stop, focus_distance=args.focus_distance)
     return RenderRequest(scene_path=args.scene, frame=args.frame, camera=args.camera,
                          shutter=tuple(args.shutter) if args.shutter else None,
@@ -190,7 +210,10 @@ def cmd_render(args: argparse.Namespace) -> int:
         sys.stderr.write(f"drt: warning: {zeroed} non-finite pixel values were zeroed\n")
     sps = result.samples / max(result.seconds, 1e-9)
     rps = result.rays / max(result.seconds, 1e-9)
-    print(f"wrote {args.output} ({prep.width}x{prep.height}, {options.spp} spp, {threads} threads): "
+    spp = f"{options.spp} spp"
+    if result.samples != prep.width * prep.height * options.spp:  # adaptive or time-limited
+        spp = f"{result.samples / (prep.width * prep.height):.1f} spp on average, at most {options.spp}"
+    print(f"wrote {args.output} ({prep.width}x{prep.height}, {spp}, {threads} threads): "
           f"{result.seconds:.2f} s render + {load_seconds:.2f} s load, {_si(sps)}samples/s, {_si(rps)}rays/s")
     return 0
 

@@ -12,6 +12,13 @@ the BSDF samples, which may hit an emitter by itself. Paths end by Russian roule
 Inside a closed solid entered through its surface, light is absorbed along the distance travelled
 (Beer-Lambert). Samples with NaN/Inf radiance are counted and zeroed; ``clamp`` (off by default) limits a
 sample's radiance to cut fireflies, never silently.
+
+Path regularization (the production default, off with ``unbiased``; see README "Noise defaults"):
+- *indirect clamp*: each contribution that reached the camera after more than one surface bounce is scaled
+  down so that its largest channel is at most ``indirect_clamp`` (hue kept), as Cycles' indirect clamp;
+- *glossy filter*: after a rough bounce, later lobes are roughened to at least ``glossy_filter`` times the
+  roughness the path has had so far (estimated from the pdf of each sampled direction), as Cycles' "filter
+  glossy": caustic-like paths (diffuse -> sharp gloss -> small light) become low-variance blurred ones.
 """
 from __future__ import annotations
 
@@ -212,10 +219,45 @@ def is_infinite_light(kind: int):
     return kind == LIGHT_DOME or kind == LIGHT_DISTANT
 
 
+@wp.func
+def clamp_contribution(c: wp.vec3, limit: float):
+    """c scaled so its largest channel is at most limit (limit 0 = off); the hue is kept."""
+    m = wp.max(wp.max(c[0], c[1]), c[2])
+    if limit > 0.0 and m > limit:
+        return c * (limit / m)
+    return c
+
+
+@wp.func
+def roughness_of_pdf(pdf: float):
+    """The perceptual GGX roughness whose lobe peaks at this pdf (1/sr): alpha = 1/sqrt(4 pi pdf), clamped to 1.
+
+    A GGX reflection lobe of alpha a has its peak pdf near 1/(4 pi a^2); a Lambertian direction (pdf <= 1/pi)
+    maps to roughness >= 0.71.
+    """
+    if pdf <= 0.0:
+        return 1.0
+    a = wp.min(1.0, 1.0 / wp.sqrt(4.0 * wp.pi * pdf))
+    return wp.sqrt(a)
+
+
+@wp.func
+def regularized_params(ms: MaterialSample, thin: int, k: float, path_roughness: float):
+    """Surface parameters with lobes at least k x the path's roughness so far (the glossy filter; k 0 = off)."""
+    p = surface_params(ms, thin)
+    r = k * path_roughness
+    if r > 0.0:
+        p.roughness = wp.max(p.roughness, r)
+        p.clearcoat_roughness = wp.max(p.clearcoat_roughness, r)
+    return p
+
+
 @wp.struct
 class PathSettings:
     max_depth: int  # bounces after the camera ray (0: emission and direct light only... see README)
     clamp: float  # maximum sample radiance per channel, 0 = off
+    indirect_clamp: float  # maximum contribution after more than one bounce (largest channel), 0 = off
+    glossy_filter: float  # k: later lobes at least k x the path's roughness so far, 0 = off
     time_filter: int
     frame_s: float  # the frame time in normalised shutter time (strobe)
     seed: wp.uint32
@@ -234,12 +276,13 @@ def trace_wave_kernel(
     region_x0: int,
     region_y0: int,
     region_w: int,
+    active: wp.array(dtype=wp.int32),  # region pixels still sampling (adaptive sampling); slot = position here
     wave_start: int,  # sample index of this wave's first sample
     wave: int,  # samples per pixel in this wave
 ):
     tid = wp.tid()
     j = tid % wave
-    pr = tid // wave
+    pr = active[tid // wave]
     px = region_x0 + pr % region_w
     py = region_y0 + pr // region_w
     pixel = wp.uint32(py * cam.width + px)
@@ -272,8 +315,16 @@ def trace_wave_kernel(
     see_through = int(1)  # so far only straight pass-through events: domes hidden from the camera stay hidden
     bounce = int(0)
     alive = int(1)
+    path_roughness = float(0.0)  # the roughest direction sampled so far (glossy filter)
     while alive != 0:
         rays += 1
+        # light reached along this ray has been scattered `bounce` times; direct light is 0 or 1 bounce
+        hit_clamp = float(0.0)
+        if bounce >= 2:
+            hit_clamp = settings.indirect_clamp
+        nee_clamp = float(0.0)
+        if bounce >= 1:
+            nee_clamp = settings.indirect_clamp
         hit = intersect_closest(geo, origin, rd, t_far, s)
         if geo.csg_groups > 0:
             hit = csg_closest(geo, origin, rd, s, hit)
@@ -286,7 +337,7 @@ def trace_wave_kernel(
                         w = float(1.0)
                         if prev_delta == 0:
                             w = power_heuristic(prev_pdf, select_pdf(lights.select, li, prev_p) * pdf_l)
-                        L += wp.cw_mul(beta, Le) * w
+                        L += clamp_contribution(wp.cw_mul(beta, Le) * w, hit_clamp)
         if hit.inst < 0:
             for li in range(lights.count):
                 kind = lights.kind[li]
@@ -297,7 +348,7 @@ def trace_wave_kernel(
                     w = float(1.0)
                     if prev_delta == 0:
                         w = power_heuristic(prev_pdf, select_pdf(lights.select, li, prev_p) * pdf_l)
-                    L += wp.cw_mul(beta, Le) * w
+                    L += clamp_contribution(wp.cw_mul(beta, Le) * w, hit_clamp)
             if bounce == 0 and lights.dome_visible != 0:
                 alpha = 1.0
             alive = 0
@@ -311,7 +362,7 @@ def trace_wave_kernel(
                                     uv_footprint(cone_w, sp.uv_density, wp.dot(sp.ng, rd)))
             ns = shading_normal(sp, ms)
             thin = 1 - geo.tri_solid[hit.tri]  # open surfaces are thin sheets, closed ones bound solids
-            params = surface_params(ms, thin)
+            params = regularized_params(ms, thin, settings.glossy_filter, path_roughness)
             wo = -rd
             lobes = bsdf_setup(params, ns, sp.ng, wo, sp.front)  # once per hit: eval, pdf and sample share it
             if bounce == 0:
@@ -333,7 +384,8 @@ def trace_wave_kernel(
                     pdf_l = select_pdf(lights.select, li, prev_p) * mesh_light_pdf(
                         lights, geo, li, hit.inst, hit.tri, origin, sp.p, s)
                     w = power_heuristic(prev_pdf, pdf_l)
-                L += wp.cw_mul(beta, Le) * (w * ms.opacity)  # emission covers what the surface covers
+                # emission covers what the surface covers
+                L += clamp_contribution(wp.cw_mul(beta, Le) * (w * ms.opacity), hit_clamp)
             if bounce >= settings.max_depth:
                 alive = 0
             else:
@@ -363,7 +415,9 @@ def trace_wave_kernel(
                                 if not delta:
                                     w = power_heuristic(p_sel * pdf_l, lobes_pdf(lobes, wi))
                                 cos_i = wp.abs(wp.dot(ns, wi))
-                                L += wp.cw_mul(wp.cw_mul(wp.cw_mul(beta, f), Le_l), tr) * (cos_i * w / (p_sel * pdf_l))
+                                L += clamp_contribution(
+                                    wp.cw_mul(wp.cw_mul(wp.cw_mul(beta, f), Le_l), tr) * (cos_i * w / (p_sel * pdf_l)),
+                                    nee_clamp)
                 # --- the BSDF's own direction continues the path
                 wi, weight, pdf, flags = lobes_sample(lobes, sample_1d(seed, pixel, index, dim + wp.uint32(BOUNCE_LOBE)),
                                                       sample_2d(seed, pixel, index, dim + wp.uint32(BOUNCE_DIRECTION)))
@@ -372,6 +426,8 @@ def trace_wave_kernel(
                 else:
                     beta = wp.cw_mul(beta, weight)
                     cone_spread = bounce_spread(cone_spread, ms.roughness, flags & FLAG_DELTA)
+                    if (flags & FLAG_DELTA) == 0:
+                        path_roughness = wp.max(path_roughness, roughness_of_pdf(pdf))
                     prev_delta = flags & FLAG_DELTA
                     prev_pdf = pdf
                     prev_n = ns

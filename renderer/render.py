@@ -26,6 +26,8 @@ from renderer.camera import CameraSetup, ndc_matrix, setup_camera
 from renderer.device import init_warp
 from renderer.errors import Cancelled, SettingsError
 from renderer.film import film
+from renderer.film import denoise
+from renderer.film.adaptive import Convergence
 from renderer.film.exr import timecode_from_frame, write_exr
 from renderer.integrator import PathSettings, trace_wave_kernel
 from renderer.lights.table import upload_lights
@@ -115,6 +117,8 @@ def load_kernels(device: str = "cpu") -> None:
 def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> PreparedScene:
     """Build the hierarchy and upload lights, materials and camera: once per (scene, frame)."""
     options.validate()
+    if options.denoise:
+        denoise.require()
     load_kernels(device)
     width, height = resolve_resolution(scene, options)
     if width * height > MAX_PIXELS:
@@ -136,16 +140,20 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> Prepar
 
 
 def render_tile(prep: PreparedScene, tile: Tile,
-                on_wave: Callable[[int, int], None] | None = None) -> TileSums:
+                on_wave: Callable[[int, int], None] | None = None, *,
+                time_budget: float | None = None) -> TileSums:
     """Render one tile: its filtered sums and weights, a pure function of (scene, options, tile).
 
     ``on_wave(samples_done_in_tile, samples_total_in_tile)`` is called after every wave; raising
-    ``Cancelled`` from it stops the render.
+    ``Cancelled`` from it stops the render. ``time_budget`` (seconds) stops sampling before the wave that would
+    overrun it (progressive rendering; the result then depends on the machine's speed). Samples per pixel are
+    ``options.spp`` at most, fewer where adaptive sampling found a pixel converged (``sums["spp"]``).
     """
     opts = prep.options
     W, H = prep.width, prep.height
     if not (0 <= tile.x0 < tile.x1 <= W and 0 <= tile.y0 < tile.y1 <= H):
         raise SettingsError(f"tile {tile} is outside the {W}x{H} image")
+    t_start = time.perf_counter()
     kind = film.FILTERS[opts.filter]
     margin = film.filter_margin(kind)
     rx0, ry0 = max(0, tile.x0 - margin), max(0, tile.y0 - margin)
@@ -160,20 +168,45 @@ def render_tile(prep: PreparedScene, tile: Tile,
     settings = PathSettings()
     settings.max_depth = int(opts.max_depth)
     settings.clamp = float(opts.clamp)
+    settings.indirect_clamp = opts.path_indirect_clamp
+    settings.glossy_filter = opts.path_glossy_filter
     settings.time_filter = TIME_FILTERS[opts.time_filter]
     settings.frame_s = frame_shutter_time(prep.scene)
     settings.seed = wp.uint32(opts.seed)
+    conv = Convergence(rw * rh, opts.noise_threshold, opts.min_spp)
+    slot_of = np.full(rw * rh, -1, np.int32)
+    # which region pixels are the tile's own (for the samples-per-pixel count and progress)
+    own = np.zeros((rh, rw), bool)
+    own[tile.y0 - ry0:tile.y1 - ry0, tile.x0 - rx0:tile.x1 - rx0] = True
+    own = own.ravel()
     total = tile.width * tile.height * opts.spp
     for start, end in waves:
         wave = end - start
-        wp.launch(trace_wave_kernel, dim=rw * rh * wave, device=dev,
+        pixels = conv.active_pixels()
+        if pixels.size == 0:
+            break
+        if time_budget is not None and start > 0:
+            # stop before a wave that would overrun the budget, predicted from the rate so far
+            elapsed = time.perf_counter() - t_start
+            per_sample = elapsed / max(1, int(conv.count.sum()))
+            if elapsed + per_sample * pixels.size * wave > time_budget:
+                break
+        slot_of[:] = -1
+        slot_of[pixels] = np.arange(pixels.size, dtype=np.int32)
+        active_wp = wp.array(pixels, dtype=wp.int32, device=dev)
+        wp.launch(trace_wave_kernel, dim=pixels.size * wave, device=dev,
                   inputs=[prep.geometry, prep.materials, prep.textures, prep.lights, prep.camera.params, buf,
-                          counters, settings, rx0, ry0, rw, start, wave])
+                          counters, settings, rx0, ry0, rw, active_wp, start, wave])
         wp.launch(film.gather_kernel, dim=tile.width * tile.height, device=dev,
-                  inputs=[buf, acc, wave, rx0, ry0, rw, rh, tile.x0, tile.y0, tile.width, kind,
-                          float(film.FILTER_RADIUS[kind]), margin])
+                  inputs=[buf, acc, wave, rx0, ry0, rw, rh, wp.array(slot_of, dtype=wp.int32, device=dev),
+                          tile.x0, tile.y0, tile.width, kind, float(film.FILTER_RADIUS[kind]), margin])
+        rgb = None
+        if conv.enabled:
+            rgb = buf.rgba.numpy()[:pixels.size * wave].reshape(pixels.size, wave, 4)[..., :3]
+        conv.add_wave(pixels, rgb, start, wave)
+        conv.update()
         if on_wave is not None:
-            on_wave(tile.width * tile.height * end, total)
+            on_wave(min(total, int(conv.count[own].sum())), total)
     h, w = tile.height, tile.width
     arrays = {
         "rgba": acc.rgba.numpy().reshape(h, w, 4),
@@ -182,9 +215,19 @@ def render_tile(prep: PreparedScene, tile: Tile,
         "hit_weight": acc.hit_weight.numpy().reshape(h, w),
         "normal": acc.normal.numpy().reshape(h, w, 3),
         "albedo": acc.albedo.numpy().reshape(h, w, 3),
+        "spp": conv.count.reshape(rh, rw)[tile.y0 - ry0:tile.y1 - ry0, tile.x0 - rx0:tile.x1 - rx0]
+        .astype(np.float32),
     }
     c = counters.numpy()
     return TileSums(tile=tile, arrays=arrays, rays=int(c[0]), nonfinite=int(c[1]))
+
+
+def tile_time_budget(options: RenderOptions, tile: Tile, width: int, height: int, threads: int = 1) -> float | None:
+    """A tile's fair share of the frame's time limit: its share of the frame's pixels, times the threads that
+    render tiles at once (so the frame takes about the limit in wall-clock time). None without a limit."""
+    if not options.time_limit:
+        return None
+    return float(options.time_limit) * threads * (tile.width * tile.height) / (width * height)
 
 
 def split_tiles(width: int, height: int, tile_size: int) -> list[Tile]:
@@ -230,7 +273,8 @@ def render_frame(prep: PreparedScene, *, tile_size: int = 64, threads: int = 2,
                 done[tile] = n
                 if progress is not None:
                     progress(sum(done.values()), total)
-        return render_tile(prep, tile, on_wave)
+        budget = tile_time_budget(prep.options, tile, prep.width, prep.height, min(threads, len(tiles)))
+        return render_tile(prep, tile, on_wave, time_budget=budget)
 
     t0 = time.perf_counter()
     if threads == 1:
@@ -239,18 +283,24 @@ def render_frame(prep: PreparedScene, *, tile_size: int = 64, threads: int = 2,
         with ThreadPoolExecutor(max_workers=threads) as pool:
             results = list(pool.map(work, tiles))
     seconds = time.perf_counter() - t0
-    return FrameResult(sums=assemble(results, prep.width, prep.height), seconds=seconds, samples=total,
+    sums = assemble(results, prep.width, prep.height)
+    return FrameResult(sums=sums, seconds=seconds, samples=int(sums["spp"].sum()),
                        rays=sum(r.rays for r in results), nonfinite=sum(r.nonfinite for r in results))
 
 
 def frame_channels(prep: PreparedScene, sums: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """EXR channels of a frame: premultiplied R, G, B, A and the requested AOVs."""
+    """EXR channels of a frame: premultiplied R, G, B, A, the requested AOVs and the denoised layer if asked."""
     r = film.resolve(sums, prep.camera.params.exposure_scale)
     ch = {"R": r["rgba"][..., 0], "G": r["rgba"][..., 1], "B": r["rgba"][..., 2], "A": r["rgba"][..., 3]}
     if "depth" in prep.options.aovs:
         ch["depth.Z"] = r["depth"]
     if "normal" in prep.options.aovs:
         ch.update({"N.X": r["normal"][..., 0], "N.Y": r["normal"][..., 1], "N.Z": r["normal"][..., 2]})
+    if prep.options.denoise:  # on the assembled frame: the filter needs the whole image around each pixel
+        d = denoise.denoise_rgb(r["rgba"][..., :3], r["albedo"], r["normal"])
+        ch.update({"denoised.R": d[..., 0], "denoised.G": d[..., 1], "denoised.B": d[..., 2]})
+    if "spp" in prep.options.aovs and "spp" in sums:
+        ch["spp.Y"] = sums["spp"]
     if "albedo" in prep.options.aovs:
         ch.update({"albedo.R": r["albedo"][..., 0], "albedo.G": r["albedo"][..., 1],
                    "albedo.B": r["albedo"][..., 2]})
@@ -277,6 +327,12 @@ def frame_attributes(prep: PreparedScene) -> dict:
         "drt/frame": float(scene.frame),
         "drt/camera": scene.camera.name,
         "drt/spp": int(o.spp),
+        "drt/unbiased": int(o.unbiased),
+        "drt/noiseThreshold": float(o.noise_threshold),
+        "drt/timeLimit": float(o.time_limit),
+        "drt/denoised": int(o.denoise),
+        "drt/indirectClamp": o.path_indirect_clamp,
+        "drt/glossyFilter": o.path_glossy_filter,
         "drt/seed": int(o.seed),
         "drt/filter": o.filter,
         "drt/timeFilter": o.time_filter,
@@ -298,5 +354,5 @@ def default_threads() -> int:
 
 
 __all__ = ["RenderOptions", "Tile", "TileSums", "PreparedScene", "FrameResult", "prepare", "render_tile",
-           "render_frame", "split_tiles", "assemble", "frame_channels", "frame_attributes", "write_frame",
+           "render_frame", "tile_time_budget", "split_tiles", "assemble", "frame_channels", "frame_attributes", "write_frame",
            "default_threads", "load_kernels"]

@@ -18,14 +18,14 @@ from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, field_val
 # renderer.render.AOV_NAMES); repeated here so the wire format does not import the renderer.
 FILTERS = ("gaussian", "box", "triangle", "blackman-harris")
 TIME_FILTERS = ("box", "triangle", "strobe")
-AOVS = ("depth", "normal", "albedo")
+AOVS = ("depth", "normal", "albedo", "spp")
 MAX_FRAMES = 100_000
 MAX_DEPTH = 64  # renderer.render.MAX_DEPTH
 MAX_TIME = 1.0e9  # |time code| bound: keeps frame arithmetic exact enough and rejects nonsense early
 
 FilterName = Literal["gaussian", "box", "triangle", "blackman-harris"]
 TimeFilterName = Literal["box", "triangle", "strobe"]
-AovName = Literal["depth", "normal", "albedo"]
+AovName = Literal["depth", "normal", "albedo", "spp"]
 
 
 class _Strict(BaseModel):
@@ -90,8 +90,16 @@ class RenderSettings(_Strict):
     focus_distance: float | None = Field(None, gt=0, le=1.0e12, description="override, in scene units")
     max_depth: int = Field(8, ge=0, le=MAX_DEPTH, description="bounces after the camera ray (1: direct lighting only)")
     clamp: float = Field(0.0, ge=0, description="clamp each sample's radiance to this per channel (0: off)")
+    unbiased: bool = Field(False, description="no path regularization (default indirect clamp and glossy filter off)")
+    noise_threshold: float = Field(0.0, ge=0, lt=1000,
+                                   description="adaptive sampling: a pixel stops at this error estimate (0: off)")
+    min_spp: int = Field(16, ge=1, le=65536, description="adaptive sampling: samples before a pixel may stop")
+    time_limit: float = Field(0.0, ge=0, le=7 * 24 * 3600,
+                              description="seconds of rendering per frame, split among its tiles (0: none; "
+                                          "spp is then the cap); time-limited frames are not bit-reproducible")
     aovs: list[AovName] = Field(default_factory=list, max_length=len(AOVS),
-                                description="extra channels: depth, normal, albedo")
+                                description="extra channels: depth, normal, albedo, spp")
+    denoise: bool = Field(False, description="add an Open Image Denoise layer denoised.R/G/B (beauty stays raw)")
     half: bool = Field(False, description="store colour and AOVs as HALF (depth stays FLOAT)")
 
     @field_validator("frames")

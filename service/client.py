@@ -231,9 +231,15 @@ def settings_from_args(args: argparse.Namespace) -> dict:
            "seed": args.seed, "tile": args.tile, "filter": args.filter, "time_filter": args.time_filter,
            "shutter": list(args.shutter) if args.shutter else None, "motion_blur": not args.no_motion_blur,
            "dof": not args.no_dof, "aovs": list(dict.fromkeys(args.aov)), "half": args.half,
-           "max_depth": args.max_depth, "clamp": args.clamp,
+           "max_depth": args.max_depth, "clamp": args.clamp, "unbiased": args.unbiased,
+           "noise_threshold": args.noise_threshold, "min_spp": args.min_spp, "time_limit": args.time_limit,
+           "denoise": args.denoise,
            "priority": args.priority, "focal_length": args.focal_length, "f_stop": args.f_stop,
            "focus_distance": args.focus_distance}
+    if args.time_limit and args.spp is None:  # as drt render: the time limit decides, spp is only a cap
+        from renderer.cli import TIME_LIMITED_SPP
+
+        out["spp"] = TIME_LIMITED_SPP
     return {k: v for k, v in out.items() if v is not None}
 
 

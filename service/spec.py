@@ -36,6 +36,11 @@ class RenderSpec:
     aovs: tuple[str, ...] = ()
     max_depth: int = 8
     clamp: float = 0.0
+    unbiased: bool = False
+    noise_threshold: float = 0.0
+    min_spp: int = 16
+    time_limit: float = 0.0
+    denoise: bool = False
     half: bool = False
 
     @classmethod
@@ -46,6 +51,8 @@ class RenderSpec:
                    focus_distance=settings.focus_distance, width=settings.width, height=settings.height,
                    spp=settings.spp, seed=settings.seed, filter=settings.filter, time_filter=settings.time_filter,
                    dof=settings.dof, aovs=tuple(settings.aovs), max_depth=settings.max_depth, clamp=settings.clamp,
+                   unbiased=settings.unbiased, noise_threshold=settings.noise_threshold,
+                   min_spp=settings.min_spp, time_limit=settings.time_limit, denoise=settings.denoise,
                    half=settings.half)
 
     def cache_key(self, frame: float | None) -> tuple:
@@ -58,7 +65,9 @@ class RenderSpec:
     def options(self) -> RenderOptions:
         return RenderOptions(width=self.width, height=self.height, spp=self.spp, seed=self.seed, filter=self.filter,
                              time_filter=self.time_filter, dof=self.dof, aovs=self.aovs, max_depth=self.max_depth,
-                             clamp=self.clamp)
+                             clamp=self.clamp, unbiased=self.unbiased,
+                             noise_threshold=self.noise_threshold, min_spp=self.min_spp, time_limit=self.time_limit,
+                             denoise=self.denoise)
 
     def request(self, frame: float | None) -> RenderRequest:
         """One frame of this job as the renderer's RenderRequest."""

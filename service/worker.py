@@ -214,9 +214,20 @@ def _stop_check(every: float = 0.1):
     return on_wave
 
 
+def _worker_threads() -> int:
+    """Threads of the Dask worker running this task (tiles rendering at once), 1 outside a worker."""
+    try:
+        from distributed import get_worker
+
+        w = get_worker()
+        return max(1, int(getattr(getattr(w, "state", w), "nthreads", 1)))
+    except (ImportError, ValueError):
+        return 1
+
+
 def render_tile_task(task: TileTask, scene: ScenePackage) -> dict:
     from renderer.errors import Cancelled, RenderError
-    from renderer.render import Tile, render_tile
+    from renderer.render import Tile, render_tile, tile_time_budget
 
     try:
         prep = prepared(task.spec, task.frame, scene, task.cache_size)
@@ -224,10 +235,12 @@ def render_tile_task(task: TileTask, scene: ScenePackage) -> dict:
             return {"error": f"frame {task.frame:g} renders at {prep.width}x{prep.height}, "
                              f"not at the job's {task.width}x{task.height}"}
         t0 = time.perf_counter()
+        tile = Tile(*task.tile)
+        budget = tile_time_budget(prep.options, tile, prep.width, prep.height, _worker_threads())
         with _cache_lock:
             _stats["running"] += 1  # tiles rendering now (tests watch a deleted job's tiles stop)
         try:
-            sums = render_tile(prep, Tile(*task.tile), on_wave=_stop_check())
+            sums = render_tile(prep, tile, on_wave=_stop_check(), time_budget=budget)
         finally:
             with _cache_lock:
                 _stats["running"] -= 1

@@ -144,3 +144,18 @@ def test_bad_lens_overrides(scene_file, tmp_path, flags):
     r = drt("render", scene_file, "-o", tmp_path / "x.exr", *flags)
     assert r.returncode == 2
     assert_one_line_error(r, flags[0])
+
+
+def test_noise_flags_adaptive_spp_aov_denoise_and_unbiased(scene_file, tmp_path):
+    out = tmp_path / "adaptive.exr"
+    r = drt("render", scene_file, "-o", out, "--width", 32, "--height", 24, "--spp", 64, "--noise-threshold", 0.05,
+            "--min-spp", 8, "--aov", "spp", "--denoise", "--unbiased", "--threads", 2)
+    assert r.returncode == 0, r.stderr
+    assert "spp on average, at most 64" in r.stdout
+    channels, header = read_exr(out)
+    assert {"spp.Y", "denoised.R", "denoised.G", "denoised.B"} <= set(channels)
+    assert channels["spp.Y"].min() >= 8 and channels["spp.Y"].max() <= 64
+    assert header["drt/unbiased"] == 1 and header["drt/denoised"] == 1
+    r = drt("render", scene_file, "-o", out, "--noise-threshold", -1)
+    assert_one_line_error(r, "--noise-threshold")
+    assert r.returncode == 2

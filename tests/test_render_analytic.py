@@ -14,6 +14,7 @@ from renderer.usd.importer import load_scene
 
 def render_rgb(path, *, tile=None, motion_blur=True, **opts):
     scene = load_scene(path, 0.0, motion_blur=motion_blur)
+    opts.setdefault("unbiased", True)  # analytic values: no path regularization
     prep = prepare(scene, RenderOptions(**opts))
     if tile is None:
         sums = render_frame(prep, tile_size=32, threads=2).sums
@@ -139,7 +140,8 @@ def test_strobe_shutter_sees_the_frame_instant(tmp_path):
     """Frame 0 with a shutter (-0.5, 0.5) around it: the strobe shows the bar sharp where it is at time 0."""
     path = coverage_stage(tmp_path / "strobe.usda", {-0.5: -2.0, 0.0: 0.0, 0.5: 2.0})
     scene = load_scene(path, 0.0, shutter=(-0.5, 0.5))
-    prep = prepare(scene, RenderOptions(width=64, height=4, spp=16, filter="box", time_filter="strobe"))
+    prep = prepare(scene, RenderOptions(width=64, height=4, spp=16, filter="box", time_filter="strobe",
+                                        unbiased=True))
     ch = frame_channels(prep, render_frame(prep, tile_size=32).sums)
     row = ch["R"].mean(0)
     # the bar spans x in [-0.25, 0.25] m: pixels 29.5 .. 34.5, fully covered pixels 30..33
@@ -152,7 +154,7 @@ def test_opacity_fading_during_the_shutter_averages_over_it(tmp_path, keys, cove
     shows its emission and coverage averaged over the shutter."""
     path = coverage_stage(tmp_path / "fade.usda", {0.0: 0.0}, opacity=keys)
     scene = load_scene(path, 0.0)
-    prep = prepare(scene, RenderOptions(width=64, height=4, spp=256, filter="box"))
+    prep = prepare(scene, RenderOptions(width=64, height=4, spp=256, filter="box", unbiased=True))
     ch = frame_channels(prep, render_frame(prep, tile_size=32).sums)
     inside = slice(30, 34)  # pixels fully covered by the 0.5 m bar at x = 0
     np.testing.assert_allclose(ch["R"][:, inside], coverage, atol=0.02)

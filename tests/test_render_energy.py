@@ -20,6 +20,7 @@ def furnace(tmp_path, material):
 
 
 def render(path, **opts):
+    opts.setdefault("unbiased", True)  # energy conservation is a property of the unbiased estimator
     prep = prepare(load_scene(path), RenderOptions(**opts))
     r = render_frame(prep, tile_size=32, threads=2)
     ch = frame_channels(prep, r.sums)

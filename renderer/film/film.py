@@ -105,7 +105,8 @@ def filter_weight_np(kind: int, dx, dy) -> np.ndarray:
 
 @wp.struct
 class SampleBuffer:
-    """One wave of samples of a tile's region (tile + margin): index (pixel_in_region * wave + j)."""
+    """One wave of samples of a tile's region (tile + margin): index (slot * wave + j), where slot is the
+    pixel's position in the wave's list of pixels still sampling (every region pixel without adaptive sampling)."""
 
     film: wp.array(dtype=wp.vec2)  # sample position within its pixel, [0, 1)^2
     rgba: wp.array(dtype=wp.vec4)  # premultiplied radiance and coverage
@@ -156,6 +157,7 @@ def gather_kernel(
     region_y0: int,
     region_w: int,
     region_h: int,
+    slot_of: wp.array(dtype=wp.int32),  # a region pixel's slot in this wave's buffer, -1: it has stopped
     tile_x0: int,
     tile_y0: int,
     tile_w: int,
@@ -182,8 +184,11 @@ def gather_kernel(
             for ox in range(-margin, margin + 1):
                 qx = px + ox
                 rx = qx - region_x0
+                slot = int(-1)
                 if rx >= 0 and rx < region_w:
-                    base = (ry * region_w + rx) * wave
+                    slot = slot_of[ry * region_w + rx]
+                if slot >= 0:
+                    base = slot * wave
                     for j in range(wave):
                         f = buf.film[base + j]
                         w = filter_weight(filter_kind, float(qx) + f[0] - cx, float(qy) + f[1] - cy, radius)

@@ -27,6 +27,8 @@ def test_defaults_are_drt_render_defaults():
 
     o = RenderOptions()
     assert (s.max_depth, s.clamp) == (o.max_depth, o.clamp)
+    assert (s.unbiased, s.noise_threshold, s.min_spp, s.time_limit, s.denoise) == \
+        (o.unbiased, o.noise_threshold, o.min_spp, o.time_limit, o.denoise)
     assert JobCreate.model_fields["max_depth"].metadata[-1].le == MAX_DEPTH
     assert s.frame_times() is None
 
@@ -45,7 +47,7 @@ def test_frames_list_or_range():
     ('{"width": 0}', "invalid settings: width: Input should be greater than or equal to 1"),
     ('{"filter": "mitchell"}',
      "invalid settings: filter: Input should be 'gaussian', 'box', 'triangle' or 'blackman-harris'"),
-    ('{"aovs": ["beauty"]}', "invalid settings: aovs.0: Input should be 'depth', 'normal' or 'albedo'"),
+    ('{"aovs": ["beauty"]}', "invalid settings: aovs.0: Input should be 'depth', 'normal', 'albedo' or 'spp'"),
     ('{"shutter": [0.5, 0.25]}', "invalid settings: shutter: shutter open (0.5) is after close (0.25)"),
     ('{"frames": [1, 1]}', "invalid settings: frames: frames must be unique"),
     ('{"frames": []}', "invalid settings: frames: give at least one frame"),
@@ -87,3 +89,11 @@ def test_spec_maps_settings_like_drt_render():
     halved = RenderSpec.from_settings(s.model_copy(update={"half": True}), "/y", "abc")
     assert spec.cache_key(1.0) == halved.cache_key(1.0)
     assert spec.cache_key(1.0) != spec.cache_key(2.0)
+
+
+def test_noise_settings_reach_the_renderer_options():
+    s = JobCreate(unbiased=True, noise_threshold=0.02, min_spp=8, time_limit=5.0, denoise=True, aovs=["spp"])
+    o = RenderSpec.from_settings(s, "/x/scene.usda", "sha").options()
+    assert (o.unbiased, o.noise_threshold, o.min_spp, o.time_limit, o.denoise, o.aovs) == \
+        (True, 0.02, 8, 5.0, True, ("spp",))
+    o.validate()
