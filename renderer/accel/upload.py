@@ -14,6 +14,7 @@ import warp as wp
 from renderer.accel.build import Bvh, build_bvh
 from renderer.accel.csg import OPERATIONS as CSG_OPERATIONS
 from renderer.accel.intersect import Geometry
+from renderer.accel.triangle_kernels import leaf_triangles, triangle_boxes
 from renderer.motion.kernels import upload_keys
 from renderer.motion.transform import matrix_at
 from renderer.scene.mesh_facts import is_closed
@@ -37,10 +38,9 @@ class GeometryStats:
     nbytes: int
 
 
-def _mesh_prim_bounds(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
+def _mesh_prim_bounds(mesh: Mesh, device: str = "cpu") -> tuple[np.ndarray, np.ndarray]:
     """Per-key triangle boxes (P, T, 3) of a mesh."""
-    tri = mesh.points[:, mesh.triangles]  # (P, T, 3, 3)
-    return tri.min(axis=2), tri.max(axis=2)
+    return triangle_boxes(mesh.points, mesh.triangles, device)
 
 
 def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -155,7 +155,7 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     t_start = time.perf_counter()
     blas: list[Bvh] = []
     for mesh in scene.meshes:
-        lo, hi = _mesh_prim_bounds(mesh)
+        lo, hi = _mesh_prim_bounds(mesh, device)
         blas.append(build_bvh(lo, hi, max_leaf=BLAS_MAX_LEAF, c_trav=BLAS_TRAVERSAL_COST))
 
     g = Geometry()
@@ -182,10 +182,8 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     v0, e1, e2 = [], [], []
     for mesh, b in zip(scene.meshes, blas):
         if len(mesh.point_times) == 1 and len(b.prim_order):
-            tri = mesh.points[0][mesh.triangles[b.prim_order]]  # (slots, 3, 3) float32, leaf order
-            v0.append(tri[:, 0])
-            e1.append(tri[:, 1] - tri[:, 0])
-            e2.append(tri[:, 2] - tri[:, 0])
+            p0, d1, d2 = leaf_triangles(mesh.points[0], mesh.triangles, b.prim_order, device)  # leaf order
+            v0.append(p0), e1.append(d1), e2.append(d2)
         else:  # deforming: interpolated at the ray's time instead
             z = np.zeros((len(b.prim_order), 3), np.float32)
             v0.append(z), e1.append(z), e2.append(z)
