@@ -246,8 +246,9 @@ def dome_pole_is_z(prim) -> bool:
     return pole == "Z"
 
 
-def _light_image(prim, frame: float, warn) -> tuple[np.ndarray, str] | None:
-    """A RectLight's ``texture:file`` as (H, W, 3) float32 linear RGB, rows top to bottom, and its path."""
+def _light_image(prim, frame: float, warn, kind: str = "light") -> tuple[np.ndarray, str] | None:
+    """A light's ``texture:file`` (RectLight, DomeLight) as (H, W, 3) float32 linear RGB, rows top to bottom, and
+    its resolved path; None (with one warning naming ``kind``) when it is absent, a UDIM set or unreadable."""
     path = str(prim.GetPath())
     attr = None
     for name in ("inputs:texture:file", "texture:file"):
@@ -258,16 +259,19 @@ def _light_image(prim, frame: float, warn) -> tuple[np.ndarray, str] | None:
     value = attr.Get(frame) if attr is not None else None
     if value is None or not str(getattr(value, "path", value) or "").strip():
         return None
+    noun = "DomeLight" if kind == "dome" else "light"
     resolved, tiles = resolve_asset(attr, value)
     if tiles is not None:
-        warn("UDIM light textures ignored: those lights use their constant color", path)
+        warn(f"UDIM {kind} textures ignored: those {kind}s use their constant color", path)
         return None
     try:
         loaded = read_asset_image(resolved, "auto", keep_top_down=True)
     except (ImageError, OSError, RuntimeError) as e:
-        warn("light textures missing or unreadable: those lights use their constant color",
+        warn(f"{noun} textures missing or unreadable: those {kind}s use their constant color",
              f"{resolved} ({' '.join(str(e).split())[:160]}; {path})")
         return None
+    if loaded.downsampled:
+        warn("large textures downsampled to at most 4096 texels a side", f"{resolved} {loaded.original_size}")
     img = loaded.top_down
     rgb = np.repeat(img[..., :1], 3, -1) if img.shape[-1] < 3 else img[..., :3]
     return np.ascontiguousarray(rgb, np.float32), resolved
@@ -277,32 +281,12 @@ def _dome_texture(prim, light: sc.Light, radiance: np.ndarray, frame: float, war
     """Load a dome's lat-long texture into ``light.texture`` (scaled by ``radiance``); returns the radiance the
     light reports (the texture's mean, or ``radiance`` unchanged without a usable texture)."""
     path = str(prim.GetPath())
-    attr = None
-    for name in ("inputs:texture:file", "texture:file"):
-        a = prim.GetAttribute(name)
-        if a and a.HasAuthoredValue():
-            attr = a
-            break
-    value = attr.Get(frame) if attr is not None else None
-    if value is None or not str(getattr(value, "path", value) or "").strip():
+    image = _light_image(prim, frame, warn, kind="dome")
+    if image is None:
         return radiance
+    rgb, resolved = image
     fmt = str(_value(prim, "texture:format", frame, "automatic"))
-    resolved, tiles = resolve_asset(attr, value)
-    if tiles is not None:
-        warn("UDIM dome textures ignored: those domes use their constant color", path)
-        return radiance
-    try:
-        loaded = read_asset_image(resolved, "auto", keep_top_down=True)
-    except (ImageError, OSError, RuntimeError) as e:
-        warn("DomeLight textures missing or unreadable: those domes use their constant color",
-             f"{resolved} ({' '.join(str(e).split())[:160]}; {path})")
-        return radiance
-    img = loaded.top_down
-    c = img.shape[-1]
-    rgb = np.repeat(img[..., :1], 3, -1) if c < 3 else img[..., :3]
     rgb = (rgb.astype(np.float64) * np.asarray(radiance, np.float64)).astype(np.float32)
-    if loaded.downsampled:
-        warn("large textures downsampled to at most 4096 texels a side", f"{resolved} {loaded.original_size}")
     h, w = rgb.shape[:2]
     if fmt == "automatic":  # by the image's shape, as UsdLux's "automatic" asks
         fmt = "latlong" if w == 2 * h else "cubeMapVerticalCross" if 4 * w == 3 * h else \
