@@ -337,11 +337,6 @@ class Store:
         with self._read() as s:
             return int(s.scalar(q))
 
-    def job_states(self, job_ids: list[str]) -> dict[str, JobState]:
-        with self._read() as s:
-            return {i: JobState(st) for i, st in s.execute(select(JobRow.id, JobRow.state)
-                                                           .where(JobRow.id.in_(job_ids)))}
-
     def counts_by_state(self) -> dict[JobState, int]:
         counts = {st: 0 for st in JobState}
         with self._read() as s:

@@ -585,10 +585,6 @@ def np_to_world(v, n) -> np.ndarray:
     return np.einsum("...ij,...j->...i", np_frame_from_normal(n), _f(v))
 
 
-def np_to_local(v, n) -> np.ndarray:
-    return np.einsum("...ji,...j->...i", np_frame_from_normal(n), _f(v))
-
-
 def np_square_to_uniform_disk_concentric(u) -> np.ndarray:
     u = _f(u)
     ox, oy = 2.0 * u[..., 0] - 1.0, 2.0 * u[..., 1] - 1.0
