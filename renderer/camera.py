@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from renderer.framing import Framing
 from renderer.motion.kernels import MotionKeys, keys_matrix, upload_keys
 from renderer.motion.transform import matrix_at
 from renderer.sampling.warps import square_to_uniform_disk_concentric
@@ -55,26 +56,52 @@ class CameraSetup:
     warning: str | None = None
 
 
-def conform_aperture(h_ap: float, v_ap: float, width: int, height: int, pixel_aspect: float = 1.0):
-    """Expand the aperture to the image aspect (UsdRender's default ``expandAperture`` policy)."""
+def conform_aperture(h_ap: float, v_ap: float, width: int, height: int, pixel_aspect: float = 1.0,
+                     policy: str = "expandAperture") -> tuple[float, float, float]:
+    """Fit the aperture to the image aspect by UsdRender's ``aspectRatioConformPolicy``.
+
+    Returns (film width, film height, pixel aspect ratio): ``adjustPixelAspectRatio`` keeps the aperture and
+    computes the pixel aspect instead; every other policy keeps the pixel aspect it is given.
+    """
     image_aspect = width * pixel_aspect / height
-    if h_ap / v_ap < image_aspect:
-        return v_ap * image_aspect, v_ap
-    return h_ap, h_ap / image_aspect
+    aperture_aspect = h_ap / v_ap
+    if policy == "adjustPixelAspectRatio":
+        return h_ap, v_ap, aperture_aspect * height / width
+    if policy == "adjustApertureWidth":
+        return v_ap * image_aspect, v_ap, pixel_aspect
+    if policy == "adjustApertureHeight":
+        return h_ap, h_ap / image_aspect, pixel_aspect
+    wider = aperture_aspect < image_aspect  # the image is wider than the aperture
+    if policy == "cropAperture":
+        wider = not wider
+    if wider:
+        return v_ap * image_aspect, v_ap, pixel_aspect
+    return h_ap, h_ap / image_aspect, pixel_aspect
 
 
-def setup_camera(camera: Camera, width: int, height: int, *, pixel_aspect: float = 1.0, dof: bool = True,
+def setup_camera(camera: Camera, framing: Framing, *, policy: str = "expandAperture", dof: bool = True,
                  device: str = "cpu") -> CameraSetup:
+    """The kernel's camera for the image ``framing`` describes: the full frame's film, cut to its window."""
     keys, _, counts = upload_keys([camera.transform], device)
     p = CameraParams()
     p.keys = keys
     p.key_count = int(counts[0])
     p.still = wp.mat44(*matrix_at(camera.transform, 0.0).astype(np.float32).reshape(-1))
     p.orthographic = int(camera.projection == "orthographic")
-    fw, fh = conform_aperture(camera.horizontal_aperture, camera.vertical_aperture, width, height, pixel_aspect)
+    W, H = framing.full
+    fw, fh, _ = conform_aperture(camera.horizontal_aperture, camera.vertical_aperture, W, H, framing.pixel_aspect,
+                                 policy)
     p.focal_length = float(camera.focal_length)
+    # the image's window of the film: a crop or overscan of the full frame is the same lens with a smaller or
+    # larger film, shifted (film positions map linearly to pixels, so this is exact)
     p.film_size = wp.vec2(fw, fh)
     p.film_offset = wp.vec2(camera.horizontal_aperture_offset, camera.vertical_aperture_offset)
+    if framing.cropped:
+        cx = (framing.x0 + 0.5 * framing.width) / W - 0.5
+        cy = 0.5 - (framing.y0 + 0.5 * framing.height) / H
+        p.film_size = wp.vec2(fw * framing.width / W, fh * framing.height / H)
+        p.film_offset = wp.vec2(camera.horizontal_aperture_offset + cx * fw,
+                                camera.vertical_aperture_offset + cy * fh)
     lens_radius = 0.0
     warning = None
     if dof and camera.f_stop > 0.0 and camera.focus_distance > 0.0 and not p.orthographic:
@@ -89,8 +116,8 @@ def setup_camera(camera: Camera, width: int, height: int, *, pixel_aspect: float
     p.focus_distance = float(camera.focus_distance)
     p.near = float(camera.clipping_range[0])
     p.far = float(camera.clipping_range[1])
-    p.width = int(width)
-    p.height = int(height)
+    p.width = int(framing.width)
+    p.height = int(framing.height)
     p.exposure_scale = float(2.0 ** camera.exposure)
     return CameraSetup(params=p, film_size=(fw, fh), lens_radius=lens_radius, warning=warning)
 

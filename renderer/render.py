@@ -29,6 +29,7 @@ from renderer.film import film
 from renderer.film import denoise
 from renderer.film.adaptive import Convergence
 from renderer.film.exr import timecode_from_frame, write_exr
+from renderer.framing import Framing, resolve_framing
 from renderer.integrator import PathSettings, trace_wave_kernel
 from renderer.lights.table import upload_lights
 from renderer.motion.transform import matrix_at
@@ -73,9 +74,9 @@ class PreparedScene:
 
     scene: Scene
     options: RenderOptions
-    width: int
+    width: int  # the image's size (the framing's window), pixels
     height: int
-    pixel_aspect: float
+    framing: Framing
     geometry: object
     materials: object
     textures: object
@@ -88,19 +89,9 @@ class PreparedScene:
 
 
 def resolve_resolution(scene: Scene, options: RenderOptions) -> tuple[int, int]:
-    rs = scene.render_settings.resolution
-    w, h = options.width, options.height
-    if w is None and h is None and rs is not None:
-        return int(rs[0]), int(rs[1])
-    aspect = scene.camera.horizontal_aperture / scene.camera.vertical_aperture
-    aspect /= scene.render_settings.pixel_aspect_ratio or 1.0
-    if w is None and h is None:
-        w = 640
-    if w is None:
-        w = max(1, round(h * aspect))
-    if h is None:
-        h = max(1, round(w / aspect))
-    return int(w), int(h)
+    """The size in pixels of the image a render of ``scene`` with ``options`` writes (see ``renderer.framing``)."""
+    f = resolve_framing(scene, options)
+    return f.width, f.height
 
 
 _compile_lock = threading.Lock()
@@ -120,10 +111,10 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> Prepar
     if options.denoise:
         denoise.require()
     load_kernels(device)
-    width, height = resolve_resolution(scene, options)
+    framing = resolve_framing(scene, options)
+    width, height = framing.width, framing.height
     if width * height > MAX_PIXELS:
         raise SettingsError(f"image of {width}x{height} pixels is too large")
-    par = float(scene.render_settings.pixel_aspect_ratio or 1.0)
     dof = options.dof and not scene.render_settings.disable_depth_of_field
     flat = flatten_still_instances(scene)
     geometry, stats = upload_geometry(flat, device)
@@ -131,10 +122,11 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> Prepar
     textures = upload_material_textures(flat.materials, device, warn=warnings.append)
     materials = upload_materials(flat.materials, device)
     lights, light_count = upload_lights(flat, device, warn=lambda what, name="": warnings.append(f"{what}: {name}"))
-    cam = setup_camera(scene.camera, width, height, pixel_aspect=par, dof=dof, device=device)
+    cam = setup_camera(scene.camera, framing, policy=scene.render_settings.aspect_ratio_conform_policy, dof=dof,
+                       device=device)
     if cam.warning:
         warnings.append(cam.warning)
-    return PreparedScene(scene=scene, options=options, width=width, height=height, pixel_aspect=par,
+    return PreparedScene(scene=scene, options=options, width=width, height=height, framing=framing,
                          geometry=geometry, materials=materials, textures=textures, lights=lights,
                          light_count=light_count, camera=cam, stats=stats, device=device, warnings=warnings)
 
@@ -342,9 +334,15 @@ def frame_attributes(prep: PreparedScene) -> dict:
     }
 
 
+def frame_windows(prep: PreparedScene) -> dict[str, tuple[int, int, int, int]]:
+    """``write_exr``'s display and data windows: the full frame, and the pixels of it the image holds."""
+    return dict(display_window=prep.framing.display_window(), data_window=prep.framing.data_window())
+
+
 def write_frame(path, prep: PreparedScene, sums: dict[str, np.ndarray], *, half: bool = False) -> int:
     """Write the frame's EXR atomically. Returns the number of non-finite values that had to be zeroed."""
-    return write_exr(path, frame_channels(prep, sums), half=half, attributes=frame_attributes(prep))
+    return write_exr(path, frame_channels(prep, sums), half=half, attributes=frame_attributes(prep),
+                     **frame_windows(prep))
 
 
 def default_threads() -> int:
@@ -354,5 +352,5 @@ def default_threads() -> int:
 
 
 __all__ = ["RenderOptions", "Tile", "TileSums", "PreparedScene", "FrameResult", "prepare", "render_tile",
-           "render_frame", "tile_time_budget", "split_tiles", "assemble", "frame_channels", "frame_attributes", "write_frame",
-           "default_threads", "load_kernels"]
+           "render_frame", "tile_time_budget", "split_tiles", "assemble", "frame_channels", "frame_attributes",
+           "frame_windows", "write_frame", "default_threads", "load_kernels"]

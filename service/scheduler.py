@@ -368,7 +368,7 @@ class Scheduler:
     def _frame_image(self, plan: JobPlan, frame: FramePlan, result: dict) -> None:
         try:
             write_exr(plan.files.frame(frame.idx), result["channels"], half=plan.spec.half,
-                      attributes=exr_attributes(result["attributes"]))
+                      attributes=exr_attributes(result["attributes"]), **result.get("windows", {}))
         except FileNotFoundError:  # the job's files are gone: it was deleted
             self._drop(plan.job_id)
             return

@@ -268,16 +268,18 @@ class FrameTask:
 
 
 def frame_image_task(task: FrameTask, scene: ScenePackage) -> dict:
-    """The frame's EXR channels and header attributes (``write_frame``'s, so the service's EXR has the same bits
-    as ``drt render``'s): ``{"channels", "attributes"}`` or ``{"error"}``. The service writes the file."""
+    """The frame's EXR channels, header attributes and windows (``write_frame``'s, so the service's EXR has the same
+    bits as ``drt render``'s): ``{"channels", "attributes", "windows"}`` or ``{"error"}``. The service writes the
+    file."""
     from renderer.errors import RenderError
-    from renderer.render import frame_attributes, frame_channels
+    from renderer.render import frame_attributes, frame_channels, frame_windows
 
     try:
         prep = prepared(task.spec, task.frame, scene, task.cache_size)
         attributes = {k: PortableTimeCode.of(v) if type(v).__name__ == "TimeCode" else v
                       for k, v in frame_attributes(prep).items()}
-        return {"channels": frame_channels(prep, task.sums), "attributes": attributes}
+        return {"channels": frame_channels(prep, task.sums), "attributes": attributes,
+                "windows": frame_windows(prep)}
     except RenderError as e:
         return {"error": _one_line(e)}
 

@@ -246,6 +246,11 @@ class Camera:
     exposure: float = 0.0  # stops; image scaled by 2^exposure
 
 
+# UsdRender's aspectRatioConformPolicy tokens
+CONFORM_POLICIES = ("expandAperture", "cropAperture", "adjustApertureWidth", "adjustApertureHeight",
+                    "adjustPixelAspectRatio")
+
+
 @dataclass
 class RenderSettingsInfo:
     """What a UsdRenderSettings prim asked for (None = not authored)."""
@@ -255,6 +260,10 @@ class RenderSettingsInfo:
     pixel_aspect_ratio: float = 1.0
     disable_motion_blur: bool = False
     disable_depth_of_field: bool = False
+    # UsdRender's aspectRatioConformPolicy: how the camera aperture is fitted to the image's aspect
+    aspect_ratio_conform_policy: str = "expandAperture"
+    # UsdRender's dataWindowNDC (xmin, ymin, xmax, ymax), (0, 0) bottom left; None = the whole image
+    data_window_ndc: tuple[float, float, float, float] | None = None
 
 
 @dataclass

@@ -14,7 +14,7 @@ import numpy as np
 from pxr import Sdf, Usd, UsdGeom, UsdRender
 
 from renderer.errors import SceneError
-from renderer.scene.model import Camera, MotionTransform, RenderSettingsInfo
+from renderer.scene.model import CONFORM_POLICIES, Camera, MotionTransform, RenderSettingsInfo
 from renderer.usd.motion import TransformSampler, motion_transform
 
 AUTO_FOCAL_35MM = 35.0  # the automatic camera's lens, in "mm" against a 36 mm wide aperture
@@ -46,17 +46,49 @@ def render_settings(stage: Usd.Stage, frame: float, warn) -> tuple[RenderSetting
     if prim is None:
         return info, None
     rs = UsdRender.Settings(prim)
-    res = rs.GetResolutionAttr().Get(frame) if rs.GetResolutionAttr().HasAuthoredValue() else None
-    if res is not None and res[0] > 0 and res[1] > 0:
-        info.resolution = (int(res[0]), int(res[1]))
-    targets = rs.GetCameraRel().GetForwardedTargets()
-    if targets:
-        info.camera_path = str(targets[0])
-    info.pixel_aspect_ratio = float(_get(prim, "pixelAspectRatio", frame, 1.0))
+    _read_settings_base(info, rs, frame, warn)
     info.disable_motion_blur = bool(_get(prim, "disableMotionBlur", frame, False)) or bool(
         _get(prim, "instantaneousShutter", frame, False))
     info.disable_depth_of_field = bool(_get(prim, "disableDepthOfField", frame, False))
+    # the first RenderProduct's authored values override the settings' (UsdRenderSettingsBase is shared)
+    products = [stage.GetPrimAtPath(t) for t in rs.GetProductsRel().GetForwardedTargets()]
+    products = [p for p in products if p and p.IsA(UsdRender.Product)]
+    if products:
+        _read_settings_base(info, UsdRender.Product(products[0]), frame, warn)
     return info, prim
+
+
+def _read_settings_base(info: RenderSettingsInfo, base, frame: float, warn) -> None:
+    """Fill ``info`` from a RenderSettingsBase (settings or product), taking only what is authored."""
+    prim = base.GetPrim()
+    attr = base.GetResolutionAttr()
+    res = attr.Get(frame) if attr.HasAuthoredValue() else None
+    if res is not None and res[0] > 0 and res[1] > 0:
+        info.resolution = (int(res[0]), int(res[1]))
+    targets = base.GetCameraRel().GetForwardedTargets()
+    if targets:
+        info.camera_path = str(targets[0])
+    attr = base.GetPixelAspectRatioAttr()
+    if attr.HasAuthoredValue():
+        par = float(attr.Get(frame))
+        if par > 0 and np.isfinite(par):
+            info.pixel_aspect_ratio = par
+        else:
+            warn(f"{prim.GetPath()}: pixelAspectRatio {par} is not positive; using 1")
+    attr = base.GetAspectRatioConformPolicyAttr()
+    if attr.HasAuthoredValue():
+        policy = str(attr.Get(frame))
+        if policy in CONFORM_POLICIES:
+            info.aspect_ratio_conform_policy = policy
+        else:
+            warn(f"{prim.GetPath()}: unknown aspectRatioConformPolicy {policy!r}; using expandAperture")
+    attr = base.GetDataWindowNDCAttr()
+    if attr.HasAuthoredValue():
+        x0, y0, x1, y1 = (float(v) for v in attr.Get(frame))
+        if not all(np.isfinite((x0, y0, x1, y1))) or x1 <= x0 or y1 <= y0:
+            warn(f"{prim.GetPath()}: dataWindowNDC {(x0, y0, x1, y1)} is empty; rendering the whole image")
+        elif (x0, y0, x1, y1) != (0.0, 0.0, 1.0, 1.0):
+            info.data_window_ndc = (x0, y0, x1, y1)
 
 
 def find_camera(stage: Usd.Stage, camera_path: str | None, settings: RenderSettingsInfo, warn):
