@@ -255,15 +255,74 @@ def drop_holes(corners: np.ndarray, tri_faces: np.ndarray, holes: np.ndarray) ->
     return corners[keep], tri_faces[keep]
 
 
+def _element_count(prim, interpolation: str, frame: float) -> int | None:
+    """How many elements a primvar of this interpolation has on a Mesh or a Cube (None: unknown)."""
+    if prim.GetTypeName() == "Cube":
+        counts = {UsdGeom.Tokens.constant: 1, UsdGeom.Tokens.uniform: len(CUBE_COUNTS),
+                  UsdGeom.Tokens.vertex: len(CUBE_POINTS), UsdGeom.Tokens.varying: len(CUBE_POINTS),
+                  UsdGeom.Tokens.faceVarying: len(CUBE_INDICES)}
+        return counts.get(interpolation)
+    if not prim.IsA(UsdGeom.Mesh):
+        return None
+    mesh = UsdGeom.Mesh(prim)
+    if interpolation == UsdGeom.Tokens.constant:
+        return 1
+    if interpolation == UsdGeom.Tokens.uniform:
+        counts = mesh.GetFaceVertexCountsAttr().Get(frame)
+        return None if counts is None else len(counts)
+    if interpolation in (UsdGeom.Tokens.vertex, UsdGeom.Tokens.varying):
+        pts = mesh.GetPointsAttr().Get(frame)
+        return None if pts is None else len(pts)
+    if interpolation == UsdGeom.Tokens.faceVarying:
+        fvi = mesh.GetFaceVertexIndicesAttr().Get(frame)
+        return None if fvi is None else len(fvi)
+    return None
+
+
+def _usable_element_size(pv, prim, frame: float, warn) -> bool:
+    """Whether the primvar can be read one value per element.
+
+    An ``elementSize`` above 1 means several values per element (UsdGeomPrimvar). DCC exporters (Maya's among
+    them) write counts there that are not meant that way: when the primvar holds exactly one value (or index)
+    per element of its interpolation, that is how it is read, as Hydra and the other renderers read it.
+    """
+    size = pv.GetElementSize()
+    if size == 1:
+        return True
+    path, name = str(prim.GetPath()), pv.GetPrimvarName()
+    expected = _element_count(prim, pv.GetInterpolation(), frame)
+    indices = pv.GetIndices(frame) if pv.IsIndexed() else None
+    values = pv.Get(frame)
+    have = len(indices) if indices is not None else (0 if values is None else len(values))
+    if expected is not None and have == expected:
+        warn(f"primvar elementSize read as 1: one value per {pv.GetInterpolation()} element ({name})", path)
+        return True
+    warn(f"primvars with elementSize != 1 ignored ({name})", path)
+    return False
+
+
+def _flattened(pv, frame: float):
+    """The primvar's values at the frame, expanded through its indices one value per element (None if it has no
+    value or an index is out of range). ``ComputeFlattened`` would group values by ``elementSize``."""
+    vals = pv.Get(frame)
+    if vals is None or len(vals) == 0:
+        return None
+    if not pv.IsIndexed():
+        return vals
+    idx = np.asarray(pv.GetIndices(frame), np.int64)
+    if len(idx) and (idx.min() < 0 or idx.max() >= len(vals)):
+        return None
+    return np.asarray(vals)[idx]
+
+
 def _primvar(prim, name: str, frame: float, warn):
     """(flattened values, interpolation) of primvars:name, or None if absent/empty."""
     pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar(name)
     if not pv or not pv.HasAuthoredValue():
         return None
-    if pv.GetElementSize() != 1:
-        warn(f"primvars with elementSize != 1 ignored ({name})", str(prim.GetPath()))
+    if not _usable_element_size(pv, prim, frame, warn):
         return None
-    vals = pv.ComputeFlattened(frame)
+    vals = _flattened(pv, frame)
     if vals is None or len(vals) == 0:
         return None
     return vals, pv.GetInterpolation()
@@ -274,12 +333,9 @@ def _uv_primvar_object(prim, frame: float, warn):
     api = UsdGeom.PrimvarsAPI(prim)
     pv = api.GetPrimvar("st")
     if pv and pv.HasAuthoredValue():
-        if pv.GetElementSize() != 1:
-            warn("primvars with elementSize != 1 ignored (st)", str(prim.GetPath()))
-            return None
-        return pv
+        return pv if _usable_element_size(pv, prim, frame, warn) else None
     for pv in api.GetPrimvarsWithAuthoredValues():  # any texture-coordinate primvar
-        if pv.GetElementSize() != 1:
+        if pv.GetElementSize() != 1 and not _usable_element_size(pv, prim, frame, warn):
             continue
         if str(pv.GetTypeName().role) == "TextureCoordinate" or pv.GetPrimvarName() in ("uv", "UVMap", "st0"):
             v = pv.Get(frame)
@@ -292,7 +348,7 @@ def _uv_primvar(prim, frame: float, warn):
     pv = _uv_primvar_object(prim, frame, warn)
     if pv is None:
         return None
-    vals = pv.ComputeFlattened(frame)
+    vals = _flattened(pv, frame)
     if vals is None or len(vals) == 0:
         return None
     return vals, pv.GetInterpolation()
@@ -551,6 +607,34 @@ def _cube(size: float):
     return np.array(pts), np.array(tris, np.int64), np.array(nrm)
 
 
+# Hydra's mesh of a UsdGeomCube (GeomUtilCuboidMeshGenerator): the topology primvars authored on a Cube refer to.
+# Points are for size 1; faces are right-handed quads.
+CUBE_POINTS = np.array([(1, 1, 1), (-1, 1, 1), (-1, -1, 1), (1, -1, 1), (-1, -1, -1), (-1, 1, -1), (1, 1, -1),
+                        (1, -1, -1)], np.float64) * 0.5
+CUBE_COUNTS = np.full(6, 4, np.int64)
+CUBE_INDICES = np.array([0, 1, 2, 3, 4, 5, 6, 7, 0, 6, 5, 1, 4, 7, 3, 2, 0, 3, 7, 6, 4, 2, 1, 5], np.int64)
+
+
+def _cube_with_uvs(prim, frame: float, keys: list[np.ndarray], perm, warn):
+    """(triangles, corner normals, corner uvs, per-key points) of a Cube whose texture coordinates are authored,
+    tessellated as Hydra's cube mesh so the primvar lines up; None when it has none that fit."""
+    hit = _uv_primvar(prim, frame, warn)
+    if hit is None:
+        return None
+    corners, tri_faces = triangulate(CUBE_COUNTS, CUBE_INDICES, CUBE_POINTS)
+    uvs = expand_primvar(hit[0], hit[1], corners, tri_faces, CUBE_INDICES, len(CUBE_COUNTS), len(CUBE_POINTS))
+    if uvs is None or uvs.shape[-1] != 2:
+        warn("texture coordinates with a size that does not match their interpolation ignored", str(prim.GetPath()))
+        return None
+    tris = CUBE_INDICES[corners]
+    sizes = [float(np.abs(k).max()) * 2.0 for k in keys]  # the size at each key (the generic cube spans +-size/2)
+    points = [(CUBE_POINTS * size)[:, perm] for size in sizes]
+    p = points[0][tris]
+    n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+    return tris, np.repeat(n[:, None, :], 3, axis=1), uvs, points, tri_faces
+
+
 def _plane(width: float, length: float):
     w, l = 0.5 * width, 0.5 * length
     p = np.array([(-w, -l, 0), (w, -l, 0), (w, l, 0), (-w, l, 0)], np.float64)
@@ -643,8 +727,16 @@ def read_primitive(prim, shutter: Shutter, warn) -> GeomData | None:
     if len(tris) == 0:
         warn("primitives of zero size skipped", str(prim.GetPath()))
         return None
-    times, pts = collapse_keys(np.asarray(times), np.stack(keys).astype(np.float32))
     ds = _get(prim, "doubleSided", frame, kind == "Plane")
+    textured = _cube_with_uvs(prim, frame, keys, perm, warn) if kind == "Cube" else None
+    if textured is not None:  # Hydra's cube mesh, which the authored texture coordinates refer to
+        tris, corner_normals, uvs, keys, tri_faces = textured
+        times, pts = collapse_keys(np.asarray(times), np.stack(keys).astype(np.float32))
+        return GeomData(point_times=times, points=np.ascontiguousarray(pts),
+                        triangles=np.ascontiguousarray(tris, np.int32), tri_faces=tri_faces,
+                        num_faces=len(CUBE_COUNTS), normals=np.ascontiguousarray(corner_normals, np.float32),
+                        uvs=np.ascontiguousarray(uvs, np.float32), double_sided=bool(ds))
+    times, pts = collapse_keys(np.asarray(times), np.stack(keys).astype(np.float32))
     return GeomData(
         point_times=times,
         points=np.ascontiguousarray(pts),

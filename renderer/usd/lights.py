@@ -98,6 +98,24 @@ def normalized(prim, frame: float) -> bool:
     return bool(_value(prim, "normalize", frame, False))
 
 
+# UsdLux has no camera visibility: a dome is seen behind everything unless one of these says otherwise. Ours,
+# then the per-ray visibility primvar Arnold exports write (0 = hidden from camera rays).
+CAMERA_VISIBILITY_ATTRIBUTES = ("drt:visibility:camera", "primvars:arnold:camera")
+
+
+def dome_seen_by_camera(prim, frame: float) -> bool:
+    """Whether camera rays see the dome (alpha 1 there), by the first of CAMERA_VISIBILITY_ATTRIBUTES authored."""
+    for name in CAMERA_VISIBILITY_ATTRIBUTES:
+        attr = prim.GetAttribute(name)
+        if attr and attr.HasAuthoredValue():
+            value = attr.Get(frame)
+            try:
+                return bool(float(value[0] if hasattr(value, "__len__") else value))
+            except (TypeError, ValueError, IndexError):
+                continue
+    return True
+
+
 def read_light(prim, sampler: TransformSampler, warn, placement=None, name: str | None = None) -> sc.Light | None:
     """A UsdLux light prim to a Light (None for unsupported kinds, with a warning). ``placement`` (absolute
     times (K,), row-vector world matrices (K, 4, 4)) places one instance of a light in a PointInstancer
@@ -146,6 +164,7 @@ def read_light(prim, sampler: TransformSampler, warn, placement=None, name: str 
         area = distant_size_factor(light.angle)
     elif kind == sc.LIGHT_DOME:
         radiance = _dome_texture(prim, light, radiance, frame, warn)
+        light.visible_to_camera = dome_seen_by_camera(prim, frame)
     if kind == sc.LIGHT_RECT:
         image = _light_image(prim, frame, warn)
         if image is not None:
