@@ -344,6 +344,12 @@ def _uv_primvar_object(prim, frame: float, warn):
     return None
 
 
+def default_uv_name(prim, frame: float) -> str | None:
+    """The primvar ``read_mesh`` takes as texture coordinates (``st``, else the first texCoord2f one), or None."""
+    pv = _uv_primvar_object(prim, frame, lambda *a: None)
+    return None if pv is None else pv.GetPrimvarName()
+
+
 def _uv_primvar(prim, frame: float, warn):
     pv = _uv_primvar_object(prim, frame, warn)
     if pv is None:

@@ -32,7 +32,8 @@ from renderer.usd import camera as usd_camera
 from renderer.usd import csg as usd_csg
 from renderer.usd import curves as usd_curves
 from renderer.usd import lights as usd_lights
-from renderer.usd.geometry import PRIMITIVE_TYPES, collapse_keys, primitive_signature, read_geometry
+from renderer.usd.geometry import (PRIMITIVE_TYPES, collapse_keys, default_uv_name, primitive_signature,
+                                   read_geometry, read_named_uvs)
 from renderer.usd.linking import apply_linking
 from renderer.usd.materials import MaterialTable
 from renderer.usd.mesh_lights import apply_mesh_light
@@ -440,6 +441,8 @@ class _Importer:
             if world is None and prim.IsA(UsdGeom.Mesh):
                 world = self.xf.world(prim, [self.frame])[0]
             geom = read_geometry(prim, self.shutter, self.warn, self.detail, world, keys)
+            if geom is not None:
+                self._material_uv_set(prim, geom)
             if geom is not None and skin is not None and geom.normals is not None and geom.subdivision_level is None:
                 geom.normals = self._skinned_normals(prim, skin, geom)
         index = None
@@ -460,6 +463,16 @@ class _Importer:
             self._mesh_bounds.append(np.stack([flat.min(axis=0), flat.max(axis=0)]).astype(np.float64))
         self._mesh_cache[key] = index
         return index
+
+    def _material_uv_set(self, prim, geom) -> None:
+        """Texture coordinates from the primvar the prim's materials read (a UsdPrimvarReader_float2 ``varname``)
+        when that is not the one the mesh reader took by default (``st``, else the first texCoord2f)."""
+        names = self.materials.uv_sets(prim)
+        if not names or names[0] == default_uv_name(prim, self.frame):
+            return
+        uvs = read_named_uvs(prim, names[0], self.frame, self.warn, geom.subdivision_level)
+        if uvs is not None and len(uvs) == len(geom.triangles):
+            geom.uvs = uvs
 
     def _skinned_normals(self, prim, skin, geom) -> np.ndarray | None:
         """Authored per-corner normals of a skinned polygon mesh carried to the skinned pose at the frame."""

@@ -55,6 +55,7 @@ from pxr import Gf, UsdGeom, UsdShade
 from renderer.scene.model import Material, Texture, TextureInput
 from renderer.usd.shading_network import (Const, Display, Network, Tex, UV, expand_rgba, select_post, shader_id,
                                           tex_mean)
+from renderer.usd import arnold_nodes
 from renderer.usd.surfaces import PREVIEW, PREVIEW_DEFAULTS, surface_inputs, surface_model
 from renderer.usd.texture_files import (TextureFiles, authoring_layer, read_asset_image,  # noqa: F401 - re-exported
                                         resolve_asset)
@@ -150,7 +151,7 @@ class MaterialTable:
         self._ids: dict[tuple, int] = {}
         self._surfaces: dict[str, tuple] = {}
         self._uv_sets: dict[str, tuple[str, ...]] = {}
-        self.net = Network(frame, warn, self.files)
+        self.net = Network(frame, warn, self.files, nodes=arnold_nodes.PATTERNS)
 
     # -- public ---------------------------------------------------------------------------------------------------
     @property

@@ -282,10 +282,12 @@ def _fold(tex: Tex, a: np.ndarray, b: np.ndarray) -> Tex:
 class Network:
     """Signals of node outputs for one import; textures through ``files``; ``warn(message, item)``."""
 
-    def __init__(self, frame: float, warn, files: TextureFiles):
+    def __init__(self, frame: float, warn, files: TextureFiles, nodes: dict | None = None):
         self.frame = frame
         self.warn = warn
         self.files = files
+        # further node kinds: shader id -> evaluate(network, prim, output name) -> Signal | None
+        self.nodes = dict(nodes or {})
         self._outputs: dict[tuple[str, str], Signal | None] = {}
         self._depth = 0
 
@@ -367,6 +369,9 @@ class Network:
 
     def _evaluate(self, prim, output: str) -> Signal | None:
         sid = shader_id(prim)
+        extra = self.nodes.get(sid)
+        if extra is not None:
+            return extra(self, prim, output)
         cat, typ = node_kind(sid)
         where = f"{prim.GetPath()} ({sid})"
         if cat in ("UsdUVTexture", "image", "tiledimage"):

@@ -13,6 +13,7 @@ Three models are read, each input a signal of the shading network (``shading_net
   specular_roughness, specular_ior, coat_weight / coat_roughness, emission_luminance * emission_color (as the
   MaterialX graph of open_pbr_surface multiplies them), geometry_opacity * (1 - transmission_weight),
   geometry_normal.
+* **Arnold's own surfaces** (``arnold:flat``, ``lambert``, ``standard``, ``utility``): see ``arnold_nodes``.
 
 Specular weight and colour: white (the default) is the metallic workflow with F0 from the IOR; otherwise, for a
 dielectric (metalness 0), the specular workflow with specularColor = weight * colour * F0(ior). Inputs of these
@@ -23,11 +24,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from renderer.usd import arnold_nodes
 from renderer.usd.shading_network import Const, Network, Tex, const, node_kind, shader_id
 
 PREVIEW = "UsdPreviewSurface"
 STANDARD = "standard_surface"
 OPENPBR = "open_pbr_surface"
+ARNOLD = "arnold"  # Arnold's own surfaces (flat, lambert, standard, utility): ``arnold_nodes``
 
 # UsdPreviewSurface spec defaults
 PREVIEW_DEFAULTS = {
@@ -67,7 +70,9 @@ _NAMES = {
 
 
 def surface_model(sid: str) -> str | None:
-    """PREVIEW, STANDARD, OPENPBR or None for a surface shader id."""
+    """PREVIEW, STANDARD, OPENPBR, ARNOLD or None for a surface shader id."""
+    if arnold_nodes.is_surface(sid):
+        return ARNOLD
     cat, _ = node_kind(sid)
     if cat == "UsdPreviewSurface":
         return PREVIEW
@@ -87,6 +92,8 @@ def surface_inputs(net: Network, prim, path: str) -> dict:
     model = surface_model(shader_id(prim))
     if model == PREVIEW:
         return {name: net.input(prim, name) for name in PREVIEW_DEFAULTS}
+    if model == ARNOLD:
+        return arnold_nodes.surface_inputs(net, prim)
     names = _NAMES[model]
     sig = {k: net.input(prim, v[0], v[1]) for k, v in names.items() if k != "normal"}
     where = f"{prim.GetPath()}"
