@@ -64,6 +64,7 @@ from renderer.sampling.sobol import (
 )
 from renderer.sampling.warps import sample_tent
 from renderer.scene.model import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_DOME, LIGHT_RECT, LIGHT_SPHERE
+from renderer.lights.multipliers import diffuse_fraction, nee_bsdf, sampled_weight
 from renderer.shading.bsdf import SurfaceParams, bsdf_albedo_hint, bsdf_setup, lobes_eval, lobes_pdf, lobes_sample
 from renderer.shading.materials import (
     Materials,
@@ -316,6 +317,7 @@ def trace_wave_kernel(
     bounce = int(0)
     alive = int(1)
     path_roughness = float(0.0)  # the roughest direction sampled so far (glossy filter)
+    lobe_frac = wp.vec3(0.0)  # diffuse share of the last sampled direction (per-light diffuse/specular multipliers)
     while alive != 0:
         rays += 1
         # light reached along this ray has been scattered `bounce` times; direct light is 0 or 1 bounce
@@ -337,6 +339,8 @@ def trace_wave_kernel(
                         w = float(1.0)
                         if prev_delta == 0:
                             w = power_heuristic(prev_pdf, select_pdf(lights.select, li, prev_p) * pdf_l)
+                        if lights.lobe_mults != 0:
+                            Le = wp.cw_mul(Le, sampled_weight(lights, li, lobe_frac))
                         L += clamp_contribution(wp.cw_mul(beta, Le) * w, hit_clamp)
         if hit.inst < 0:
             for li in range(lights.count):
@@ -348,6 +352,8 @@ def trace_wave_kernel(
                     w = float(1.0)
                     if prev_delta == 0:
                         w = power_heuristic(prev_pdf, select_pdf(lights.select, li, prev_p) * pdf_l)
+                    if lights.lobe_mults != 0 and bounce > 0:
+                        Le = wp.cw_mul(Le, sampled_weight(lights, li, lobe_frac))
                     L += clamp_contribution(wp.cw_mul(beta, Le) * w, hit_clamp)
             if bounce == 0 and lights.dome_visible != 0:
                 alpha = 1.0
@@ -384,6 +390,8 @@ def trace_wave_kernel(
                     pdf_l = select_pdf(lights.select, li, prev_p) * mesh_light_pdf(
                         lights, geo, li, hit.inst, hit.tri, origin, sp.p, s)
                     w = power_heuristic(prev_pdf, pdf_l)
+                if lights.lobe_mults != 0 and bounce > 0 and li >= 0:
+                    Le = wp.cw_mul(Le, sampled_weight(lights, li, lobe_frac))
                 # emission covers what the surface covers
                 L += clamp_contribution(wp.cw_mul(beta, Le) * (w * ms.opacity), hit_clamp)
             if bounce >= settings.max_depth:
@@ -401,6 +409,8 @@ def trace_wave_kernel(
                     if pdf_l > 0.0 and (Le_l[0] > 0.0 or Le_l[1] > 0.0 or Le_l[2] > 0.0) and lit_by(
                             lights.links, li, hit.inst):
                         f = lobes_eval(lobes, wi)
+                        if lights.lobe_mults != 0:
+                            f = nee_bsdf(lights, li, lobes, wi, f)
                         if f[0] > 0.0 or f[1] > 0.0 or f[2] > 0.0:
                             # shadow rays start on the side of the surface the light is on
                             o_sh = origin_l
@@ -425,6 +435,8 @@ def trace_wave_kernel(
                     alive = 0
                 else:
                     beta = wp.cw_mul(beta, weight)
+                    if lights.lobe_mults != 0:
+                        lobe_frac = diffuse_fraction(lobes, wi, flags & FLAG_DELTA)
                     cone_spread = bounce_spread(cone_spread, ms.roughness, flags & FLAG_DELTA)
                     if (flags & FLAG_DELTA) == 0:
                         path_roughness = wp.max(path_roughness, roughness_of_pdf(pdf))

@@ -71,6 +71,8 @@ class Lights:
     select: Selection  # which light a shading point samples (``select``)
     env: EnvMap  # the textured dome, if any (size[0] == 1 marks its light)
     dome_visible: int  # 1 when camera rays see a dome (alpha 1 there)
+    lobe_mult: wp.array(dtype=wp.vec2)  # (inputs:diffuse, inputs:specular) per light
+    lobe_mults: int  # 1 when some light's multipliers are not (1, 1): the kernels split the BSDF by lobe
 
 
 def _luminance(rgb) -> float:
@@ -163,7 +165,7 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
                   clusters: bool = True) -> tuple[Lights, int]:
     """Lights of a scene for the kernels; returns the struct and the number of lights."""
     (kinds, radiance, size, insts, cdfs, bases, counts, powers, transforms, shapes, sided, images, uniform, kept,
-     estimates) = ([] for _ in range(15))
+     estimates, mults) = ([] for _ in range(16))
     centre, radius = scene_sphere(scene)
     env_image, env_xf = None, np.eye(4)
     dome_visible = 0
@@ -265,6 +267,7 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
         cdfs.append(cdf)
         powers.append(power)
         transforms.append(light.transform)
+        mults.append((light.diffuse, light.specular))
     n = len(kinds)
     lt = Lights()
     lt.count = n
@@ -283,6 +286,8 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
     p = p / p.sum()
     cdf_sel = np.cumsum(p)
     cdf_sel[-1] = 1.0
+    lt.lobe_mult = wp.array(np.array(mults or [(1.0, 1.0)], np.float32), dtype=wp.vec2, device=device)
+    lt.lobe_mults = int(any(m != (1.0, 1.0) for m in mults))
     lt.select_pdf = wp.array(p.astype(np.float32), dtype=wp.float32, device=device)
     lt.select_cdf = wp.array(cdf_sel.astype(np.float32), dtype=wp.float32, device=device)
     lt.instance = i32(insts, [-1])

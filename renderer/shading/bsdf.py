@@ -302,6 +302,28 @@ def _eval_local(b: BsdfLobes, wi: wp.vec3) -> wp.vec3:
 
 
 @wp.func
+def _eval_local_split(b: BsdfLobes, wi: wp.vec3):
+    """(diffuse lobe, every other non-delta lobe) at local wi: ``_eval_local`` in two parts, for per-light
+    diffuse/specular multipliers. Kept apart from ``_eval_local`` so that its sums (and frames) stay as they are."""
+    wo = b.wo
+    att = _coat_att(b.cc, wo[2]) * _coat_att(b.cc, wi[2])
+    fd = wp.vec3(0.0)
+    fs = wp.vec3(0.0)
+    if wi[2] > 0.0:
+        fd = diffuse_eval(b.kd, b.f0, b.f90, wo, wi) * (att / (1.0 - b.cc * W_COAT_DIFFUSE_K))
+        if b.w_spec > 0.0 and not is_delta(b.alpha):
+            v, c = ggx_reflection_eval(b.alpha, wo, wi)
+            fs += fresnel_schlick(b.f0, b.f90, c) * (att * b.w_spec * v)
+        if b.cc > 0.0 and not is_delta(b.alpha_cc):
+            v, c = ggx_reflection_eval(b.alpha_cc, wo, wi)
+            fs += wp.vec3(b.cc * fresnel_dielectric(c, W_CLEARCOAT_IOR) * v)
+    if b.trans == TRANS_DIELECTRIC and not is_delta(b.alpha):
+        fr, ft = dielectric_eval(b.alpha, b.eta, wo, wi)
+        fs += (wp.vec3(fr) + b.tint * ft) * (att * b.w_trans)
+    return fd, fs
+
+
+@wp.func
 def _pdf_local(b: BsdfLobes, wi: wp.vec3) -> float:
     wo = b.wo
     pdf = float(0.0)
@@ -325,6 +347,17 @@ def lobes_eval(b: BsdfLobes, wi: wp.vec3) -> wp.vec3:
     if _leaks(b, wl[2], wi):
         return wp.vec3(0.0)
     return _eval_local(b, wl)
+
+
+@wp.func
+def lobes_eval_split(b: BsdfLobes, wi: wp.vec3):
+    """(diffuse, the other lobes) of ``lobes_eval``: f = diffuse + other."""
+    if b.valid == 0:
+        return wp.vec3(0.0), wp.vec3(0.0)
+    wl = wp.transpose(b.frame) * wi
+    if _leaks(b, wl[2], wi):
+        return wp.vec3(0.0), wp.vec3(0.0)
+    return _eval_local_split(b, wl)
 
 
 @wp.func

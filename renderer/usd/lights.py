@@ -173,8 +173,10 @@ def read_light(prim, sampler: TransformSampler, warn, placement=None, name: str 
         light.shaping = read_shaping(prim, sampler.shutter, warn)
     elif _has_shaping(prim):
         warn("light shaping on distant and dome lights ignored (the schema shapes local lights)", path)
-    if float(get("diffuse", 1.0)) != 1.0 or float(get("specular", 1.0)) != 1.0:
-        warn("per-light diffuse/specular multipliers other than 1 ignored (the BSDF is not split by lobe)", path)
+    light.diffuse, light.specular = float(get("diffuse", 1.0)), float(get("specular", 1.0))
+    if not (np.isfinite(light.diffuse) and np.isfinite(light.specular)) or min(light.diffuse, light.specular) < 0:
+        warn("per-light diffuse/specular multipliers that are negative or not finite read as 1", path)
+        light.diffuse = light.specular = 1.0
     if bool(get("normalize", False)) and area > 0.0:
         radiance = radiance / area
     if not np.all(np.isfinite(radiance)):
