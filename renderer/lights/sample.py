@@ -184,6 +184,19 @@ def distant_axis(lights: Lights, li: int, s: float):
     return wp.normalize(wp.transform_vector(light_matrix(lights, li, s), wp.vec3(0.0, 0.0, 1.0)))
 
 
+@wp.func
+def light_radiance(lights: Lights, li: int, s: float) -> wp.vec3:
+    """Radiance of light ``li`` at normalised shutter time ``s``: its keys linearly interpolated when its emission
+    is animated within the shutter (``rad_count`` > 1), else the constant."""
+    n = lights.rad_count[li]
+    if n < 2:
+        return lights.radiance[li]
+    x = wp.clamp(s, 0.0, 1.0) * float(n - 1)
+    k = wp.min(int(x), n - 2)
+    off = lights.rad_off[li] + k
+    return wp.lerp(lights.rad_keys[off], lights.rad_keys[off + 1], x - float(k))
+
+
 @wp.func(inline=True)  # called once per path vertex: no copy of the big structs
 def sample_light(lights: Lights, geo: Geometry, mats: Materials, tex: Textures, li: int, p: wp.vec3,
                  n: wp.vec3, s: float, u_pick: float, u: wp.vec2):
@@ -195,7 +208,7 @@ def sample_light(lights: Lights, geo: Geometry, mats: Materials, tex: Textures, 
     (intensity / dist^2, or irradiance), and delta is True: no multiple importance weight applies.
     """
     kind = lights.kind[li]
-    Le = lights.radiance[li]
+    Le = light_radiance(lights, li, s)
     zero = wp.vec3(0.0)
     if kind == LIGHT_RECT:
         corner, ex, ey, front = rect_frame(lights, li, s)
@@ -260,7 +273,7 @@ def sample_light(lights: Lights, geo: Geometry, mats: Materials, tex: Textures, 
         if wp.dot(wp.transform_vector(w2o_t, wp.cross(p1 - p0, p2 - p0)), g.dir) >= 0.0:
             return zero, 0.0, zero, 0.0, False
     if g.pdf > 0.0 and lights.uniform[li] != 0:  # MeshLightAPI: light rays only, so no MIS partner
-        return g.dir, g.dist, lights.radiance[li], g.pdf * p_tri, True
+        return g.dir, g.dist, light_radiance(lights, li, s), g.pdf * p_tri, True
     if g.pdf > 0.0:
         # the emission where the point landed (emissive textures): its barycentrics are the warp's
         b = square_to_uniform_triangle(u)
@@ -303,7 +316,7 @@ def area_light_hit(lights: Lights, li: int, ro: wp.vec3, rd: wp.vec3, tmax: floa
         if t > 0.0 and t < tmax and wp.dot(rd, front) < 0.0:
             pdf = rect_pdf(ro, rd, corner, ex, ey)
             if pdf > 0.0:
-                Le = wp.cw_mul(lights.radiance[li], rect_texel(lights, li, corner, ex, ey, ro + rd * t))
+                Le = wp.cw_mul(light_radiance(lights, li, s), rect_texel(lights, li, corner, ex, ey, ro + rd * t))
                 return t, wp.cw_mul(Le, light_shaping(lights, li, -rd, s)), pdf
     elif kind == LIGHT_DISK:
         c, front, r = disk_frame(lights, li, s)
@@ -311,7 +324,7 @@ def area_light_hit(lights: Lights, li: int, ro: wp.vec3, rd: wp.vec3, tmax: floa
         if t > 0.0 and t < tmax and wp.dot(rd, front) < 0.0:
             pdf = disk_light_pdf(ro, rd, c, front, r)
             if pdf > 0.0:
-                return t, wp.cw_mul(lights.radiance[li], light_shaping(lights, li, -rd, s)), pdf
+                return t, wp.cw_mul(light_radiance(lights, li, s), light_shaping(lights, li, -rd, s)), pdf
     elif kind == LIGHT_SPHERE:
         c, r = sphere_frame(lights, li, s)
         if r > 0.0:
@@ -325,7 +338,7 @@ def area_light_hit(lights: Lights, li: int, ro: wp.vec3, rd: wp.vec3, tmax: floa
                 if t > 0.0 and t < tmax:
                     pdf = sphere_light_pdf(ro, rd, c, r)
                     if pdf > 0.0:
-                        return t, wp.cw_mul(lights.radiance[li], light_shaping(lights, li, -rd, s)), pdf
+                        return t, wp.cw_mul(light_radiance(lights, li, s), light_shaping(lights, li, -rd, s)), pdf
     elif kind == LIGHT_CYLINDER:
         c, axis, length, r = cylinder_frame(lights, li, s)
         o = ro - c
@@ -341,7 +354,7 @@ def area_light_hit(lights: Lights, li: int, ro: wp.vec3, rd: wp.vec3, tmax: floa
                 if t > 0.0 and t < tmax and wp.abs(wp.dot(o + t * rd, axis)) <= 0.5 * length:
                     pdf = cylinder_light_pdf(ro, rd, c, axis, length, r)
                     if pdf > 0.0:
-                        return t, wp.cw_mul(lights.radiance[li], light_shaping(lights, li, -rd, s)), pdf
+                        return t, wp.cw_mul(light_radiance(lights, li, s), light_shaping(lights, li, -rd, s)), pdf
     return float(BIG), zero, 0.0
 
 
@@ -354,12 +367,12 @@ def infinite_light_eval(lights: Lights, li: int, d: wp.vec3, n_prev: wp.vec3, s:
     kind = lights.kind[li]
     if kind == LIGHT_DOME:
         if lights.size[li][0] > 0.0:
-            return wp.cw_mul(lights.radiance[li], env_radiance(lights.env, d)), env_pdf(lights.env, d)
-        return lights.radiance[li], wp.max(wp.dot(d, n_prev), 0.0) / wp.pi
+            return wp.cw_mul(light_radiance(lights, li, s), env_radiance(lights.env, d)), env_pdf(lights.env, d)
+        return light_radiance(lights, li, s), wp.max(wp.dot(d, n_prev), 0.0) / wp.pi
     if kind == LIGHT_DISTANT:
         cos_max = lights.size[li][0]
         if cos_max < 1.0 and wp.dot(d, distant_axis(lights, li, s)) >= cos_max:
-            return lights.radiance[li], 1.0 / (2.0 * wp.pi * (1.0 - cos_max))
+            return light_radiance(lights, li, s), 1.0 / (2.0 * wp.pi * (1.0 - cos_max))
     return wp.vec3(0.0), 0.0
 
 

@@ -72,6 +72,9 @@ class Lights:
     env: EnvMap  # the textured dome, if any (size[0] == 1 marks its light)
     dome_visible: int  # 1 when camera rays see a dome (alpha 1 there)
     lobe_mult: wp.array(dtype=wp.vec2)  # (inputs:diffuse, inputs:specular) per light
+    rad_off: wp.array(dtype=wp.int32)  # first radiance key of a light animated within the shutter in rad_keys
+    rad_count: wp.array(dtype=wp.int32)  # its number of keys (evenly spaced over the shutter), 0 = constant
+    rad_keys: wp.array(dtype=wp.vec3)  # radiance keys, concatenated
     lobe_mults: int  # 1 when some light's multipliers are not (1, 1): the kernels split the BSDF by lobe
 
 
@@ -165,12 +168,14 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
                   clusters: bool = True) -> tuple[Lights, int]:
     """Lights of a scene for the kernels; returns the struct and the number of lights."""
     (kinds, radiance, size, insts, cdfs, bases, counts, powers, transforms, shapes, sided, images, uniform, kept,
-     estimates, mults) = ([] for _ in range(16))
+     estimates, mults, rad_keys) = ([] for _ in range(17))
     centre, radius = scene_sphere(scene)
     env_image, env_xf = None, np.eye(4)
     dome_visible = 0
     for light in scene.lights:
         rad = np.asarray(light.radiance, np.float64)
+        if light.radiance_keys is not None:  # animated in the shutter: power and culling by its average
+            rad = np.asarray(light.radiance_keys, np.float64).mean(0)
         phi = cap = ext = 0.0
         pos = np.zeros(3)
         lum = _luminance(rad)
@@ -268,6 +273,8 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
         powers.append(power)
         transforms.append(light.transform)
         mults.append((light.diffuse, light.specular))
+        rad_keys.append(np.asarray(light.radiance_keys, np.float32).reshape(-1, 3)
+                        if light.radiance_keys is not None else np.zeros((0, 3), np.float32))
     n = len(kinds)
     lt = Lights()
     lt.count = n
@@ -286,6 +293,11 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
     p = p / p.sum()
     cdf_sel = np.cumsum(p)
     cdf_sel[-1] = 1.0
+    counts_k = [len(k) for k in rad_keys]
+    lt.rad_count = i32(counts_k, [0])
+    lt.rad_off = i32(np.concatenate([[0], np.cumsum(counts_k)[:-1]]).astype(np.int32) if counts_k else [], [0])
+    all_keys = np.concatenate(rad_keys) if counts_k and sum(counts_k) else np.zeros((1, 3), np.float32)
+    lt.rad_keys = wp.array(all_keys.astype(np.float32), dtype=wp.vec3, device=device)
     lt.lobe_mult = wp.array(np.array(mults or [(1.0, 1.0)], np.float32), dtype=wp.vec2, device=device)
     lt.lobe_mults = int(any(m != (1.0, 1.0) for m in mults))
     lt.select_pdf = wp.array(p.astype(np.float32), dtype=wp.float32, device=device)

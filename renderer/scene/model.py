@@ -202,6 +202,8 @@ class Light:
     instance: int = -1  # LIGHT_MESH only
     triangles: tuple[int, int] | None = None  # LIGHT_MESH: the emitting triangle range of the mesh (None: all)
     visible_to_camera: bool = True  # dome lights seen by camera rays
+    # radiance (RGB) at evenly spaced times over the shutter when the emission is animated in it; None: constant
+    radiance_keys: tuple | None = None
     diffuse: float = 1.0  # inputs:diffuse: multiplier of this light's effect on the diffuse response of materials
     specular: float = 1.0  # inputs:specular: ... on their specular response (specular, coat, transmission lobes)
     # LIGHT_DOME with a lat-long texture: (H, W, 3) float32 linear emitted radiance (already multiplied by

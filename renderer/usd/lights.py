@@ -129,6 +129,7 @@ def read_light(prim, sampler: TransformSampler, warn, placement=None, name: str 
     frame = sampler.shutter.frame
     get = lambda n, d: _value(prim, n, frame, d)  # noqa: E731
     radiance = base_emission(prim, frame)
+    scale = 1.0  # the final radiance is base_emission * scale (treatAsPoint, normalize); not for textured domes
     if placement is None:
         times, rows = sampler.motion(prim)
         frame_row = sampler.world(prim, [frame])[0]
@@ -154,6 +155,7 @@ def read_light(prim, sampler: TransformSampler, warn, placement=None, name: str 
         light.radius = r
         if bool(get("treatAsPoint", False)):  # a point of the sphere's far-field intensity L pi r^2 (cd)
             light.radius = 0.0
+            scale *= np.pi * r * r * sx * sy if r > 0.0 else 1.0
             radiance = radiance * (np.pi * r * r * sx * sy if r > 0.0 else 1.0)
     elif kind == sc.LIGHT_CYLINDER:
         light.length = float(get("length", 1.0))
@@ -179,11 +181,38 @@ def read_light(prim, sampler: TransformSampler, warn, placement=None, name: str 
         light.diffuse = light.specular = 1.0
     if bool(get("normalize", False)) and area > 0.0:
         radiance = radiance / area
+        scale /= area
     if not np.all(np.isfinite(radiance)):
         warn("lights with non-finite radiance ignored", path)
         return None
     light.radiance = tuple(float(x) for x in radiance)
+    if not (kind == sc.LIGHT_DOME and light.texture is not None):
+        light.radiance_keys = emission_keys(prim, sampler.shutter, scale)
     return light
+
+
+# What makes a light's emission (``base_emission``); when one of them varies inside the shutter the light gets
+# EMISSION_KEYS radiance keys, evenly spaced over it, and every sample takes its own time's radiance.
+_EMISSION_NAMES = ("intensity", "exposure", "color", "colorTemperature", "enableColorTemperature")
+EMISSION_KEYS = 5
+
+
+def emission_keys(prim, shutter, scale: float) -> tuple | None:
+    """Radiance (RGB, nits) at EMISSION_KEYS times evenly over the shutter when the emission is animated within
+    it, else None. ``scale``: what turns ``base_emission`` into the light's radiance (normalize, treatAsPoint)."""
+    if shutter.static:
+        return None
+    animated = False
+    for name in _EMISSION_NAMES:
+        for attr in (prim.GetAttribute("inputs:" + name), prim.GetAttribute(name)):
+            if attr and attr.HasAuthoredValue() and attr.ValueMightBeTimeVarying():
+                animated = True
+    if not animated:
+        return None
+    keys = np.array([base_emission(prim, float(t)) * scale for t in shutter.uniform(EMISSION_KEYS)], np.float64)
+    if not np.all(np.isfinite(keys)) or np.allclose(keys, keys[0], rtol=0.0, atol=0.0):
+        return None
+    return tuple(tuple(float(x) for x in k) for k in np.maximum(keys, 0.0))
 
 
 _SHAPING_NAMES = ("shaping:cone:angle", "shaping:cone:softness", "shaping:focus", "shaping:focusTint",

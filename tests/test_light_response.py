@@ -1,5 +1,6 @@
 """Per-light inputs:diffuse / inputs:specular (renderer/lights/multipliers.py) scale the diffuse and specular
-response of materials to that light, through next-event estimation and BSDF-sampled hits alike."""
+response of materials to that light, through next-event estimation and BSDF-sampled hits alike; emission animated
+within the shutter is taken at each sample's time."""
 from __future__ import annotations
 
 import numpy as np
@@ -74,3 +75,31 @@ def test_specular_multiplier_scales_a_metal_through_both_strategies(tmp_path, sp
                     spp=256)
     assert base.mean() > 0.05
     assert float(scaled.mean()) == pytest.approx(specular * float(base.mean()), abs=0.01 * float(base.mean()))
+
+
+def ramp_scene(path, keys, shutter=(-0.5, 0.5)):
+    """A white Lambert card under a normalized distant light whose intensity is time-sampled ``keys``
+    ({time: lux}), seen through a camera with the given shutter."""
+    stage = stages.new_stage(path)
+    stages.camera(stage, translate=(0, 0, 10), ortho=True, h_ap_mm=20.0, v_ap_mm=20.0, shutter=shutter)
+    stages.rect_xy(stage, "/World/Card", -2, 2, -2, 2, 0.0, stages.material(stage, "white", (0.8, 0.8, 0.8)))
+    lt = stages.distant_light(stage, intensity=1.0, rotate_x=0.0)
+    attr = lt.GetIntensityAttr()
+    for t, v in keys.items():
+        attr.Set(v, t)
+    stage.Save()
+    return str(path)
+
+
+def test_intensity_animated_in_the_shutter_averages_over_it(tmp_path):
+    # 0 lux at the shutter's open, 4 lux at its close, linear: the frame sees the average, 2 lux
+    path = ramp_scene(tmp_path / "ramp.usda", {-0.5: 0.0, 0.5: 4.0})
+    rgb = render(path, spp=64)
+    assert float(rgb.mean()) == pytest.approx(0.8 * 2.0 / np.pi, rel=0.01)
+    # a shutter over the first half sees the first half's average, 1 lux
+    half = render(ramp_scene(tmp_path / "half.usda", {-0.5: 0.0, 0.5: 4.0}, shutter=(-0.5, 0.0)), spp=64)
+    assert float(half.mean()) == pytest.approx(0.8 * 1.0 / np.pi, rel=0.01)
+    # an intensity that is constant over the shutter renders exactly as a constant one
+    flat = render(ramp_scene(tmp_path / "flat.usda", {-1.0: 2.0, 1.0: 2.0}), spp=16)
+    const = render(ramp_scene(tmp_path / "const.usda", {}), spp=16) * 2.0
+    assert np.allclose(flat, const, rtol=1e-5)
