@@ -225,10 +225,32 @@ def _worker_threads() -> int:
         return 1
 
 
+# Render work yields the CPU to whatever shares the machine with it: on the embedded LocalCluster that is the API
+# answering status requests and inspecting uploads, which must stay fast while tiles render. A niceness, raised
+# once per worker process (never lowered: that needs privileges); DRT_RENDER_NICENESS=0 leaves it alone.
+RENDER_NICENESS = 10
+_niced = False
+
+
+def background_priority() -> None:
+    """Raise this process's niceness to DRT_RENDER_NICENESS (default RENDER_NICENESS), once."""
+    global _niced
+    if _niced:
+        return
+    _niced = True
+    try:
+        want = int(os.environ.get("DRT_RENDER_NICENESS", RENDER_NICENESS))
+        if want > os.getpriority(os.PRIO_PROCESS, 0):
+            os.setpriority(os.PRIO_PROCESS, 0, min(want, 19))
+    except (ValueError, OSError, AttributeError):  # not a number, not permitted, or not a POSIX system
+        pass
+
+
 def render_tile_task(task: TileTask, scene: ScenePackage) -> dict:
     from renderer.errors import Cancelled, RenderError
     from renderer.render import Tile, render_tile, tile_time_budget
 
+    background_priority()
     try:
         prep = prepared(task.spec, task.frame, scene, task.cache_size)
         if (prep.width, prep.height) != (task.width, task.height):
