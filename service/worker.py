@@ -27,6 +27,7 @@ from __future__ import annotations
 import atexit
 import dataclasses
 import hashlib
+import multiprocessing
 import os
 import shutil
 import tempfile
@@ -233,11 +234,14 @@ _niced = False
 
 
 def background_priority() -> None:
-    """Raise this process's niceness to DRT_RENDER_NICENESS (default RENDER_NICENESS), once."""
+    """Raise this process's niceness to DRT_RENDER_NICENESS (default RENDER_NICENESS), once, in a worker process of
+    its own (a nanny's child): workers running as threads of the service (or of a test) leave it alone."""
     global _niced
     if _niced:
         return
     _niced = True
+    if multiprocessing.parent_process() is None:
+        return
     try:
         want = int(os.environ.get("DRT_RENDER_NICENESS", RENDER_NICENESS))
         if want > os.getpriority(os.PRIO_PROCESS, 0):
