@@ -85,6 +85,26 @@ def test_shadow_enable_and_shadow_color(tmp_path):
     np.testing.assert_allclose(build(tmp_path / "g.usda", near)[x_px(0.15)], 1.0, rtol=1e-3)
 
 
+@pytest.mark.parametrize("gamma", [1.0, 2.0])
+def test_shadow_falloff_fades_the_end_of_the_shadow_distance(tmp_path, gamma):
+    # the occluder is 1 m from the floor; distance 1.225 and falloff 0.4 put it 0.4375 of the way through the
+    # zone (the middle of its 4th slice): shadow strength (1 - 0.4375)^gamma, so the floor keeps the rest
+    def fading(sun, stage):
+        api = UsdLux.ShadowAPI.Apply(sun.GetPrim())
+        api.CreateShadowDistanceAttr(1.225)
+        api.CreateShadowFalloffAttr(0.4)
+        api.CreateShadowFalloffGammaAttr(gamma)
+    row = build(tmp_path / f"fade{gamma}.usda", fading)
+    np.testing.assert_allclose(row[x_px(0.15)], 1.0 - (1.0 - 0.4375) ** gamma, atol=2e-3)
+    np.testing.assert_allclose(row[x_px(-0.2)], 1.0, rtol=1e-3)  # unshadowed floor unchanged
+
+    def before_the_zone(sun, stage):  # zone [2, 3]: the occluder at 1 m shadows fully
+        api = UsdLux.ShadowAPI.Apply(sun.GetPrim())
+        api.CreateShadowDistanceAttr(3.0)
+        api.CreateShadowFalloffAttr(1.0)
+    assert build(tmp_path / "full.usda", before_the_zone)[x_px(0.15)].max() == 0.0
+
+
 def test_membership_follows_collection_rules_and_instance_proxies(tmp_path):
     """expansionRule explicitOnly, and a child of an instanceable prim excluded through its proxy path."""
     stage = stages.new_stage(tmp_path / "m.usda")

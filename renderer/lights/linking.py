@@ -5,7 +5,9 @@ link group); each instance carries two bit masks, the groups that light it and t
 for (``upload_links``). ``lit_by`` says whether light li may light a point of instance ``inst``;
 ``shadow_factor`` is what reaches a point from light li along a shadow ray: the transmittance T through the
 occluders that cast shadows for li (only those nearer than ``shadow:distance``), as L (T + (1 - T)
-shadow:color), and 1 with ``shadow:enable`` off.
+shadow:color), and 1 with ``shadow:enable`` off. ``shadow:falloff`` F fades the last F of ``shadow:distance`` D:
+occluders nearer than D - F shadow fully, those in the zone with strength (1 - x)^``shadow:falloffGamma`` (x the
+fraction through the zone), taken per slice of the zone (FALLOFF_STEPS), those beyond D not at all.
 """
 from __future__ import annotations
 
@@ -28,6 +30,7 @@ from renderer.shading.materials import Materials
 from renderer.shading.textures import Textures
 
 MAX_GROUPS = 31  # link groups per mask (bits of an int32)
+FALLOFF_STEPS = 8  # slices of a shadow:falloff zone, each with the fade strength at its middle
 
 
 @wp.struct
@@ -38,6 +41,8 @@ class Links:
     inst_caster: wp.array(dtype=wp.int32)  # per instance: bits of the groups it casts shadows for
     shadow_color: wp.array(dtype=wp.vec3)  # per light
     shadow_param: wp.array(dtype=wp.vec2)  # per light: (enable 0/1, max occluder distance or -1)
+    shadow_falloff: wp.array(dtype=wp.vec2)  # per light: (falloff zone size or -1, falloff gamma)
+    falloff_steps: int  # FALLOFF_STEPS (a struct field, not a constant, so the loop over slices is not unrolled)
 
 
 def _groups(masks: list, n_inst: int, what: str, names: list[str], warn) -> tuple[list[int], np.ndarray]:
@@ -74,6 +79,9 @@ def upload_links(lights, n_inst: int, device: str, warn=lambda *a: None) -> Link
                               dtype=wp.vec3, device=device)
     k.shadow_param = wp.array(np.array([(float(lt.shadow_enable), lt.shadow_distance) for lt in lights]
                                        or [(1.0, -1.0)], np.float32), dtype=wp.vec2, device=device)
+    k.shadow_falloff = wp.array(np.array([(lt.shadow_falloff, lt.shadow_falloff_gamma) for lt in lights]
+                                         or [(-1.0, 1.0)], np.float32), dtype=wp.vec2, device=device)
+    k.falloff_steps = FALLOFF_STEPS
     return k
 
 
@@ -123,6 +131,14 @@ def caster_transmittance(geo: Geometry, mats: Materials, tex: Textures, links: L
     return tr
 
 
+@wp.func(inline=True)  # no copy of the Geometry struct
+def _segment_transmittance(geo: Geometry, mats: Materials, tex: Textures, links: Links, bit: int, ro: wp.vec3,
+                           rd: wp.vec3, tmax: float, s: float):
+    if bit < 0:
+        return transmittance(geo, mats, tex, ro, rd, tmax, s)
+    return caster_transmittance(geo, mats, tex, links, bit, ro, rd, tmax, s)
+
+
 @wp.func(inline=True)  # one call site: no copy of the Geometry struct
 def shadow_factor(geo: Geometry, mats: Materials, tex: Textures, links: Links, li: int, ro: wp.vec3,
                   rd: wp.vec3, tmax: float, s: float):
@@ -135,8 +151,29 @@ def shadow_factor(geo: Geometry, mats: Materials, tex: Textures, links: Links, l
         t = wp.min(tmax, sp[1])
     bit = links.shadow_bit[li]
     tr = float(1.0)
-    if bit < 0:
-        tr = transmittance(geo, mats, tex, ro, rd, t, s)
-    else:
-        tr = caster_transmittance(geo, mats, tex, links, bit, ro, rd, t, s)
+    fo = links.shadow_falloff[li]
+    # segments of the shadow ray, each with its shadow strength: the whole ray at strength 1, or, with a falloff
+    # zone, the part before it (strength 1) and FALLOFF_STEPS slices of the zone with the strength at their middle,
+    # (1 - x)^gamma, x the fraction through the zone. One traversal call site in a loop of runtime length, so the
+    # kernel holds one copy of the traversal (a loop of constant length would be unrolled).
+    z0 = t
+    segments = int(1)
+    if sp[1] > 0.0 and fo[0] > 0.0 and tmax > sp[1] - fo[0]:
+        z0 = wp.max(sp[1] - fo[0], 0.0)
+        segments = 1 + links.falloff_steps
+    step = fo[0] / float(wp.max(links.falloff_steps, 1))
+    for k in range(segments):
+        a = float(0.0)
+        b = z0
+        strength = float(1.0)
+        if k > 0:
+            a = z0 + step * float(k - 1)
+            b = wp.min(a + step, t)
+            strength = wp.pow(1.0 - (float(k) - 0.5) / float(links.falloff_steps), fo[1])
+        if b > a and tr > 0.0:
+            tk = _segment_transmittance(geo, mats, tex, links, bit, ro + rd * a, rd, b - a, s)
+            if strength == 1.0:
+                tr = tr * tk
+            else:
+                tr = tr * (1.0 - strength * (1.0 - tk))
     return wp.vec3(tr) + links.shadow_color[li] * (1.0 - tr)

@@ -227,6 +227,8 @@ class Light:
     shadow_enable: bool = True
     shadow_color: tuple[float, float, float] = (0.0, 0.0, 0.0)  # replaces fully shadowed light
     shadow_distance: float = -1.0  # scene units from the shaded point within which occluders shadow; <= 0 all
+    shadow_falloff: float = -1.0  # scene units: the zone before shadow_distance where shadows fade out; <= 0 none
+    shadow_falloff_gamma: float = 1.0  # shadow strength (1 - x)^gamma at fraction x through the falloff zone
 
 
 @dataclass

@@ -8,8 +8,8 @@ everything (includeRoot, the schema's fallback, with no excludes and no expressi
 
 ShadowAPI: ``shadow:enable`` off casts no shadows from the light; ``shadow:color`` is what fully shadowed light
 is replaced by (L (T + (1 - T) color) with T the transmittance, black by default); ``shadow:distance`` > 0 limits
-the distance from the shaded point within which occluders cast shadows; ``shadow:falloff`` is not modelled (a
-hard cut at that distance, with a warning).
+the distance from the shaded point within which occluders cast shadows; ``shadow:falloff`` (at most that distance)
+and ``shadow:falloffGamma`` fade shadows out over the end of it (``renderer.lights.linking``).
 """
 from __future__ import annotations
 
@@ -65,5 +65,8 @@ def apply_linking(light: sc.Light, prim, instances: list[sc.Instance], frame: fl
     light.shadow_enable = bool(_get(prim, "shadow:enable", frame, True))
     light.shadow_color = tuple(float(x) for x in _get(prim, "shadow:color", frame, (0.0, 0.0, 0.0)))
     light.shadow_distance = float(_get(prim, "shadow:distance", frame, -1.0))
-    if float(_get(prim, "shadow:falloff", frame, -1.0)) > 0 and light.shadow_distance > 0:
-        warn("shadow:falloff not modelled (shadows end at shadow:distance)", str(prim.GetPath()))
+    falloff = float(_get(prim, "shadow:falloff", frame, -1.0))
+    gamma = float(_get(prim, "shadow:falloffGamma", frame, 1.0))
+    if falloff > 0 and light.shadow_distance > 0:  # "cannot exceed the shadow max distance"
+        light.shadow_falloff = min(falloff, light.shadow_distance)
+        light.shadow_falloff_gamma = gamma if gamma > 0 and gamma == gamma else 1.0
