@@ -335,9 +335,9 @@ def _uv_primvar_object(prim, frame: float, warn):
     if pv and pv.HasAuthoredValue():
         return pv if _usable_element_size(pv, prim, frame, warn) else None
     for pv in api.GetPrimvarsWithAuthoredValues():  # any texture-coordinate primvar
-        if pv.GetElementSize() != 1 and not _usable_element_size(pv, prim, frame, warn):
-            continue
         if str(pv.GetTypeName().role) == "TextureCoordinate" or pv.GetPrimvarName() in ("uv", "UVMap", "st0"):
+            if pv.GetElementSize() != 1 and not _usable_element_size(pv, prim, frame, warn):
+                continue
             v = pv.Get(frame)
             if v is not None and len(v) and np.asarray(v).ndim == 2 and np.asarray(v).shape[1] == 2:
                 return pv
