@@ -162,3 +162,38 @@ def test_lights_under_instanceable_prims_are_one_light_per_instance(tmp_path):
     disks = [lt for lt in scene.lights if lt.kind == sc.LIGHT_DISK]
     assert sorted(matrix_at(lt.transform, 0.0)[0, 3] for lt in disks) == pytest.approx([-1.0, 1.0])
     assert Usd.Stage.Open(str(tmp_path / "inst.usda")).GetPrimAtPath("/World/Fixture0").IsInstance()
+
+
+def test_mesh_lights_in_point_instancer_prototypes_light_like_placed_copies(tmp_path):
+    """A MeshLightAPI panel as a PointInstancer prototype, placed twice, lights the floor as two separately
+    authored panels do (each placement its own mesh light, normalized by its own area)."""
+    w, d, intensity = 0.5, 0.5, 8.0
+
+    def panel(stage, path, y):
+        m = down_quad(stage, path, w, d, y)
+        UsdLux.MeshLightAPI.Apply(m.GetPrim())
+        light = UsdLux.LightAPI(m.GetPrim())
+        light.CreateIntensityAttr(intensity)
+        light.CreateNormalizeAttr(True)
+        return m
+
+    offsets = [(-0.3, 0.0, 0.0), (0.3, 0.0, 0.0)]
+    stage = floor_stage(tmp_path / "placed.usda")
+    for k, (x, y, z) in enumerate(offsets):
+        UsdGeom.Xform.Define(stage, f"/World/P{k}").AddTranslateOp().Set(Gf.Vec3d(x, y, z))
+        panel(stage, f"/World/P{k}/Panel", H)
+    stage.Save()
+    stage = floor_stage(tmp_path / "instanced.usda")
+    pi = UsdGeom.PointInstancer.Define(stage, "/World/Panels")
+    UsdGeom.Scope.Define(stage, "/World/Panels/Prototypes")
+    panel(stage, "/World/Panels/Prototypes/Panel", H)
+    pi.CreatePrototypesRel().SetTargets(["/World/Panels/Prototypes/Panel"])
+    pi.CreatePositionsAttr([Gf.Vec3f(*o) for o in offsets])
+    pi.CreateProtoIndicesAttr([0, 0])
+    stage.Save()
+    scene = load_scene(str(tmp_path / "instanced.usda"))
+    assert sum(lt.kind == sc.LIGHT_MESH for lt in scene.lights) == 2
+    assert not any("MeshLightAPI" in w for w in scene.warnings)
+    placed, instanced = floor_value(tmp_path / "placed.usda"), floor_value(tmp_path / "instanced.usda")
+    assert placed.mean() > 0.1
+    np.testing.assert_allclose(instanced, placed, rtol=0.03)

@@ -167,6 +167,8 @@ class _Importer:
         self._proxies: list = []
         self._saw_render = False
         self._proto_lights: dict = {}  # path -> (index, light prim) of lights met in PointInstancer prototypes
+        self._proto_mesh_lights: dict = {}  # path -> MeshLightAPI prim met in PointInstancer prototypes
+        self._placement_mesh_lights: dict = {}  # placement name -> the MeshLightAPI prim it places
         self._mesh_lights: list = []  # (MeshLightAPI prim, its instance indices)
         self._mesh_light_instances: dict[int, object] = {}  # instance index -> its MeshLightAPI prim
         self._light_prims: list = []  # (Light, the prim it came from), for linking
@@ -532,7 +534,14 @@ class _Importer:
                 self._light_prims.append((light, self._proto_light_prims[-meshes[j] - 1]))
         keep = np.nonzero(~is_light)[0]
         if len(keep):
+            first = len(self.instances)
             self._add_instances([meshes[j] for j in keep], [names[j] for j in keep], times, rows[keep], interval)
+            emitters: dict = {}  # MeshLightAPI prim path -> (prim, its placements' instance indices)
+            for i in range(first, len(self.instances)):
+                light_prim = self._placement_mesh_lights.get(self.instances[i].name)
+                if light_prim is not None:
+                    emitters.setdefault(str(light_prim.GetPath()), (light_prim, []))[1].append(i)
+            self._mesh_lights += list(emitters.values())
 
     def _pi_key_times(self, prim) -> np.ndarray:
         sh = self.shutter
@@ -617,6 +626,10 @@ class _Importer:
             base = str(proto.GetParent().GetPath()).rstrip("/")
             rel_names = [nm[len(base):] if nm.startswith(base + "/") else "/" + nm.lstrip("/") for nm in sub_names]
             names += [f"{path}[{i}]{nm}" for i in sel for nm in rel_names]
+            for nm, rel in zip(sub_names, rel_names):  # placements of MeshLightAPI prims, by their names
+                if nm in self._proto_mesh_lights:
+                    for i in sel:
+                        self._placement_mesh_lights[f"{path}[{i}]{rel}"] = self._proto_mesh_lights[nm]
         if not rows:
             return empty
         return meshes, names, np.concatenate(rows)
@@ -658,9 +671,8 @@ class _Importer:
             elif prim.IsA(UsdGeom.Mesh) or prim.GetTypeName() in PRIMITIVE_TYPES or usd_curves.handles(prim):
                 it.PruneChildren()
                 mesh = self._mesh_index(prim)
-                if usd_lights.is_light(prim):
-                    self.warn("mesh lights (MeshLightAPI) inside PointInstancer prototypes render as plain geometry",
-                              str(prim.GetPath()))
+                if usd_lights.is_light(prim):  # each placement becomes a mesh light (see _point_instancer)
+                    self._proto_mesh_lights[str(prim.GetPath())] = prim
                 if mesh is not None:
                     meshes.append(mesh)
                     names.append(str(prim.GetPath()))
