@@ -140,3 +140,15 @@ def test_unknown_policy_warns_and_expands(tmp_path):
     scene = load_scene(str(path), 0.0)
     assert scene.render_settings.aspect_ratio_conform_policy == "expandAperture"
     assert any("aspectRatioConformPolicy" in w for w in scene.warnings)
+
+
+def test_a_product_with_the_unit_window_renders_the_whole_image(tmp_path):
+    path = window_stage(tmp_path / "u.usda", (0.25, 0.25, 0.75, 0.75))  # a crop on the settings
+    stage = Usd.Stage.Open(str(path))
+    product = UsdRender.Product.Define(stage, "/Render/Product")
+    product.CreateDataWindowNDCAttr(Gf.Vec4f(0.0, 0.0, 1.0, 1.0))
+    UsdRender.Settings(stage.GetPrimAtPath("/Render/Settings")).CreateProductsRel().SetTargets([product.GetPath()])
+    stage.Save()
+    scene = load_scene(str(path), 0.0)
+    assert scene.render_settings.data_window_ndc is None
+    assert not resolve_framing(scene, RenderOptions()).cropped

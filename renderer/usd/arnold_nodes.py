@@ -31,7 +31,8 @@ from __future__ import annotations
 import numpy as np
 
 from renderer.scene.model import Texture, TextureInput
-from renderer.usd.shading_network import UV, Const, Display, Network, Tex, _numeric, _vec, const, shader_id
+from renderer.usd.shading_network import (RAW_NAMES, SRGB_NAMES, UV, Const, Display, Network, Tex, _numeric, _vec,
+                                          const, shader_id)
 from renderer.usd.texture_files import resolve_asset
 
 CHECKER_TEXELS = 32  # texels per checker square in the texture made for a checkerboard node
@@ -146,9 +147,8 @@ def _image(net: Network, prim, output: str):
         a, t = np.diag([1.0, -1.0]) @ a, np.array([t[0], 1.0 - t[1]])
     m = a @ uv.matrix
     tr = a @ uv.translation + t
-    cs = str(net.value(prim, "color_space", "auto") or "auto")
-    colorspace = "sRGB" if cs.lower() in ("srgb", "srgb_texture", "srgb - texture") else (
-        "raw" if cs.lower() in ("raw", "linear", "lin_srgb", "lin_rec709", "scene_linear", "data") else "auto8")
+    cs = str(net.value(prim, "color_space", "auto") or "auto").lower()  # the colour-space names MaterialX's are
+    colorspace = "sRGB" if cs in SRGB_NAMES else ("raw" if cs in RAW_NAMES or cs.startswith("lin") else "auto8")
     name, tiles = resolve_asset(attr, value)
     texture, _ = net.files.load(name, tiles, colorspace, where)
     wraps = []

@@ -87,8 +87,8 @@ def _read_settings_base(info: RenderSettingsInfo, base, frame: float, warn) -> N
         x0, y0, x1, y1 = (float(v) for v in attr.Get(frame))
         if not all(np.isfinite((x0, y0, x1, y1))) or x1 <= x0 or y1 <= y0:
             warn(f"{prim.GetPath()}: dataWindowNDC {(x0, y0, x1, y1)} is empty; rendering the whole image")
-        elif (x0, y0, x1, y1) != (0.0, 0.0, 1.0, 1.0):
-            info.data_window_ndc = (x0, y0, x1, y1)
+        else:  # the unit window is the whole image (and resets a window the settings gave, on a product)
+            info.data_window_ndc = None if (x0, y0, x1, y1) == (0.0, 0.0, 1.0, 1.0) else (x0, y0, x1, y1)
 
 
 def find_camera(stage: Usd.Stage, camera_path: str | None, settings: RenderSettingsInfo, warn):

@@ -156,7 +156,6 @@ def read_light(prim, sampler: TransformSampler, warn, placement=None, name: str 
         if bool(get("treatAsPoint", False)):  # a point of the sphere's far-field intensity L pi r^2 (cd)
             light.radius = 0.0
             scale *= np.pi * r * r * sx * sy if r > 0.0 else 1.0
-            radiance = radiance * (np.pi * r * r * sx * sy if r > 0.0 else 1.0)
     elif kind == sc.LIGHT_CYLINDER:
         light.length = float(get("length", 1.0))
         light.radius = float(get("radius", 0.5))
@@ -180,8 +179,8 @@ def read_light(prim, sampler: TransformSampler, warn, placement=None, name: str 
         warn("per-light diffuse/specular multipliers that are negative or not finite read as 1", path)
         light.diffuse = light.specular = 1.0
     if bool(get("normalize", False)) and area > 0.0:
-        radiance = radiance / area
         scale /= area
+    radiance = radiance * scale
     if not np.all(np.isfinite(radiance)):
         warn("lights with non-finite radiance ignored", path)
         return None

@@ -44,9 +44,9 @@ _TYPES = {"float": 1, "integer": 1, "boolean": 1, "vector2": 2, "float2": 2, "co
           "float3": 3, "normal": 3, "normal3": 3, "point": 3, "point3": 3, "color4": 4, "vector4": 4, "float4": 4,
           "string": 0, "filename": 0, "token": 0, "surfaceshader": 0, "int": 1, "matrix33": 0, "matrix44": 0}
 _ADDRESS = {"periodic": "repeat", "clamp": "clamp", "mirror": "mirror", "constant": "black"}
-_SRGB_NAMES = ("srgb", "srgb_texture", "srgb_rec709_scene", "srgb_rec709_display", "srgb_display", "gamma22",
+SRGB_NAMES = ("srgb", "srgb_texture", "srgb_rec709_scene", "srgb_rec709_display", "srgb_display", "gamma22",
                "srgb_tx", "utility - srgb - texture", "g22_rec709")
-_RAW_NAMES = ("raw", "linear", "lin_rec709", "lin_rec709_scene", "lin_srgb", "scene_linear", "data",
+RAW_NAMES = ("raw", "linear", "lin_rec709", "lin_rec709_scene", "lin_srgb", "scene_linear", "data",
               "lin_rec709_display", "utility - raw", "non-color", "identity")
 _OTHER_PRIMARIES = ("aces2065-1", "acescg", "lin_ap0", "lin_ap1")
 LUMA = np.array([0.2126, 0.7152, 0.0722])  # Rec.709 luminance coefficients (MaterialX lumacoeffs default)
@@ -553,11 +553,11 @@ class Network:
             return "raw"
         if file_attr is not None and file_attr.HasColorSpace():
             cs = str(file_attr.GetColorSpace()).lower()
-            if cs in _SRGB_NAMES:
+            if cs in SRGB_NAMES:
                 return "sRGB"
             if cs in _OTHER_PRIMARIES:
                 return {"aces2065-1": "ACES2065-1", "lin_ap0": "ACES2065-1"}.get(cs, "ACEScg")
-            if cs in _RAW_NAMES or cs.startswith("lin"):
+            if cs in RAW_NAMES or cs.startswith("lin"):
                 return "raw"
         return auto
 
