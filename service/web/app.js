@@ -73,6 +73,13 @@
 
   const when = (iso) => (iso ? new Date(iso) : null);
 
+  // Whether job version a is strictly newer than b (every change stamps updated_at; a finished job is final).
+  function newer(a, b) {
+    const ta = Date.parse(a.updated_at), tb = Date.parse(b.updated_at);
+    if (ta !== tb) return ta > tb;
+    return !ACTIVE.has(a.state) && ACTIVE.has(b.state);
+  }
+
   function clock(iso) {
     const d = when(iso);
     if (!d) return "–";
@@ -277,27 +284,47 @@
       this.load(false);
     }
 
+    // A snapshot can be older than events that arrive while it is in flight (the stream's first event starts a
+    // load; a job submitted meanwhile is announced once and then stays quiet while it waits): the events heard
+    // during a load are applied again over its snapshot, unless the snapshot holds a newer version of the job.
     async load(more) {
       const q = new URLSearchParams({ limit: "100" });
       if (this.filter) q.set("state", this.filter);
       if (more && this.cursor) q.set("cursor", this.cursor);
+      const seq = (this.loadSeq = (this.loadSeq || 0) + 1);
+      this.heard = new Map(); // job id -> its latest event ({deleted: true} for a deletion)
       try {
         const page = await getJSON(`/v1/jobs?${q}`);
+        if (seq !== this.loadSeq) return; // a later load replaces this one
         if (!more) this.jobs.clear();
         for (const j of page.items) this.jobs.set(j.id, j);
+        for (const [id, msg] of this.heard) {
+          const held = this.jobs.get(id);
+          if (msg.deleted) this.jobs.delete(id);
+          else if (!held || !newer(held, msg)) this.apply(msg);
+        }
+        this.heard = null;
         this.cursor = page.next_cursor;
         notice("");
         this.render();
-      } catch (e) { reportError(e); }
+      } catch (e) { if (seq === this.loadSeq) this.heard = null; reportError(e); }
+    }
+
+    apply(msg) {
+      if (!this.filter || msg.state === this.filter) this.jobs.set(msg.id, msg);
+      else this.jobs.delete(msg.id);
     }
 
     onEvent(name, data) {
       if (name === "ready" || name === "resync") { this.load(false); return; }
       const msg = JSON.parse(data);
-      if (name === "deleted") this.jobs.delete(msg.id);
-      else if (name === "job") {
-        if (!this.filter || msg.state === this.filter) this.jobs.set(msg.id, msg);
-        else this.jobs.delete(msg.id);
+      if (name === "deleted") {
+        this.jobs.delete(msg.id);
+        if (this.heard) this.heard.set(msg.id, { deleted: true });
+      } else if (name === "job") {
+        const held = this.jobs.get(msg.id);
+        if (!held || !newer(held, msg)) this.apply(msg);
+        if (this.heard) this.heard.set(msg.id, msg);
       }
       this.render();
     }
@@ -375,7 +402,8 @@
 
     async load() {
       try {
-        this.update(await getJSON(`/v1/jobs/${encodeURIComponent(this.id)}`));
+        const job = await getJSON(`/v1/jobs/${encodeURIComponent(this.id)}`);
+        if (!this.job || !newer(this.job, job)) this.update(job); // an event may have brought a newer version
       } catch (e) {
         if (e instanceof ApiError && e.status === 404) this.deleted();
         else reportError(e);
@@ -383,7 +411,10 @@
     }
 
     onEvent(name, data) {
-      if (name === "job") this.update(JSON.parse(data));
+      if (name === "job") {
+        const job = JSON.parse(data);
+        if (!this.job || !newer(this.job, job)) this.update(job);
+      }
       else if (name === "deleted") this.deleted();
       else if (name === "resync") this.load();
     }

@@ -125,6 +125,25 @@ def test_the_list_follows_a_job_from_queued_to_succeeded(server, tab, card):
     assert tab.page.locator("tbody tr[data-state]:not([data-state=succeeded])").count() == 0
 
 
+def test_a_snapshot_older_than_the_events_does_not_hide_a_job(server, tab, card):
+    # The list's first load is answered late with a snapshot taken before the job existed (as when the server is
+    # busy): the job the event stream announced meanwhile must stay listed, although no further event comes.
+    held = []
+    hold = lambda route: held.append(route)  # noqa: E731 - Playwright wants a Python function, not a builtin
+    tab.page.route("**/v1/jobs?*", hold)
+    tab.goto("/")
+    tab.page.wait_for_selector("#live[data-state=live]")
+    job_id = submit(server.http, card, QUICK).json()["id"]
+    wait_job(server.http, job_id, until=("succeeded",))
+    tab.page.wait_for_selector(f'tr[data-id="{job_id}"][data-state=succeeded]', timeout=10_000)
+    assert held, "the list never asked for its snapshot"
+    for route in held:
+        route.fulfill(status=200, content_type="application/json", body='{"items": [], "next_cursor": null}')
+    tab.page.unroute("**/v1/jobs?*", hold)
+    time.sleep(1.0)  # several turns of the change feed: nothing more is sent about a finished job
+    assert tab.js(ROW, job_id) == ["succeeded", 100]
+
+
 def test_the_job_page_fills_in_tiles_and_preview_live_then_downloads(server, tab, card, tmp_path):
     job_id = submit(server.http, card, {"width": 64, "height": 48, "spp": 512, "tile": 8}).json()["id"]
     tab.goto(f"/jobs/{job_id}")
