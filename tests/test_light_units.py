@@ -78,9 +78,10 @@ def test_sphere_light_normalize_divides_by_its_area_and_treat_as_point_keeps_its
     assert results["norm"] == pytest.approx(E / math.pi / (4 * math.pi * r * r), rel=0.02)
 
 
-def test_rect_light_texture_follows_the_schema_orientation(tmp_path):
-    """usdLux RectLight: the texture's first texel (top left) at local (+X, +Y), its last at (-X, -Y). A 2x2
-    image (red, green / blue, white) on a rect 2 cm above the floor lights each floor quadrant with its texel."""
+def test_rect_light_texture_reads_unmirrored_from_behind_the_light(tmp_path):
+    """RectLight texture: top-left texel at local (-X, +Y), bottom-right at (+X, -Y) (as husk and kick read it). A
+    2x2 image (red, green / blue, white) on a rect 2 cm above the floor, seen from above (from behind the light),
+    lights each floor quadrant with its texel where the image has it."""
     from PIL import Image
     img = np.array([[[255, 0, 0], [0, 255, 0]], [[0, 0, 255], [255, 255, 255]]], np.uint8)
     Image.fromarray(img).save(tmp_path / "quad.png")
@@ -100,7 +101,7 @@ def test_rect_light_texture_follows_the_schema_orientation(tmp_path):
     quads = {"top_right": rgb[1:3, 5:7], "top_left": rgb[1:3, 1:3], "bottom_right": rgb[5:7, 5:7],
              "bottom_left": rgb[5:7, 1:3]}
     mean = {k: v.reshape(-1, 3).mean(0) for k, v in quads.items()}
-    assert np.argmax(mean["top_right"]) == 0 and mean["top_right"][0] > 3 * mean["top_right"][1:].max()  # red
-    assert np.argmax(mean["top_left"]) == 1 and mean["top_left"][1] > 3 * mean["top_left"][[0, 2]].max()  # green
-    assert np.argmax(mean["bottom_right"]) == 2 and mean["bottom_right"][2] > 3 * mean["bottom_right"][:2].max()
-    assert mean["bottom_left"].min() > 0.8 * mean["bottom_left"].max()  # white
+    assert np.argmax(mean["top_left"]) == 0 and mean["top_left"][0] > 3 * mean["top_left"][1:].max()  # red
+    assert np.argmax(mean["top_right"]) == 1 and mean["top_right"][1] > 3 * mean["top_right"][[0, 2]].max()  # green
+    assert np.argmax(mean["bottom_left"]) == 2 and mean["bottom_left"][2] > 3 * mean["bottom_left"][:2].max()
+    assert mean["bottom_right"].min() > 0.8 * mean["bottom_right"].max()  # white

@@ -129,8 +129,9 @@ def light_shaping(lights: Lights, li: int, emit_dir: wp.vec3, s: float):
 
 @wp.func
 def rect_texel(lights: Lights, li: int, corner: wp.vec3, ex: wp.vec3, ey: wp.vec3, q: wp.vec3):
-    """A rect light's texture at world point q on it (white without one): texel (0, 0) at the (+X, +Y) corner,
-    the image's last at (-X, -Y) (usdLux RectLight), nearest texel."""
+    """A rect light's texture at world point q on it (white without one), nearest texel: the image's top-left
+    texel at the (-X, +Y) corner, its bottom-right at (+X, -Y), so the image reads unmirrored from behind the
+    light, looking where it shines (as a projector's slide; husk, kick and other renderers agree on this)."""
     off = lights.img_off[li]
     if off < 0:
         return wp.vec3(1.0)
@@ -138,7 +139,7 @@ def rect_texel(lights: Lights, li: int, corner: wp.vec3, ex: wp.vec3, ey: wp.vec
     b = wp.clamp(wp.dot(q - corner, ey) / wp.dot(ey, ey), 0.0, 1.0)  # 0 at -Y, 1 at +Y
     w = lights.img_w[li]
     h = lights.img_h[li]
-    col = wp.min(int((1.0 - a) * float(w)), w - 1)
+    col = wp.min(int(a * float(w)), w - 1)
     row = wp.min(int((1.0 - b) * float(h)), h - 1)
     return lights.img[off + row * w + col]
 

@@ -12,9 +12,9 @@ SphereLight with ``treatAsPoint`` becomes a point light of the same far-field in
 Both the current ``inputs:`` attribute names and the legacy names without the prefix are read. Light parameters
 are taken at the frame; the light's transform moves over the shutter like any prim's.
 
-A RectLight's ``texture:file`` multiplies its emission; by the schema the image's first texel (top left) is at
-the rect's (+X, +Y) corner and its last at (-X, -Y), so the image reads unmirrored from the side the light
-shines towards (husk and kick once showed it mirrored).
+A RectLight's ``texture:file`` multiplies its emission; the image's top-left texel is at the rect's (-X, +Y)
+corner and its bottom-right at (+X, -Y), so it reads unmirrored from behind the light, looking where it shines,
+as husk, kick and other renderers agree since they fixed their mirrored mapping (arnold-usd #1772).
 
 DomeLight textures (``inputs:texture:file``, OpenEXR/HDR/any OpenImageIO format, resolved relative to the
 authoring layer) become ``Light.texture``: linear radiance (the image times intensity * 2^exposure * color *
