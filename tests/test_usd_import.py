@@ -228,6 +228,18 @@ def test_unreadable_prims_are_skipped_not_raised(tmp_path):
     assert any("invalid topology" in w and "/M" in w for w in scene.warnings)
 
 
+def test_prims_of_unknown_types_are_named_in_a_warning(tmp_path):
+    # A renderer's own procedural (no schema in usd-core) draws nothing here and says so; typeless prims and the
+    # meshes under an unknown prim are not its concern.
+    path = tmp_path / "proc.usda"
+    path.write_text('#usda 1.0\ndef ArnoldUsd "Proc"\n{\n    string arnold:filename = "other.usd"\n'
+                    '    def Cube "Inside"\n    {\n    }\n}\ndef "Group"\n{\n    def Cube "C"\n    {\n    }\n}\n')
+    scene = load_scene(path)
+    assert sorted(i.name for i in scene.instances) == ["/Group/C", "/Proc/Inside"]
+    unknown = [w for w in scene.warnings if "no schema defines" in w]
+    assert len(unknown) == 1 and "/Proc (ArnoldUsd)" in unknown[0] and "/Group" not in unknown[0], scene.warnings
+
+
 def test_subdivision_surfaces_are_refined_without_warnings(tmp_path):
     stage, path = new_stage(tmp_path)
     for i in range(5):

@@ -290,6 +290,9 @@ class _Importer:
             if not img:
                 if parent_info is not None:
                     purposes[str(prim.GetPath())] = parent_info
+                if prim.GetTypeName() and prim.GetPrimTypeInfo().GetSchemaType().isUnknown:
+                    # e.g. a renderer's own procedural (ArnoldUsd): no schema says what it draws
+                    self.warn("prims of types no schema defines skipped", f"{prim.GetPath()} ({prim.GetTypeName()})")
                 continue
             self.csg.visit(prim)
             if self._statically_invisible(img):
