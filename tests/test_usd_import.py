@@ -459,6 +459,28 @@ def test_render_settings_pick_camera_resolution_and_disable_blur(tmp_path):
     assert load_scene(path, camera_path="/World/First").camera.name == "/World/First"
 
 
+def test_a_camera_placed_only_by_arnold_look_at_primvars(tmp_path):
+    # 3ds Max exports leave the camera's USD transform empty and place it with Arnold's position / look_at / up;
+    # a camera that USD places keeps its own transform whatever those say.
+    stage, path = new_stage(tmp_path, up="Z")
+    add_tri(stage)
+    for name, own in (("Max", None), ("Placed", (1.0, 2.0, 3.0))):
+        cam = UsdGeom.Camera.Define(stage, f"/World/{name}")
+        if own is not None:
+            cam.AddTranslateOp().Set(Gf.Vec3d(*own))
+        p = cam.GetPrim()
+        for key, v in (("position", (-6.0, -3.0, 30.0)), ("look_at", (-6.0, -3.0, 7.0)), ("up", (0.0, 1.0, 0.0))):
+            p.CreateAttribute(f"primvars:arnold:{key}", Sdf.ValueTypeNames.Float3Array).Set([Gf.Vec3f(*v)])
+    stage.GetRootLayer().Save()
+    m = matrix_at(load_scene(path, camera_path="/World/Max").camera.transform, 0.0)
+    np.testing.assert_allclose(m[:3, 3], [-6, -3, 30], atol=1e-5)  # eye
+    np.testing.assert_allclose(-m[:3, 2], [0, 0, -1], atol=1e-6)  # looks at look_at
+    np.testing.assert_allclose(m[:3, 1], [0, 1, 0], atol=1e-6)  # up
+    m = matrix_at(load_scene(path, camera_path="/World/Placed").camera.transform, 0.0)
+    np.testing.assert_allclose(m[:3, 3], [1, 2, 3], atol=1e-6)
+    np.testing.assert_allclose(m[:3, :3], np.eye(3), atol=1e-6)
+
+
 def test_no_camera_no_lights_defaults_follow_up_axis(tmp_path):
     stage, path = new_stage(tmp_path, up="Z")
     UsdGeom.Cube.Define(stage, "/World/Box").AddTranslateOp().Set(Gf.Vec3d(10, 20, 30))

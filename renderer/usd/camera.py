@@ -139,6 +139,9 @@ def read_camera(prim, sampler: TransformSampler, settings: RenderSettingsInfo, w
     cam = UsdGeom.Camera(prim)
     path = str(prim.GetPath())
     times, rows = sampler.motion(prim)
+    placed = arnold_look_at(prim, frame) if np.allclose(rows, np.eye(4)) else None
+    if placed is not None:
+        times, rows = np.array([frame]), placed[None]
     tenth = lambda attr: float(attr.Get(frame)) / 10.0  # noqa: E731
     near, far = cam.GetClippingRangeAttr().Get(frame)
     out = Camera(
@@ -166,6 +169,35 @@ def read_camera(prim, sampler: TransformSampler, settings: RenderSettingsInfo, w
         warn(f"camera {path}: fStop {out.f_stop} without a focusDistance; depth of field disabled")
         out.f_stop = 0.0
     return out
+
+
+def arnold_look_at(prim, frame: float) -> np.ndarray | None:
+    """The row-vector camera-to-world matrix that Arnold's own camera parameters ``primvars:arnold:position``,
+    ``look_at`` and ``up`` describe, or None when they are not all usable.
+
+    Only consulted for a camera whose world transform is the identity (nothing places it in USD): 3ds Max's USD
+    export places its cameras that way alone, and such a camera at the origin would see none of the scene.
+    """
+    def vec(name: str, default=None):
+        attr = prim.GetAttribute(f"primvars:arnold:{name}")
+        value = attr.Get(frame) if attr and attr.HasAuthoredValue() else None
+        if value is None or len(value) == 0:
+            return default
+        v = np.asarray(value[0] if hasattr(value[0], "__len__") else value, np.float64).reshape(-1)
+        return v if v.shape == (3,) and np.all(np.isfinite(v)) else None
+
+    eye, target, up = vec("position"), vec("look_at"), vec("up", np.array([0.0, 1.0, 0.0]))
+    if eye is None or target is None or up is None:
+        return None
+    back = eye - target  # the camera looks down its -Z
+    x = np.cross(up, back)
+    if np.linalg.norm(back) < 1e-12 or np.linalg.norm(x) < 1e-12:
+        return None
+    back /= np.linalg.norm(back)
+    x /= np.linalg.norm(x)
+    m = np.eye(4)
+    m[0, :3], m[1, :3], m[2, :3], m[3, :3] = x, np.cross(back, x), back, eye
+    return m
 
 
 def auto_camera(bounds: np.ndarray | None, up_axis: str, settings: RenderSettingsInfo) -> tuple[Camera, np.ndarray]:
