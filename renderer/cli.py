@@ -129,7 +129,8 @@ def add_render_command(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
     r.add_argument("scene", help="a .usd/.usda/.usdc/.usdz file")
     r.add_argument("-o", "--output", required=True, metavar="OUT.exr")
     add_render_settings(r)
-    r.add_argument("--tile", type=_positive_int, default=64, help="tile size in pixels (default 64)")
+    r.add_argument("--tile", type=_positive_int, default=None,
+                   help="tile size in pixels (default 64, smaller when a small image would leave threads idle)")
     r.add_argument("--threads", type=_positive_int, default=None, help="render threads (default: all cores)")
     r.add_argument("--quiet", action="store_true", help="no warnings or progress bar")
     return r

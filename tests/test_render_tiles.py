@@ -6,7 +6,7 @@ import pytest
 
 from renderer.film import film
 from renderer.motion.transform import make_transform
-from renderer.render import RenderOptions, Tile, prepare, render_frame, render_tile
+from renderer.render import RenderOptions, Tile, auto_tile_size, prepare, render_frame, render_tile, split_tiles
 from renderer.scene.model import (LIGHT_RECT, LIGHT_SPHERE, Camera, Instance, Light, Material, Mesh, MotionTransform,
                             Scene)
 
@@ -57,6 +57,16 @@ def test_bit_identical_across_tilings_and_threads(scene, filter_name):
     t = render_tile(prep, Tile(11, 5, 30, 17))
     assert np.array_equal(t.arrays["rgba"], ref["rgba"][5:17, 11:30])
     assert ref["rgba"][..., :3].max() > 0.05  # the scene is lit
+
+
+def test_the_default_tile_size_keeps_every_thread_busy(scene):
+    # production frames keep 64 px tiles; a small preview gets smaller ones (at least 4 per thread, not under 16)
+    assert auto_tile_size(640, 360, 2) == 64 and auto_tile_size(1920, 1080, 8) == 64
+    assert auto_tile_size(160, 90, 2) == 32 and len(split_tiles(160, 90, 32)) >= 8
+    assert auto_tile_size(40, 28, 2) == 16 and auto_tile_size(8, 8, 64) == 16
+    prep = prepare(scene, RenderOptions(width=40, height=28, spp=3))
+    auto = render_frame(prep, threads=2).sums  # the default is only a schedule: same pixels
+    assert np.array_equal(auto["rgba"], render_frame(prep, tile_size=64, threads=1).sums["rgba"])
 
 
 def test_seed_changes_the_noise_not_the_mean(scene):
