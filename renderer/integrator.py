@@ -178,6 +178,24 @@ def surface_at(geo: Geometry, inst: int, tri: int, b1: float, b2: float, ro: wp.
 
 
 @wp.func
+def display_diffuse(geo: Geometry, mats: Materials, mat_id: int, inst: int, tri: int, b1: float, b2: float,
+                    diffuse: wp.vec3):
+    """The diffuse colour at a hit: the mesh's per-corner displayColor (times the material's scale) where the
+    material's diffuse is the displayColor and the mesh has one that varies, else ``diffuse``."""
+    ds = mats.display_scale[mat_id]
+    if ds[3] == 0.0:
+        return diffuse
+    m = geo.inst_mesh[inst]
+    off = geo.mesh_color_off[m]
+    if off < 0:
+        return diffuse
+    c = off + 3 * (tri - geo.mesh_tri_off[m])
+    col = geo.colors[c] * (1.0 - b1 - b2) + geo.colors[c + 1] * b1 + geo.colors[c + 2] * b2
+    out = wp.cw_mul(col, wp.vec3(ds[0], ds[1], ds[2]))
+    return wp.vec3(wp.clamp(out[0], 0.0, 1.0), wp.clamp(out[1], 0.0, 1.0), wp.clamp(out[2], 0.0, 1.0))
+
+
+@wp.func
 def shading_normal(sp: SurfacePoint, ms: MaterialSample):
     """The shading normal facing the viewer, with the material's normal map applied."""
     if ms.has_normal_map == 0 or sp.tangent[3] == 0.0:
@@ -366,6 +384,8 @@ def trace_wave_kernel(
             cone_w = cone_w + cone_spread * hit.t
             ms = eval_material_cone(mats, tex, sp.material, sp.uv, s,
                                     uv_footprint(cone_w, sp.uv_density, wp.dot(sp.ng, rd)))
+            ms.diffuse_color = display_diffuse(geo, mats, sp.material, hit.inst, hit.tri, hit.b1, hit.b2,
+                                               ms.diffuse_color)
             ns = shading_normal(sp, ms)
             thin = 1 - geo.tri_solid[hit.tri]  # open surfaces are thin sheets, closed ones bound solids
             params = regularized_params(ms, thin, settings.glossy_filter, path_roughness)

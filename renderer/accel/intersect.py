@@ -60,6 +60,10 @@ class Geometry:
     mesh_has_normals: wp.array(dtype=wp.int32)
     uvs: wp.array(dtype=wp.vec2)  # 3 per global triangle when mesh_has_uvs
     mesh_has_uvs: wp.array(dtype=wp.int32)
+    # per-corner displayColor of the meshes whose displayColor varies: triangle t (local) of mesh m, corner c at
+    # mesh_color_off[m] + 3 t + c; -1: the mesh has none (its materials hold the colour)
+    colors: wp.array(dtype=wp.vec3)
+    mesh_color_off: wp.array(dtype=wp.int32)
     tri_solid: wp.array(dtype=wp.int32)  # per global triangle, 1: part of a closed surface (refracts, absorbs)
     # --- top level
     tlas_a: wp.array(dtype=wp.int32)

@@ -204,6 +204,14 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     uv_cat = cat(uvs, (1, 2), np.float32)
     g.uvs = wp.array(uv_cat if len(uv_cat) else np.zeros((1, 2), np.float32), dtype=wp.vec2, device=device)
     g.mesh_has_uvs = _i32([int(m.uvs is not None) for m in scene.meshes] or [0], device)
+    color_off, colors, n = [], [], 0  # only meshes that have colours take memory
+    for m in scene.meshes:
+        color_off.append(n if m.colors is not None else -1)
+        if m.colors is not None:
+            colors.append(np.asarray(m.colors, np.float32).reshape(-1, 3))
+            n += len(colors[-1])
+    g.colors = _v3(cat(colors, (1, 3), np.float32), device)
+    g.mesh_color_off = _i32(color_off or [-1], device)
     solid = [m.solid if m.solid is not None else np.full(len(m.triangles), is_closed(m.triangles, m.points[0]))
              for m in scene.meshes]
     g.tri_solid = _i32(cat(solid, (1,), np.int32), device)

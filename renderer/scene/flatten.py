@@ -21,7 +21,9 @@ MERGED_LIMIT = 1 << 23  # triangles the merged mesh may reach through copies of 
 
 
 def _is_still(scene: Scene, inst: Instance) -> bool:
-    return (inst.transform.num_keys == 1 and not scene.meshes[inst.mesh].deforming
+    """Still and plain: meshes with per-corner colours stay instanced (the merged mesh carries none)."""
+    mesh = scene.meshes[inst.mesh]
+    return (inst.transform.num_keys == 1 and not mesh.deforming and mesh.colors is None
             and inst.visible_from <= 0.0 and inst.visible_to >= 1.0 and inst.csg_group < 0)
 
 

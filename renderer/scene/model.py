@@ -47,6 +47,9 @@ class Mesh:
     material_ids: np.ndarray  # (T,) int32 index into Scene.materials per triangle
     normals: np.ndarray | None = None  # (T, 3, 3) float32 per-corner object-space shading normals, or None
     uvs: np.ndarray | None = None  # (T, 3, 2) float32 per-corner st, or None
+    # (T, 3, 3) float32 per-corner displayColor (linear RGB) where the prim's displayColor varies over it
+    # (uniform, vertex, varying or faceVarying); None: constant or absent (the material holds it)
+    colors: np.ndarray | None = None
     double_sided: bool = True
     # (T,) bool: the triangle is part of a closed surface (a solid that refracts and absorbs); None: derived
     # from the whole mesh (``geometry_util.is_closed``). Set when meshes are merged (``flatten``).
@@ -152,6 +155,9 @@ class Material:
     # travels ``absorption_distance`` scene units inside keeps ``absorption_color`` of itself. White: none.
     absorption_color: tuple[float, float, float] = (1.0, 1.0, 1.0)
     absorption_distance: float = 1.0
+    # diffuseColor is the prim's displayColor times this (a fallback material, or a UsdPrimvarReader of
+    # displayColor): where a mesh has per-corner ``colors`` they replace ``diffuse_color`` (its mean); None: no
+    display_scale: tuple[float, float, float] | None = None
     # Inputs driven by textures, by UsdPreviewSurface input name ("diffuseColor", "roughness", "normal", ...).
     # The constant field of a textured input holds the texture's mean value (what constant-only code uses).
     textures: dict[str, TextureInput] = field(default_factory=dict)

@@ -80,6 +80,9 @@ class Materials:
     use_specular_workflow: wp.array(dtype=wp.int32)  # per material
     absorption_cd: wp.array(dtype=wp.vec4)  # per material: transmittance colour (rgb) after distance (w)
     absorption: wp.array(dtype=wp.vec3)  # per material: absorption coefficient sigma_a per scene unit (0: none)
+    # per material: diffuseColor = the prim's displayColor x (xyz) when w = 1 (``Material.display_scale``), so a
+    # mesh's per-corner displayColor (``Geometry.colors``) replaces the constant; w = 0: not displayColor-driven
+    display_scale: wp.array(dtype=wp.vec4)
     # opacity changing during the shutter: material m's keys (s, opacity) at [key_off[m], key_off[m] + key_count[m])
     opacity_key_off: wp.array(dtype=wp.int32)
     opacity_key_count: wp.array(dtype=wp.int32)  # 0: the constant (or texture) opacity throughout
@@ -477,6 +480,8 @@ def upload_materials(materials: list[Material], device: str = "cpu") -> Material
                                        dtype=wp.int32, device=device)
     m.absorption_cd = f32(absorb, wp.vec4)
     m.absorption = f32(sigma, wp.vec3)
+    m.display_scale = f32([(0.0, 0.0, 0.0, 0.0) if x.display_scale is None else
+                           (*np.nan_to_num(_vec3(x.display_scale, (1.0,) * 3)), 1.0) for x in mats], wp.vec4)
     key_off, key_count, keys = [], [], []
     for x in mats:
         k = [] if (x.opacity_keys is None or "opacity" in x.textures) else list(x.opacity_keys)

@@ -483,14 +483,37 @@ def _subdivided(mesh, frame, scheme, counts, fvi, keys, holes, left_handed, deta
 
 
 def read_named_uvs(prim, name: str, frame: float, warn, level: int | None = None) -> np.ndarray | None:
-    """Per-corner values (T, 3, 2) float32 of the float2 primvar ``name`` of a Mesh, on the triangles ``read_mesh``
-    makes (same triangulation, holes and winding; for a subdivision surface pass ``level``, the
-    ``GeomData.subdivision_level`` it was refined to); None if the prim is not a Mesh or the primvar is absent or
-    mis-sized.
+    """Per-corner values (T, 3, 2) float32 of the float2 primvar ``name`` of a Mesh (``read_corner_primvar``).
 
     For materials whose UsdPrimvarReader_float2 names a primvar other than the one ``read_mesh`` picks (``st``,
     else the first texCoord2f primvar).
     """
+    return read_corner_primvar(prim, name, frame, warn, level, 2)
+
+
+def read_display_colors(prim, frame: float, warn, level: int | None = None) -> np.ndarray | None:
+    """Per-corner displayColor (T, 3, 3) float32 of a Mesh whose displayColor varies over it (uniform, vertex,
+    varying or faceVarying with unequal values); None when it is constant, absent, mis-sized or not finite."""
+    pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar("displayColor")
+    if not pv or not pv.HasAuthoredValue() or pv.GetInterpolation() == UsdGeom.Tokens.constant:
+        return None
+    vals = _flattened(pv, frame)
+    if vals is None or len(vals) < 2:
+        return None
+    v = np.asarray(vals, np.float64).reshape(-1, 3)
+    if not np.all(np.isfinite(v)) or np.all(v == v[0]):
+        return None
+    colors = read_corner_primvar(prim, "displayColor", frame, warn, level, 3)
+    if colors is None:
+        warn("displayColor with a size that does not match its interpolation: its mean used", str(prim.GetPath()))
+    return colors
+
+
+def read_corner_primvar(prim, name: str, frame: float, warn, level: int | None, width: int) -> np.ndarray | None:
+    """Per-corner values (T, 3, width) float32 of the primvar ``name`` of a Mesh, on the triangles ``read_mesh``
+    makes (same triangulation, holes and winding; for a subdivision surface pass ``level``, the
+    ``GeomData.subdivision_level`` it was refined to, and the values are refined with the surface's rules); None
+    if the prim is not a Mesh or the primvar is absent or mis-sized."""
     if not prim.IsA(UsdGeom.Mesh):
         return None
     mesh = UsdGeom.Mesh(prim)
@@ -514,17 +537,17 @@ def read_named_uvs(prim, name: str, frame: float, warn, level: int | None = None
         uv = (np.asarray(pv.Get(frame)), None if idx is None else np.asarray(idx, np.int64), pv.GetInterpolation())
         detail = SubdivisionDetail(level=usd_subdiv.DEFAULT_LEVEL if level is None else level)
         ref = usd_subdiv.refine(mesh, frame, scheme, counts, fvi, base[None], holes, uv, detail, None, warn)
-        if ref is None or ref.uvs is None or ref.uvs.shape[-1] != 2:
+        if ref is None or ref.uvs is None or ref.uvs.shape[-1] != width:
             return None
         return np.ascontiguousarray(ref.uvs[:, [0, 2, 1]] if left_handed else ref.uvs, np.float32)
     corners, tri_faces = triangulate(counts, fvi, base)
     corners, tri_faces = drop_holes(corners, tri_faces, holes)
     if left_handed:
         corners = corners[:, [0, 2, 1]]
-    uvs = expand_primvar(hit[0], hit[1], corners, tri_faces, fvi, len(counts), len(base))
-    if uvs is None or uvs.shape[-1] != 2:
+    values = expand_primvar(hit[0], hit[1], corners, tri_faces, fvi, len(counts), len(base))
+    if values is None or values.shape[-1] != width:
         return None
-    return np.ascontiguousarray(uvs, np.float32)
+    return np.ascontiguousarray(values, np.float32)
 
 
 # ---------------------------------------------------------------------------------------------------------------

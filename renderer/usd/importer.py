@@ -33,7 +33,7 @@ from renderer.usd import csg as usd_csg
 from renderer.usd import curves as usd_curves
 from renderer.usd import lights as usd_lights
 from renderer.usd.geometry import (PRIMITIVE_TYPES, collapse_keys, default_uv_name, primitive_signature,
-                                   read_geometry, read_named_uvs)
+                                   read_display_colors, read_geometry, read_named_uvs)
 from renderer.usd.linking import apply_linking
 from renderer.usd.materials import MaterialTable
 from renderer.usd.mesh_lights import apply_mesh_light
@@ -452,6 +452,11 @@ class _Importer:
                 geom.normals = self._skinned_normals(prim, skin, geom)
         index = None
         if geom is not None:
+            colors = None
+            if prim.IsA(UsdGeom.Mesh):  # a displayColor that varies over the mesh (Houdini's Cd, Maya's colour sets)
+                colors = read_display_colors(prim, self.frame, self.warn, geom.subdivision_level)
+                if colors is not None and len(colors) != len(geom.triangles):
+                    colors = None
             index = len(self.meshes)
             self.meshes.append(sc.Mesh(
                 name=str(prim.GetPath()),
@@ -461,6 +466,7 @@ class _Importer:
                 material_ids=self.materials.assign(prim, geom.tri_faces, geom.num_faces),
                 normals=geom.normals,
                 uvs=geom.uvs,
+                colors=colors,
                 double_sided=geom.double_sided,
                 solid=getattr(geom, "solid", None),
             ))

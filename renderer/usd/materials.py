@@ -227,7 +227,8 @@ class MaterialTable:
             color = display_color(prim, self.frame)
             if color is None:
                 return self._add(("grey",), Material(name="default grey", diffuse_color=GREY))
-            return self._add(("display", color), Material(name=f"displayColor {color}", diffuse_color=color))
+            return self._add(("display", color), Material(name=f"displayColor {color}", diffuse_color=color,
+                                                          display_scale=(1.0, 1.0, 1.0)))
         mprim = mat.GetPrim()
         # Instance proxies of one prototype share its material.
         path = str((mprim.GetPrimInPrototype() if mprim.IsInstanceProxy() else mprim).GetPath())
@@ -241,9 +242,12 @@ class MaterialTable:
                 c = color if color is not None else fallback
                 f[name] = tuple(float(x) * k for x, k in zip(np.resize(c, 3), scale)) if isinstance(c, tuple) \
                     else float(np.resize(c, 1)[0]) * scale[0]
+                if name == "diffuse_color" and color is not None:
+                    f["display_scale"] = tuple(float(k) for k in np.resize(scale, 3))
             return self._add(("usd", path, color), Material(name=path, **f))
         color = display_color(prim, self.frame)
-        return self._add(("fallback", path, color), Material(name=path, diffuse_color=color or GREY))
+        return self._add(("fallback", path, color), Material(name=path, diffuse_color=color or GREY,
+                                                             display_scale=None if color is None else (1.0, 1.0, 1.0)))
 
     def _surface(self, mat: UsdShade.Material, path: str) -> tuple:
         """Parse a material once: ("preview", fields, displayColor-driven fields) or ("fallback", None, ())."""

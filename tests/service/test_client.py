@@ -41,4 +41,4 @@ def test_frame_and_frames_conflict():
 
 def test_render_is_still_drt_render():
     args = build_parser().parse_args(["render", "scene.usda", "-o", "out.exr", "--spp", "4"])
-    assert (args.command, args.spp, args.tile, args.output) == ("render", 4, 64, "out.exr")
+    assert (args.command, args.spp, args.tile, args.output) == ("render", 4, None, "out.exr")  # None: auto tiles
