@@ -452,8 +452,11 @@ class _Importer:
                 geom.normals = self._skinned_normals(prim, skin, geom)
         index = None
         if geom is not None:
+            material_ids = self.materials.assign(prim, geom.tri_faces, geom.num_faces)
             colors = None
-            if prim.IsA(UsdGeom.Mesh):  # a displayColor that varies over the mesh (Houdini's Cd, Maya's colour sets)
+            # a displayColor that varies over the mesh (Houdini's Cd, Maya's colour sets), where a material shows it
+            if prim.IsA(UsdGeom.Mesh) and any(self.materials.materials[i].display_scale is not None
+                                              for i in np.unique(material_ids)):
                 colors = read_display_colors(prim, self.frame, self.warn, geom.subdivision_level)
                 if colors is not None and len(colors) != len(geom.triangles):
                     colors = None
@@ -463,7 +466,7 @@ class _Importer:
                 point_times=self.shutter.normalise(geom.point_times),
                 points=geom.points,
                 triangles=geom.triangles,
-                material_ids=self.materials.assign(prim, geom.tri_faces, geom.num_faces),
+                material_ids=material_ids,
                 normals=geom.normals,
                 uvs=geom.uvs,
                 colors=colors,
