@@ -1,6 +1,7 @@
 """displayColor that varies over a mesh (Houdini's Cd, Maya's colour sets): per-vertex, per-face-vertex and per-face
 colours are interpolated across each triangle, on polygon meshes and subdivision surfaces alike, for the fallback
-material and for a UsdPreviewSurface whose diffuseColor reads displayColor through a UsdPrimvarReader_float3.
+material and for a UsdPreviewSurface whose diffuseColor reads displayColor through a UsdPrimvarReader_float3; along
+BasisCurves and per point of a Points prim too.
 
 Seen from above under a white dome of radiance 1, a diffuse surface's colour shows its albedo's hue: the left edge
 of a quad coloured red on the left and blue on the right is red, the right edge blue, the middle purple; with the
@@ -105,3 +106,30 @@ def test_a_constant_display_color_is_unchanged(tmp_path):
     left, mid, right = columns(render(stage))
     for c in (left, mid, right):
         assert c[1] > 4 * max(c[0], c[2]), c
+
+
+def test_curve_and_point_colours(tmp_path):
+    # a wide linear curve along x, red at its left end and blue at its right; then two points, green and red
+    stage, mesh = grid_stage(tmp_path, name="curve.usda")
+    stage.RemovePrim(mesh.GetPath())
+    curve = UsdGeom.BasisCurves.Define(stage, "/World/Curve")
+    curve.CreateTypeAttr("linear")
+    curve.CreatePointsAttr(Vt.Vec3fArray([Gf.Vec3f(-1.2, 0, 0), Gf.Vec3f(0, 0, 0), Gf.Vec3f(1.2, 0, 0)]))
+    curve.CreateCurveVertexCountsAttr([3])
+    curve.CreateWidthsAttr([1.2])
+    pv = UsdGeom.PrimvarsAPI(curve).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
+                                                  UsdGeom.Tokens.vertex)
+    pv.Set(Vt.Vec3fArray([Gf.Vec3f(*c) for c in (RED, (0.5, 0, 0.5), BLUE)]))
+    red_to_blue(*columns(render(stage)))
+
+    stage, mesh = grid_stage(tmp_path, name="points.usda")
+    stage.RemovePrim(mesh.GetPath())
+    points = UsdGeom.Points.Define(stage, "/World/Points")
+    points.CreatePointsAttr(Vt.Vec3fArray([Gf.Vec3f(-0.5, 0, 0), Gf.Vec3f(0.5, 0, 0)]))
+    points.CreateWidthsAttr([0.9, 0.9])
+    pv = UsdGeom.PrimvarsAPI(points).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
+                                                   UsdGeom.Tokens.vertex)
+    pv.Set(Vt.Vec3fArray([Gf.Vec3f(*GREEN), Gf.Vec3f(*RED)]))
+    rgb = render(stage)
+    left, right = rgb[3:7, 3:7].reshape(-1, 3).mean(0), rgb[3:7, 13:17].reshape(-1, 3).mean(0)
+    assert left[1] > 4 * max(left[0], left[2]) and right[0] > 4 * max(right[1], right[2]), (left, right)

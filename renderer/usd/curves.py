@@ -22,6 +22,9 @@ unknown: curves are 6-sided tubes, points 80-triangle spheres.
 
 NurbsCurves are evaluated (rational, Cox-de Boor) at ``NURBS_SAMPLES`` points per knot span of their ``ranges``
 and rendered as linear curves through those points; their vertex widths go through the same basis.
+
+A ``displayColor`` that varies becomes per-corner ``CurveGeom.colors``: along BasisCurves through their basis
+(like widths), and per point over each point's whole shape.
 """
 from __future__ import annotations
 
@@ -107,6 +110,7 @@ class CurveGeom(GeomData):
     """GeomData plus which triangles are thin (points and curves never refract as solids)."""
 
     solid: np.ndarray | None = None  # (T,) bool
+    colors: np.ndarray | None = None  # (T, 3, 3) per-corner displayColor where it varies (points, BasisCurves)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -125,6 +129,17 @@ def _interp_values(prim, name: str, attr, interp: str, frame: float):
         if v is not None and len(v):
             return np.asarray(v, np.float64), str(interp)
     return None
+
+
+def _varying_display_color(prim, frame: float):
+    """(values (n, 3), interpolation) of a displayColor that is not constant over the prim, else None."""
+    got = _interp_values(prim, "displayColor", None, "constant", frame)
+    if got is None or got[1] == "constant":
+        return None
+    vals = got[0].reshape(-1, 3) if got[0].size % 3 == 0 else None
+    if vals is None or len(vals) < 2 or not np.all(np.isfinite(vals)) or np.all(vals == vals[0]):
+        return None
+    return vals, got[1]
 
 
 def _keys(prim, shutter: Shutter, warn, path: str):
@@ -217,7 +232,14 @@ def _points(prim, keys, frame: float, warn, view: View | None, path: str) -> Cur
                 parts.append((*tp.discs(centres[:, sel], wd[sel], facing, 6), idx[sel]))
             else:
                 parts.append((*tp.spheres(centres[:, sel], wd[sel], int(b)), idx[sel]))
-    return _assemble(parts, times, n)
+    out = _assemble(parts, times, n)
+    dc = _varying_display_color(prim, frame)
+    if out is not None and dc is not None:
+        if dc[1] in ("vertex", "varying") and len(dc[0]) >= n:  # one colour per point, over its whole shape
+            out.colors = np.ascontiguousarray(np.repeat(dc[0][out.tri_faces][:, None, :], 3, axis=1), np.float32)
+        else:
+            warn("point displayColor that is not per point: its mean used", path)
+    return out
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -424,6 +446,15 @@ def _curves(prim, keys, frame: float, warn, view: View | None, path: str) -> Cur
         if normals is None:
             warn("curve normals with a size that does not match their interpolation ignored", path)
 
+    colors = None  # displayColor at the samples (N, 3), through the basis like widths (BasisCurves only)
+    dc = _varying_display_color(prim, frame)
+    if dc is not None:
+        if prim.GetTypeName() == "BasisCurves":
+            colors = tc.primvar_at(dc[0], dc[1], topo, ctype, basis, smp)
+        if colors is None:
+            warn("curve displayColor that does not match its interpolation (or of Hermite/NURBS curves): its mean "
+                 "used", path)
+
     tan = tc.polyline_tangents(p, smp)  # (K, N, 3)
     ncurves = len(smp.poly_start)
     poly_of = np.repeat(np.arange(ncurves), smp.poly_count)
@@ -445,11 +476,13 @@ def _curves(prim, keys, frame: float, warn, view: View | None, path: str) -> Cur
             nn = tc._unit(normals[sel])
             side = tc._unit(np.cross(ts, nn), tc._any_perpendicular(ts))
             pts_, tris, nr, pair = tc.ribbon(ps, side, nn, ws, sub)
+            per_sample = 2
         elif m == -1:
             facing = view.facing(ps[0])
             side = tc._unit(np.cross(ts, facing), tc._any_perpendicular(ts))
             shade = tc._unit(facing - np.sum(facing * ts[0], axis=-1, keepdims=True) * ts[0], facing)
             pts_, tris, nr, pair = tc.ribbon(ps, side, shade, ws, sub)
+            per_sample = 2
         else:
             start = None
             if view is not None:  # start across the view so two vertices sit on the silhouette
@@ -457,7 +490,11 @@ def _curves(prim, keys, frame: float, warn, view: View | None, path: str) -> Cur
                 start = np.cross(ts[0, st], view.facing(ps[0, st]))
             u = np.stack([tc.rotation_minimising_frames(ps[k], ts[k], sub, start) for k in range(len(ps))])
             pts_, tris, nr, pair = tc.tube(ps, u, ts, ws, int(m), sub, mean_width=view is None)
-        parts.append((pts_, tris, nr, sub.curve[pair], None))
+            per_sample = int(m)
+        corner = None
+        if colors is not None:  # ribbons have 2 vertices per sample, tubes ``sides``, in sample order
+            corner = colors[sel][np.arange(pts_.shape[-2]) // per_sample][tris]
+        parts.append((pts_, tris, nr, sub.curve[pair], None, corner))
     return _assemble(parts, times, len(counts))
 
 
@@ -474,10 +511,12 @@ def _subset(smp: tc.Samples, keep: np.ndarray) -> tuple[tc.Samples, np.ndarray]:
 
 
 def _assemble(parts, times, num_faces: int) -> CurveGeom | None:
-    """Concatenate tessellated parts [(points (K, V, 3), tris, normals, owner, owner index map or None)]."""
+    """Concatenate tessellated parts [(points (K, V, 3), tris, normals, owner, owner index map or None[, per-corner
+    colours (T, 3, 3) or None])]; the colours are kept when every part has them."""
     pts, tris, nrms, faces = [], [], [], []
+    corner = [part[5] if len(part) > 5 else None for part in parts]
     base = 0
-    for p, t, n, owner, remap in parts:
+    for p, t, n, owner, remap, *_ in parts:
         pts.append(p)
         tris.append(t + base)
         nrms.append(n)
@@ -497,6 +536,8 @@ def _assemble(parts, times, num_faces: int) -> CurveGeom | None:
         uvs=None,
         double_sided=True,
         solid=np.zeros(len(tris), bool),
+        colors=np.ascontiguousarray(np.concatenate(corner), np.float32) if corner and all(
+            c is not None for c in corner) else None,
     )
 
 

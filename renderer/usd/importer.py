@@ -455,9 +455,11 @@ class _Importer:
             material_ids = self.materials.assign(prim, geom.tri_faces, geom.num_faces)
             colors = None
             # a displayColor that varies over the mesh (Houdini's Cd, Maya's colour sets), where a material shows it
-            if prim.IsA(UsdGeom.Mesh) and any(self.materials.materials[i].display_scale is not None
-                                              for i in np.unique(material_ids)):
-                colors = read_display_colors(prim, self.frame, self.warn, geom.subdivision_level)
+            if any(self.materials.materials[i].display_scale is not None for i in np.unique(material_ids)):
+                if prim.IsA(UsdGeom.Mesh):
+                    colors = read_display_colors(prim, self.frame, self.warn, geom.subdivision_level)
+                else:  # points and curves carry theirs through tessellation
+                    colors = getattr(geom, "colors", None)
                 if colors is not None and len(colors) != len(geom.triangles):
                     colors = None
             index = len(self.meshes)
