@@ -84,7 +84,7 @@ TIME_BOX = TIME_FILTERS["box"]
 TIME_TRIANGLE = TIME_FILTERS["triangle"]
 TIME_STROBE = TIME_FILTERS["strobe"]
 
-RR_START = 3  # bounces before Russian roulette may end a path
+RR_START = 5  # bounces before Russian roulette may end a path (equal-time efficiency: 3 -> 5 gained 3-15 %)
 RAY_EPSILON = 2.0e-5  # relative offset of secondary ray origins (times 1 + |p|_inf, scene units)
 FLAG_DELTA = 1
 FLAG_TRANSMISSION = 2
