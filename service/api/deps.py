@@ -1,4 +1,7 @@
-"""Request dependencies as ``Annotated`` aliases. Tests swap them with ``app.dependency_overrides``."""
+"""Request dependencies as ``Annotated`` aliases. Tests swap them with ``app.dependency_overrides``.
+
+They are ``async`` because none of them blocks: FastAPI runs a plain ``def`` dependency on the thread pool, one
+hop per dependency per request, which on the status route cost more than the database read itself."""
 from __future__ import annotations
 
 from typing import Annotated
@@ -14,11 +17,11 @@ from ..settings import ServiceSettings
 from ..submission import Inspector, Submitter
 
 
-def get_settings(request: Request) -> ServiceSettings:
+async def get_settings(request: Request) -> ServiceSettings:
     return request.app.state.settings
 
 
-def get_runtime(request: Request) -> Runtime:
+async def get_runtime(request: Request) -> Runtime:
     return request.app.state.runtime
 
 
@@ -26,15 +29,15 @@ SettingsDep = Annotated[ServiceSettings, Depends(get_settings)]
 RuntimeDep = Annotated[Runtime, Depends(get_runtime)]
 
 
-def get_store(runtime: RuntimeDep) -> Store:
+async def get_store(runtime: RuntimeDep) -> Store:
     return runtime.store
 
 
-def get_submitter(runtime: RuntimeDep) -> Submitter:
+async def get_submitter(runtime: RuntimeDep) -> Submitter:
     return runtime.submitter
 
 
-def get_inspector(runtime: RuntimeDep) -> Inspector:
+async def get_inspector(runtime: RuntimeDep) -> Inspector:
     return runtime.inspector
 
 
@@ -47,7 +50,7 @@ InspectorDep = Annotated[Inspector, Depends(get_inspector)]
 _bearer = HTTPBearer(auto_error=False, description="required when the service has DRT_API_TOKEN set")
 
 
-def require_token(settings: SettingsDep, request: Request,
+async def require_token(settings: SettingsDep, request: Request,
                   _declared: Annotated[HTTPAuthorizationCredentials | None, Security(_bearer)] = None) -> None:
     """With ``DRT_API_TOKEN`` set, requests must carry ``Authorization: Bearer <token>``. ``auth.TokenFirst``
     already refused others before their body was read; this dependency documents the scheme and honours
@@ -63,7 +66,7 @@ def _token(settings: ServiceSettings) -> str | None:
     return settings.api_token.get_secret_value() if settings.api_token is not None else None
 
 
-def get_client_id(settings: SettingsDep, request: Request) -> str:
+async def get_client_id(settings: SettingsDep, request: Request) -> str:
     """The submitter, for the per-client queue limit: its token's hash, else its address."""
     return client_identity(_token(settings), request.headers.get("authorization"),
                            request.client.host if request.client else None)
