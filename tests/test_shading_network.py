@@ -374,6 +374,36 @@ def Material "M"
     assert "sheen" in warnings(scene)
 
 
+def test_the_universal_surface_wins_over_a_materialx_look(tmp_path):
+    # the usd-wg teapot layout's material: a green UsdPreviewSurface for every renderer, a grey standard_surface
+    # in the mtlx context; the universal one is rendered; alone, the MaterialX look is
+    both = """
+def Material "M"
+{
+    token outputs:mtlx:surface.connect = </M/SS.outputs:out>
+    token outputs:surface.connect = </M/P.outputs:surface>
+    def Shader "SS"
+    {
+        uniform token info:id = "ND_standard_surface_surfaceshader"
+        float inputs:base = 1
+        color3f inputs:base_color = (0.8, 0.8, 0.8)
+        token outputs:out
+    }
+    def Shader "P"
+    {
+        uniform token info:id = "UsdPreviewSurface"
+        color3f inputs:diffuseColor = (0.1, 0.9, 0.05)
+        token outputs:surface
+    }
+}
+"""
+    np.testing.assert_allclose(evaluate(load(tmp_path, QUAD.format(mat="M") + both))["diffuse_color"][0],
+                               [0.1, 0.9, 0.05], atol=1e-6)
+    mtlx_only = both.replace('    token outputs:surface.connect = </M/P.outputs:surface>\n', '')
+    np.testing.assert_allclose(evaluate(load(tmp_path, QUAD.format(mat="M") + mtlx_only, "m.usda"))
+                               ["diffuse_color"][0], [0.8, 0.8, 0.8], atol=1e-6)
+
+
 MTLX_DOC = """<?xml version="1.0"?>
 <materialx version="1.38">
   <nodegraph name="NG">

@@ -63,7 +63,10 @@ from renderer.usd.texture_files import (TextureFiles, authoring_layer, read_asse
 GREY = (0.18, 0.18, 0.18)
 ABSORPTION_COLOR = "drt:absorptionColor"
 ABSORPTION_DISTANCE = "drt:absorptionDistance"
-SURFACE_CONTEXTS = ("mtlx", "", "arnold")  # render contexts of a Material's surface output, in preference order
+# Render contexts of a Material's surface output, in preference order: the universal output first, the one an
+# author gives every renderer (a material carrying both a UsdPreviewSurface and a MaterialX look renders as its
+# UsdPreviewSurface, as the shared assets' notes ask), then MaterialX, then Arnold's own.
+SURFACE_CONTEXTS = ("", "mtlx", "arnold")
 
 # UsdPreviewSurface input -> (the Material field it fills, its spec default) ("color": 3 floats, else a scalar).
 _INPUTS = {name: (field, PREVIEW_DEFAULTS[name]) for name, field in (
