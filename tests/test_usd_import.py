@@ -240,6 +240,15 @@ def test_prims_of_unknown_types_are_named_in_a_warning(tmp_path):
     assert len(unknown) == 1 and "/Proc (ArnoldUsd)" in unknown[0] and "/Group" not in unknown[0], scene.warnings
 
 
+def test_light_filters_are_named_in_a_warning(tmp_path):
+    path = tmp_path / "filters.usda"
+    path.write_text('#usda 1.0\ndef Cube "C"\n{\n}\ndef LightFilter "Gobo"\n{\n}\n'
+                    'def SphereLight "Key"\n{\n    rel light:filters = </Gobo>\n}\n')
+    scene = load_scene(path)
+    assert len(scene.lights) == 1
+    assert any("light filters ignored" in w and "/Gobo (LightFilter)" in w for w in scene.warnings), scene.warnings
+
+
 def test_subdivision_surfaces_are_refined_without_warnings(tmp_path):
     stage, path = new_stage(tmp_path)
     for i in range(5):

@@ -23,7 +23,7 @@ import os
 import re
 
 import numpy as np
-from pxr import Gf, Tf, Usd, UsdGeom, UsdRender, UsdShade
+from pxr import Gf, Tf, Usd, UsdGeom, UsdLux, UsdRender, UsdShade
 
 from renderer.errors import SceneError, SettingsError
 from renderer.scene import model as sc
@@ -314,6 +314,8 @@ class _Importer:
                     self._mesh_lights.append((prim, list(range(first, len(self.instances)))))
             elif usd_lights.is_light(prim):
                 self._guarded(self._light, prim)
+            elif prim.IsA(UsdLux.LightFilter):
+                self.warn("light filters ignored (not modelled)", f"{prim.GetPath()} ({prim.GetTypeName()})")
             elif prim.IsA(UsdGeom.Gprim):
                 it.PruneChildren()
                 if purpose != "guide":
