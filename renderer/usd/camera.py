@@ -55,7 +55,26 @@ def render_settings(stage: Usd.Stage, frame: float, warn) -> tuple[RenderSetting
     products = [p for p in products if p and p.IsA(UsdRender.Product)]
     if products:
         _read_settings_base(info, UsdRender.Product(products[0]), frame, warn)
+        _warn_unwritten_vars(stage, UsdRender.Product(products[0]), warn)
     return info, prim
+
+
+BEAUTY_SOURCES = {"color", "ci", "c", "rgba", "rgb", "beauty", "c.*", "c.*[<l.>o]", "c<.*>"}
+
+
+def _warn_unwritten_vars(stage: Usd.Stage, product, warn) -> None:
+    """The EXR holds the beauty (R, G, B, A) and the AOVs asked for on the command line or in the job; a product's
+    other render vars (light groups, LPEs, primvars) are named in one warning rather than dropped silently."""
+    for target in product.GetOrderedVarsRel().GetForwardedTargets():
+        var = stage.GetPrimAtPath(target)
+        if not var or not var.IsA(UsdRender.Var):
+            continue
+        rv = UsdRender.Var(var)
+        source = str(rv.GetSourceNameAttr().Get() or "")
+        if source.strip().lower() not in BEAUTY_SOURCES:
+            kind = str(rv.GetSourceTypeAttr().Get() or "raw")
+            warn("render vars not written (the EXR holds the beauty and the --aov channels)",
+                 f"{target} ({kind} {source})")
 
 
 def _read_settings_base(info: RenderSettingsInfo, base, frame: float, warn) -> None:
