@@ -177,7 +177,7 @@ def surface_at(geo: Geometry, inst: int, tri: int, b1: float, b2: float, ro: wp.
     return sp
 
 
-@wp.func
+@wp.func(inline=True)  # once per hit: no copy of the big structs
 def display_diffuse(geo: Geometry, mats: Materials, mat_id: int, inst: int, tri: int, b1: float, b2: float,
                     diffuse: wp.vec3):
     """The diffuse colour at a hit: the mesh's per-corner displayColor (times the material's scale) where the

@@ -17,7 +17,7 @@ from test_render_analytic import render_rgb
 RED, BLUE, GREEN = (1.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, 1.0, 0.0)
 
 
-def grid_stage(tmp_path, *, subdivision="none", material=None, name="colors.usda"):
+def grid_stage(tmp_path, *, subdivision="none", name="colors.usda"):
     """A 2x1 grid of quads over x in [-1, 1], z in [-0.5, 0.5] (y = 0, facing up), an orthographic camera above
     it seeing exactly that rectangle, and a white dome."""
     stage = stages.new_stage(tmp_path / name)
@@ -30,9 +30,15 @@ def grid_stage(tmp_path, *, subdivision="none", material=None, name="colors.usda
     mesh.CreateFaceVertexCountsAttr([4, 4])
     mesh.CreateFaceVertexIndicesAttr([0, 1, 4, 3, 1, 2, 5, 4])
     mesh.CreateSubdivisionSchemeAttr(subdivision)
-    if material is not None:
-        UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(material)
     return stage, mesh
+
+
+def set_colors(gprim, interpolation, colors) -> None:
+    UsdGeom.PrimvarsAPI(gprim).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
+                                             interpolation).Set(Vt.Vec3fArray([Gf.Vec3f(*c) for c in colors]))
+
+
+RED_TO_BLUE = (RED, (0.5, 0, 0.5), BLUE)  # the grid's three vertex columns, left to right
 
 
 def columns(rgb):
@@ -57,25 +63,19 @@ def red_to_blue(left, mid, right):
 @pytest.mark.parametrize("subdivision", ["none", "catmullClark"])
 def test_vertex_colours_are_interpolated(tmp_path, subdivision):
     stage, mesh = grid_stage(tmp_path, subdivision=subdivision)
-    pv = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
-                                                 UsdGeom.Tokens.vertex)
-    pv.Set(Vt.Vec3fArray([Gf.Vec3f(*c) for c in (RED, (0.5, 0, 0.5), BLUE) * 2]))
+    set_colors(mesh, UsdGeom.Tokens.vertex, RED_TO_BLUE * 2)
     red_to_blue(*columns(render(stage)))
 
 
 def test_face_varying_and_uniform_colours(tmp_path):
     stage, mesh = grid_stage(tmp_path)
-    pv = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
-                                                 UsdGeom.Tokens.faceVarying)
     # face 0 (left) red at its left corners and purple at its right ones; face 1 purple then blue
     purple = (0.5, 0, 0.5)
-    pv.Set(Vt.Vec3fArray([Gf.Vec3f(*c) for c in (RED, purple, purple, RED, purple, BLUE, BLUE, purple)]))
+    set_colors(mesh, UsdGeom.Tokens.faceVarying, (RED, purple, purple, RED, purple, BLUE, BLUE, purple))
     red_to_blue(*columns(render(stage)))
 
     stage, mesh = grid_stage(tmp_path, name="uniform.usda")
-    pv = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
-                                                 UsdGeom.Tokens.uniform)
-    pv.Set(Vt.Vec3fArray([Gf.Vec3f(*GREEN), Gf.Vec3f(*RED)]))
+    set_colors(mesh, UsdGeom.Tokens.uniform, (GREEN, RED))
     left, _, right = columns(render(stage))
     assert left[1] > 4 * max(left[0], left[2]) and right[0] > 4 * max(right[1], right[2]), (left, right)
 
@@ -93,16 +93,13 @@ def test_a_primvar_reader_of_display_color_feeds_diffuse(tmp_path):
     surf.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(1.0)
     mat.CreateSurfaceOutput().ConnectToSource(surf.ConnectableAPI(), "surface")
     UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(mat)
-    pv = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
-                                                 UsdGeom.Tokens.vertex)
-    pv.Set(Vt.Vec3fArray([Gf.Vec3f(*c) for c in (RED, (0.5, 0, 0.5), BLUE) * 2]))
+    set_colors(mesh, UsdGeom.Tokens.vertex, RED_TO_BLUE * 2)
     red_to_blue(*columns(render(stage)))
 
 
 def test_a_constant_display_color_is_unchanged(tmp_path):
     stage, mesh = grid_stage(tmp_path)
-    UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
-                                            UsdGeom.Tokens.constant).Set(Vt.Vec3fArray([Gf.Vec3f(*GREEN)]))
+    set_colors(mesh, UsdGeom.Tokens.constant, (GREEN,))
     left, mid, right = columns(render(stage))
     for c in (left, mid, right):
         assert c[1] > 4 * max(c[0], c[2]), c
@@ -117,9 +114,7 @@ def test_curve_and_point_colours(tmp_path):
     curve.CreatePointsAttr(Vt.Vec3fArray([Gf.Vec3f(-1.2, 0, 0), Gf.Vec3f(0, 0, 0), Gf.Vec3f(1.2, 0, 0)]))
     curve.CreateCurveVertexCountsAttr([3])
     curve.CreateWidthsAttr([1.2])
-    pv = UsdGeom.PrimvarsAPI(curve).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
-                                                  UsdGeom.Tokens.vertex)
-    pv.Set(Vt.Vec3fArray([Gf.Vec3f(*c) for c in (RED, (0.5, 0, 0.5), BLUE)]))
+    set_colors(curve, UsdGeom.Tokens.vertex, RED_TO_BLUE)
     red_to_blue(*columns(render(stage)))
 
     stage, mesh = grid_stage(tmp_path, name="points.usda")
@@ -127,9 +122,7 @@ def test_curve_and_point_colours(tmp_path):
     points = UsdGeom.Points.Define(stage, "/World/Points")
     points.CreatePointsAttr(Vt.Vec3fArray([Gf.Vec3f(-0.5, 0, 0), Gf.Vec3f(0.5, 0, 0)]))
     points.CreateWidthsAttr([0.9, 0.9])
-    pv = UsdGeom.PrimvarsAPI(points).CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray,
-                                                   UsdGeom.Tokens.vertex)
-    pv.Set(Vt.Vec3fArray([Gf.Vec3f(*GREEN), Gf.Vec3f(*RED)]))
+    set_colors(points, UsdGeom.Tokens.vertex, (GREEN, RED))
     rgb = render(stage)
     left, right = rgb[3:7, 3:7].reshape(-1, 3).mean(0), rgb[3:7, 13:17].reshape(-1, 3).mean(0)
     assert left[1] > 4 * max(left[0], left[2]) and right[0] > 4 * max(right[1], right[2]), (left, right)

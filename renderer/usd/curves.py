@@ -35,7 +35,7 @@ from pxr import UsdGeom
 
 from renderer.scene import tessellate_curves as tc
 from renderer.scene import tessellate_points as tp
-from renderer.usd.geometry import GeomData, point_keys
+from renderer.usd.geometry import GeomData, point_keys, varying_colors
 from renderer.usd.motion import Shutter
 
 DEFAULT_WIDTH = 1.0  # scene units; the schema has no fallback, Hydra and RenderMan use 1
@@ -134,12 +134,8 @@ def _interp_values(prim, name: str, attr, interp: str, frame: float):
 def _varying_display_color(prim, frame: float):
     """(values (n, 3), interpolation) of a displayColor that is not constant over the prim, else None."""
     got = _interp_values(prim, "displayColor", None, "constant", frame)
-    if got is None or got[1] == "constant":
-        return None
-    vals = got[0].reshape(-1, 3) if got[0].size % 3 == 0 else None
-    if vals is None or len(vals) < 2 or not np.all(np.isfinite(vals)) or np.all(vals == vals[0]):
-        return None
-    return vals, got[1]
+    vals = None if got is None or got[1] == "constant" else varying_colors(got[0])
+    return None if vals is None else (vals, got[1])
 
 
 def _keys(prim, shutter: Shutter, warn, path: str):

@@ -491,6 +491,15 @@ def read_named_uvs(prim, name: str, frame: float, warn, level: int | None = None
     return read_corner_primvar(prim, name, frame, warn, level, 2)
 
 
+def varying_colors(values) -> np.ndarray | None:
+    """The colours (n, 3) float64 when they are finite and not all equal (worth per-corner data), else None."""
+    v = np.asarray(values, np.float64)
+    if v.size < 6 or v.size % 3:
+        return None
+    v = v.reshape(-1, 3)
+    return v if np.all(np.isfinite(v)) and not np.all(v == v[0]) else None
+
+
 def read_display_colors(prim, frame: float, warn, level: int | None = None) -> np.ndarray | None:
     """Per-corner displayColor (T, 3, 3) float32 of a Mesh whose displayColor varies over it (uniform, vertex,
     varying or faceVarying with unequal values); None when it is constant, absent, mis-sized or not finite."""
@@ -498,10 +507,7 @@ def read_display_colors(prim, frame: float, warn, level: int | None = None) -> n
     if not pv or not pv.HasAuthoredValue() or pv.GetInterpolation() == UsdGeom.Tokens.constant:
         return None
     vals = _flattened(pv, frame)
-    if vals is None or len(vals) < 2:
-        return None
-    v = np.asarray(vals, np.float64).reshape(-1, 3)
-    if not np.all(np.isfinite(v)) or np.all(v == v[0]):
+    if vals is None or varying_colors(vals) is None:
         return None
     colors = read_corner_primvar(prim, "displayColor", frame, warn, level, 3)
     if colors is None:
