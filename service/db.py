@@ -121,6 +121,10 @@ class JobNotFound(Exception):
     pass
 
 
+class StoreBusy(Exception):
+    """The database is locked and the caller asked not to wait."""
+
+
 class JobActive(Exception):
     """The job is queued or running (it must be canceled before it can be deleted)."""
 
@@ -211,13 +215,17 @@ class Store:
             self._readers.clear()
         self.engine.dispose()
 
-    def _reader(self) -> sqlite3.Connection:
-        conn = getattr(self._local, "conn", None)
+    def _reader(self, wait: bool = True) -> sqlite3.Connection:
+        """This thread's read-only connection: one that waits up to 60 s for a lock, or (``wait=False``) one that
+        never waits (SQLITE_BUSY at once)."""
+        attr = "conn" if wait else "conn_nowait"
+        conn = getattr(self._local, attr, None)
         if conn is None:
-            conn = sqlite3.connect(self._path, check_same_thread=False, isolation_level=None, timeout=60)
-            conn.execute("PRAGMA busy_timeout=60000")
+            conn = sqlite3.connect(self._path, check_same_thread=False, isolation_level=None,
+                                   timeout=60 if wait else 0)
+            conn.execute(f"PRAGMA busy_timeout={60000 if wait else 0}")
             conn.execute("PRAGMA query_only=ON")
-            self._local.conn = conn
+            setattr(self._local, attr, conn)
             with self._readers_lock:
                 self._readers.append(conn)
         return conn
@@ -253,15 +261,24 @@ class Store:
                           .values(job_id=job_id))
         return self.get_job(job_id)
 
-    def get_job(self, job_id: str) -> JobRow:
-        """The job with its frames, detached (a snapshot: both read in one transaction)."""
-        conn = self._reader()
-        conn.execute("BEGIN")
+    def get_job(self, job_id: str, *, wait: bool = True) -> JobRow:
+        """The job with its frames, detached (a snapshot: both read in one transaction).
+
+        ``wait=False`` never waits for a lock: it raises ``StoreBusy`` instead (for callers on the event loop, which
+        must not block; in WAL mode a reader is refused only in rare moments, e.g. another process holding the
+        database in exclusive mode or recovering it after a crash)."""
+        conn = self._reader(wait)
         try:
-            job = conn.execute(_SELECT_JOB, (job_id,)).fetchone()
-            frames = conn.execute(_SELECT_FRAMES, (job_id,)).fetchall() if job is not None else []
-        finally:
-            conn.execute("COMMIT")
+            conn.execute("BEGIN")
+            try:
+                job = conn.execute(_SELECT_JOB, (job_id,)).fetchone()
+                frames = conn.execute(_SELECT_FRAMES, (job_id,)).fetchall() if job is not None else []
+            finally:
+                conn.execute("COMMIT")
+        except sqlite3.OperationalError as e:
+            if wait or (e.sqlite_errorcode & 0xFF) not in (sqlite3.SQLITE_BUSY, sqlite3.SQLITE_LOCKED):
+                raise
+            raise StoreBusy(job_id) from e
         if job is None:
             raise JobNotFound(job_id)
         row = JobRow(**dict(zip(_JOB_COLUMNS, job)))

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import io
+import threading
 import time
 
 import numpy as np
@@ -10,7 +11,8 @@ from PIL import Image
 
 from renderer.film.exr import read_exr
 from service import inspection, worker
-from service.api.deps import get_settings
+from service.api.deps import get_settings, get_store
+from service.db import StoreBusy
 
 from service_helpers import (CONTRACT_LIMITS, assert_same_exr, cli_render, http_contract, service_settings, submit,
                              wait_job, write_card)
@@ -260,6 +262,33 @@ def test_token_through_dependency_override(client, tmp_path):
     finally:
         client.app.dependency_overrides.clear()
     assert client.get("/v1/jobs").status_code == 200
+
+
+
+def test_status_of_a_locked_database_is_read_on_the_thread_pool(client, card):
+    """The status route reads on the event loop without waiting; when the database refuses that read (locked by
+    another process), the same answer comes from a read on the thread pool, which may wait."""
+    job = wait_job(client, submit(client, card, SMALL).json()["id"])
+    store = client.app.state.runtime.store
+    reads = []
+
+    class Locked:
+        def get_job(self, job_id, wait=True):
+            reads.append((wait, threading.get_ident()))
+            if not wait:
+                raise StoreBusy(job_id)
+            return store.get_job(job_id)
+
+    client.app.dependency_overrides[get_store] = lambda: Locked()
+    try:
+        r = client.get(f"/v1/jobs/{job['id']}")
+        missing = client.get("/v1/jobs/nope")
+    finally:
+        client.app.dependency_overrides.clear()
+    assert r.status_code == 200 and r.json() == job
+    assert missing.status_code == 404 and missing.json() == {"detail": "job not found"}
+    assert [w for w, _ in reads] == [False, True, False, True]
+    assert reads[0][1] != reads[1][1]  # the waiting read ran on another thread than the one that refused
 
 
 def test_health_metrics_and_docs(client, card):

@@ -1,13 +1,15 @@
 """The job state machine and the store's atomic transitions, claims and idempotency records."""
 from __future__ import annotations
 
+import sqlite3
 import threading
+import time
 
 import pytest
 
 from schemas import JobState
 from service import jobs as sm
-from service.db import JobActive, JobNotFound, Store, decode_cursor, encode_cursor
+from service.db import JobActive, JobNotFound, Store, StoreBusy, decode_cursor, encode_cursor
 
 
 def test_transition_table():
@@ -145,3 +147,38 @@ def test_cursor_sequence_numbers_stay_within_sqlite_integers():
     for seq in (2**63, 10**30):
         with pytest.raises(ValueError):
             decode_cursor(encode_cursor(seq))
+
+
+def test_a_read_that_must_not_wait_is_refused_at_once_while_the_database_is_locked(tmp_path):
+    """The status route reads on the event loop with ``wait=False``: a locked database must answer StoreBusy at once
+    (the route then reads on the thread pool), never hold the loop for the 60 s busy timeout."""
+    store = Store(tmp_path / "db.sqlite3")
+    _job(store)
+    store.close()  # another process can lock a WAL database exclusively only while no connection has it open
+    locker = sqlite3.connect(tmp_path / "db.sqlite3", isolation_level=None)
+    locker.execute("PRAGMA locking_mode=EXCLUSIVE")
+    locker.execute("BEGIN EXCLUSIVE")
+    seen = []
+
+    def read():  # a thread of its own: the closed store's connections stay with the thread that opened them
+        t0 = time.monotonic()
+        try:
+            store.get_job("a", wait=False)
+            seen.append("read")
+        except StoreBusy:
+            seen.append(("busy", time.monotonic() - t0))
+        released.wait(10)
+        seen.append(store.get_job("a", wait=False).id)  # the same connection reads again once the lock is gone
+
+    released = threading.Event()
+    t = threading.Thread(target=read)
+    t.start()
+    while not seen and t.is_alive():
+        time.sleep(0.01)
+    locker.execute("COMMIT")
+    locker.close()
+    released.set()
+    t.join(10)
+    assert seen[0][0] == "busy" and seen[0][1] < 1.0, seen
+    assert seen[1] == "a"
+    store.close()
