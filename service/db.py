@@ -5,7 +5,11 @@ attempted: attempts, done, seconds: the checkpoint record), ``idempotency`` (Ide
 
 Reads of one job (``get_job``: the status request, the API's hot path) skip the ORM: one plain ``sqlite3``
 connection per thread reads the job and its frames in one snapshot and fills detached ``JobRow``/``FrameRow``
-objects, about 0.2 ms instead of 1.5-2 ms of SQLAlchemy session and query overhead under the GIL.
+objects, about 0.2 ms instead of 1.5-2 ms of SQLAlchemy session and query overhead under the GIL. So does the
+bookkeeping every job goes through (submission: the Idempotency-Key claim, the queue counts, the insert; the
+scheduler: active jobs, transitions, each finished tile and frame): plain SQL on one writer connection, about 4x
+less CPU than building and running the same statements through SQLAlchemy, CPU that status requests waited for
+(the GIL). SQLAlchemy keeps the schema, migrations and the rarer operations.
 
 Concurrency: the API's threads and the scheduler's thread share one engine. Every state change is a single
 conditional ``UPDATE`` (``WHERE state IN (...)``) so a claim or a transition is atomic, and write transactions
@@ -115,6 +119,9 @@ class IdempotencyRow(Base):
 _JOB_COLUMNS = tuple(c.name for c in JobRow.__table__.columns)
 _SELECT_JOB = f"SELECT {', '.join(_JOB_COLUMNS)} FROM jobs WHERE id = ?"
 _SELECT_FRAMES = "SELECT idx, time, tiles_done, done FROM frames WHERE job_id = ? ORDER BY idx"
+_INSERT_JOB = (f"INSERT INTO jobs ({', '.join(c for c in _JOB_COLUMNS if c != 'seq')}) "
+               f"VALUES ({', '.join(':' + c for c in _JOB_COLUMNS if c != 'seq')})")
+_ACTIVE = f"({', '.join(repr(x.value) for x in sorted(sm.ACTIVE))})"  # ('queued', 'running')
 
 
 class JobNotFound(Exception):
@@ -191,12 +198,16 @@ class Store:
 
         self._writer = self.engine.execution_options(drt_write=True)
         self._path = path
+        self._raw = None  # the plain writer connection, opened after the schema exists
         self._local = threading.local()
         self._readers: list[sqlite3.Connection] = []
         self._readers_lock = threading.Lock()
         self._write_lock = threading.Lock()
         Base.metadata.create_all(self.engine)
         self._migrate()
+        self._raw = sqlite3.connect(path, check_same_thread=False, isolation_level=None, timeout=60)
+        for pragma in ("synchronous=NORMAL", "foreign_keys=ON", "busy_timeout=60000"):
+            self._raw.execute(f"PRAGMA {pragma}")
         # Claims left by requests that were in flight when the service stopped can never complete.
         with self._write() as s:
             s.execute(delete(IdempotencyRow).where(IdempotencyRow.job_id.is_(None)))
@@ -209,6 +220,10 @@ class Store:
                 s.connection().exec_driver_sql("ALTER TABLE jobs ADD COLUMN client VARCHAR(80)")
 
     def close(self) -> None:
+        with self._write_lock:
+            if self._raw is not None:
+                self._raw.close()
+                self._raw = None
         with self._readers_lock:
             for conn in self._readers:
                 conn.close()
@@ -240,25 +255,41 @@ class Store:
         with self._write_lock, Session(self._writer, expire_on_commit=False) as s:
             yield s
 
+    @contextlib.contextmanager
+    def _tx(self):
+        """One write transaction on the plain writer connection (queued on the same lock as ``_write``)."""
+        with self._write_lock:
+            conn = self._raw
+            conn.execute("BEGIN IMMEDIATE")
+            try:
+                yield conn
+            except BaseException:
+                conn.execute("ROLLBACK")
+                raise
+            conn.execute("COMMIT")
+
+    def _query(self, sql: str, params: tuple = ()) -> list[tuple]:
+        """One read statement on this thread's plain connection (a statement is its own snapshot)."""
+        return self._reader().execute(sql, params).fetchall()
+
     # -- jobs ---------------------------------------------------------------------------------------------------
     def create_job(self, *, job_id: str, priority: int, settings_json: str, scene_sha256: str, scene_name: str,
                    scene_bytes: int, width: int, height: int, tile_size: int, tiles_per_frame: int,
                    frame_times: list[float], exposure_scale: float, warnings: list[str],
                    idempotency_key: str | None = None, client: str | None = None) -> JobRow:
         now = time.time()
-        row = JobRow(id=job_id, state=sm.QUEUED.value, priority=priority, settings_json=settings_json,
-                     scene_sha256=scene_sha256, scene_name=scene_name, scene_bytes=scene_bytes, width=width,
-                     height=height, tile_size=tile_size, tiles_per_frame=tiles_per_frame,
-                     tiles_total=tiles_per_frame * len(frame_times), tiles_done=0, samples_done=0,
-                     exposure_scale=exposure_scale, warnings_json=json.dumps(warnings), created_at=now,
-                     updated_at=now, client=client)
-        row.frames = [FrameRow(idx=i, time=t, tiles_done=0, done=False) for i, t in enumerate(frame_times)]
-        with self._write() as s, s.begin():
-            s.add(row)
-            s.flush()
+        job = dict(id=job_id, state=sm.QUEUED.value, priority=priority, settings_json=settings_json,
+                   scene_sha256=scene_sha256, scene_name=scene_name, scene_bytes=scene_bytes, width=width,
+                   height=height, tile_size=tile_size, tiles_per_frame=tiles_per_frame,
+                   tiles_total=tiles_per_frame * len(frame_times), tiles_done=0, samples_done=0,
+                   exposure_scale=exposure_scale, warnings_json=json.dumps(warnings), error=None, created_at=now,
+                   updated_at=now, started_at=None, finished_at=None, client=client)
+        with self._tx() as c:
+            c.execute(_INSERT_JOB, job)
+            c.executemany("INSERT INTO frames (job_id, idx, time, tiles_done, done) VALUES (?, ?, ?, 0, 0)",
+                          [(job_id, i, float(t)) for i, t in enumerate(frame_times)])
             if idempotency_key is not None:
-                s.execute(update(IdempotencyRow).where(IdempotencyRow.key == idempotency_key)
-                          .values(job_id=job_id))
+                c.execute("UPDATE idempotency SET job_id = ? WHERE key = ?", (job_id, idempotency_key))
         return self.get_job(job_id)
 
     def get_job(self, job_id: str, *, wait: bool = True) -> JobRow:
@@ -301,26 +332,27 @@ class Store:
     def transition(self, job_id: str, target: JobState, *, error: str | None = None) -> JobRow:
         """Move a job to ``target`` atomically; IllegalTransition if its current state does not allow it."""
         now = time.time()
-        values: dict = {"state": target.value, "updated_at": now}
+        values: dict = {"state": ("?", target.value), "updated_at": ("?", now)}  # column -> (SQL, parameter)
         if target == sm.RUNNING:
-            values["started_at"] = func.coalesce(JobRow.started_at, now)
+            values["started_at"] = ("COALESCE(started_at, ?)", now)
         if target in sm.TERMINAL:
-            values["finished_at"] = now
+            values["finished_at"] = ("?", now)
         if error is not None:
-            values["error"] = error
+            values["error"] = ("?", error)
         if target == sm.QUEUED:  # a retry: a fresh run (its own start time and speed) over the same checkpoints
-            values.update(error=None, started_at=None, finished_at=None, samples_done=0)
-        with self._write() as s, s.begin():
-            res = s.execute(update(JobRow).where(JobRow.id == job_id,
-                                                 JobRow.state.in_([x.value for x in sm.sources(target)]))
-                            .values(**values))
-            if res.rowcount == 0:
-                current = s.scalar(select(JobRow.state).where(JobRow.id == job_id))
+            values.update(error=("?", None), started_at=("?", None), finished_at=("?", None),
+                          samples_done=("?", 0))
+        sources = sorted(x.value for x in sm.sources(target))
+        sql = (f"UPDATE jobs SET {', '.join(f'{k} = {v}' for k, (v, _) in values.items())} "
+               f"WHERE id = ? AND state IN ({', '.join('?' * len(sources))})")
+        with self._tx() as c:
+            if c.execute(sql, (*(p for _, p in values.values()), job_id, *sources)).rowcount == 0:
+                current = c.execute("SELECT state FROM jobs WHERE id = ?", (job_id,)).fetchone()
                 if current is None:
                     raise JobNotFound(job_id)
-                raise sm.IllegalTransition(job_id, JobState(current), target)
+                raise sm.IllegalTransition(job_id, JobState(current[0]), target)
             if target == sm.QUEUED:  # failed attempts are forgotten, so that each tile has its retries again
-                s.execute(delete(TileRow).where(TileRow.job_id == job_id, TileRow.done.is_(False)))
+                c.execute("DELETE FROM tiles WHERE job_id = ? AND done = 0", (job_id,))
         return self.get_job(job_id)
 
     def delete_job(self, job_id: str) -> JobRow:
@@ -335,24 +367,18 @@ class Store:
         return row
 
     def scene_in_use(self, sha256: str) -> bool:
-        with self._read() as s:
-            return s.scalar(select(func.count()).select_from(JobRow).where(JobRow.scene_sha256 == sha256)) > 0
+        return bool(self._query("SELECT EXISTS (SELECT 1 FROM jobs WHERE scene_sha256 = ?)", (sha256,))[0][0])
 
     def active_jobs(self) -> list[JobHead]:
         """Queued and running jobs in scheduling order: priority (high first), then first-in first-out."""
-        with self._read() as s:
-            rows = s.execute(select(JobRow.id, JobRow.state, JobRow.priority)
-                             .where(JobRow.state.in_([x.value for x in sm.ACTIVE]))
-                             .order_by(JobRow.priority.desc(), JobRow.seq.asc()))
-            return [JobHead(i, JobState(st), p) for i, st, p in rows]
+        rows = self._query(f"SELECT id, state, priority FROM jobs WHERE state IN {_ACTIVE} ORDER BY priority DESC, seq")
+        return [JobHead(i, JobState(st), p) for i, st, p in rows]
 
     def count_active(self, client: str | None = None) -> int:
         """Jobs queued or running, of one client or (None) of all."""
-        q = select(func.count()).select_from(JobRow).where(JobRow.state.in_([x.value for x in sm.ACTIVE]))
-        if client is not None:
-            q = q.where(JobRow.client == client)
-        with self._read() as s:
-            return int(s.scalar(q))
+        if client is None:
+            return self._query(f"SELECT count(*) FROM jobs WHERE state IN {_ACTIVE}")[0][0]
+        return self._query(f"SELECT count(*) FROM jobs WHERE state IN {_ACTIVE} AND client = ?", (client,))[0][0]
 
     def counts_by_state(self) -> dict[JobState, int]:
         counts = {st: 0 for st in JobState}
@@ -391,30 +417,27 @@ class Store:
     def tile_done(self, job_id: str, frame_idx: int, tile_idx: int, samples: int, seconds: float) -> bool:
         """Record a checkpointed tile of a running job. False (nothing recorded) if the job is no longer running
         or the tile was already recorded."""
-        with self._write() as s, s.begin():
-            already = s.scalar(select(TileRow.done).where(TileRow.job_id == job_id, TileRow.frame_idx == frame_idx,
-                                                          TileRow.tile_idx == tile_idx))
-            if already:
+        tile = (job_id, frame_idx, tile_idx)
+        with self._tx() as c:
+            already = c.execute("SELECT done FROM tiles WHERE job_id = ? AND frame_idx = ? AND tile_idx = ?",
+                                tile).fetchone()
+            if already is not None and already[0]:
                 return False
-            res = s.execute(update(JobRow).where(JobRow.id == job_id, JobRow.state == sm.RUNNING.value)
-                            .values(tiles_done=JobRow.tiles_done + 1, samples_done=JobRow.samples_done + samples,
-                                    updated_at=time.time()))
-            if res.rowcount == 0:
+            if c.execute("UPDATE jobs SET tiles_done = tiles_done + 1, samples_done = samples_done + ?, "
+                         "updated_at = ? WHERE id = ? AND state = ?",
+                         (samples, time.time(), job_id, sm.RUNNING.value)).rowcount == 0:
                 return False
-            s.execute(sqlite_insert(TileRow).values(job_id=job_id, frame_idx=frame_idx, tile_idx=tile_idx,
-                                                    attempts=1, done=True, seconds=seconds)
-                      .on_conflict_do_update(index_elements=["job_id", "frame_idx", "tile_idx"],
-                                             set_={"done": True, "seconds": seconds, "error": None}))
-            s.execute(update(FrameRow).where(FrameRow.job_id == job_id, FrameRow.idx == frame_idx)
-                      .values(tiles_done=FrameRow.tiles_done + 1))
+            c.execute("INSERT INTO tiles (job_id, frame_idx, tile_idx, attempts, done, seconds) "
+                      "VALUES (?, ?, ?, 1, 1, ?) ON CONFLICT (job_id, frame_idx, tile_idx) "
+                      "DO UPDATE SET done = 1, seconds = excluded.seconds, error = NULL", (*tile, seconds))
+            c.execute("UPDATE frames SET tiles_done = tiles_done + 1 WHERE job_id = ? AND idx = ?",
+                      (job_id, frame_idx))
         return True
 
     def done_tiles(self, job_id: str) -> dict[int, set[int]]:
         out: dict[int, set[int]] = defaultdict(set)
-        with self._read() as s:
-            for f, t in s.execute(select(TileRow.frame_idx, TileRow.tile_idx)
-                                  .where(TileRow.job_id == job_id, TileRow.done.is_(True))):
-                out[f].add(t)
+        for f, t in self._query("SELECT frame_idx, tile_idx FROM tiles WHERE job_id = ? AND done = 1", (job_id,)):
+            out[f].add(t)
         return out
 
     def forget_tiles(self, job_id: str, frame_idx: int, tile_idxs: set[int]) -> None:
@@ -431,33 +454,32 @@ class Store:
             s.execute(update(JobRow).where(JobRow.id == job_id).values(tiles_done=JobRow.tiles_done - n))
 
     def frame_done(self, job_id: str, frame_idx: int) -> None:
-        with self._write() as s, s.begin():
-            s.execute(update(FrameRow).where(FrameRow.job_id == job_id, FrameRow.idx == frame_idx).values(done=True))
-            s.execute(update(JobRow).where(JobRow.id == job_id).values(updated_at=time.time()))
+        with self._tx() as c:
+            c.execute("UPDATE frames SET done = 1 WHERE job_id = ? AND idx = ?", (job_id, frame_idx))
+            c.execute("UPDATE jobs SET updated_at = ? WHERE id = ?", (time.time(), job_id))
 
     # -- idempotency -------------------------------------------------------------------------------------------
     def claim_key(self, key: str, request_hash: str) -> Claim:
         for _ in range(3):  # the holder of the key may release it between our insert and our read
-            with self._write() as s:
-                try:
-                    with s.begin():
-                        s.add(IdempotencyRow(key=key, request_hash=request_hash, job_id=None,
-                                             created_at=time.time()))
-                    return Claim("new")
-                except IntegrityError:
-                    pass
-            with self._read() as s:
-                row = s.get(IdempotencyRow, key)
-            if row is None:
+            try:
+                with self._tx() as c:
+                    c.execute("INSERT INTO idempotency (key, request_hash, job_id, created_at) VALUES (?, ?, NULL, ?)",
+                              (key, request_hash, time.time()))
+                return Claim("new")
+            except sqlite3.IntegrityError:
+                pass
+            row = self._query("SELECT request_hash, job_id FROM idempotency WHERE key = ?", (key,))
+            if not row:
                 continue
-            if row.request_hash != request_hash:
-                return Claim("conflict", row.job_id)
-            if row.job_id is None:
+            held_hash, job_id = row[0]
+            if held_hash != request_hash:
+                return Claim("conflict", job_id)
+            if job_id is None:
                 return Claim("busy")
-            return Claim("existing", row.job_id)
+            return Claim("existing", job_id)
         return Claim("busy")
 
     def release_key(self, key: str) -> None:
         """Forget a claim whose request failed (so that a corrected retry may use the key)."""
-        with self._write() as s, s.begin():
-            s.execute(delete(IdempotencyRow).where(IdempotencyRow.key == key, IdempotencyRow.job_id.is_(None)))
+        with self._tx() as c:
+            c.execute("DELETE FROM idempotency WHERE key = ? AND job_id IS NULL", (key,))
