@@ -228,6 +228,27 @@ class InspectionPool:
         self._idle.put(p)
         return result
 
+    def wait_ready(self, timeout: float) -> None:
+        """Wait (at most ``timeout`` seconds) until the idle processes have imported what inspections need (~2 s,
+        done while the cluster starts), so that the first submissions to a new service do not wait for it."""
+        deadline = time.monotonic() + timeout
+        procs = []
+        while True:
+            try:
+                procs.append(self._idle.get_nowait())
+            except queue.Empty:
+                break
+        try:
+            for p in procs:
+                if not p.ready and p.answers.poll(max(0.0, deadline - time.monotonic())):
+                    try:
+                        p.ready = p.answers.recv() == "ready"
+                    except (EOFError, OSError):
+                        pass  # dead: its first use replaces it, as for any process that dies
+        finally:
+            for p in procs:
+                self._idle.put(p)
+
     def close(self) -> None:
         self._closed = True
         with self._lock:

@@ -38,6 +38,7 @@ class Runtime:
             inspector.close()
             store.close()
             raise
+        inspector.wait_ready(120)  # its processes imported pxr and the renderer while the cluster started
         scheduler = Scheduler(settings, store, engine, scenes)
         submitter = Submitter(settings, store, scenes, on_created=scheduler.wake, cluster_available=engine.available)
         scheduler.start()

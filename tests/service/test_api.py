@@ -291,6 +291,14 @@ def test_status_of_a_locked_database_is_read_on_the_thread_pool(client, card):
     assert reads[0][1] != reads[1][1]  # the waiting read ran on another thread than the one that refused
 
 
+
+def test_the_inspection_processes_are_ready_when_the_service_starts(client):
+    """Every submission of a burst at a new service waited for the processes' imports (~2 s) before; they are
+    done while the cluster starts."""
+    pool = client.app.state.runtime.inspector
+    assert pool._all and all(p.ready for p in pool._all)
+
+
 def test_health_metrics_and_docs(client, card):
     assert client.get("/healthz").json() == {"status": "ok", "cluster": "reachable", "workers": 1, "threads": 2}
     job = wait_job(client, submit(client, card, SMALL).json()["id"])
