@@ -28,6 +28,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--workers", type=int, default=None, help="LocalCluster worker processes (DRT_WORKERS)")
     s.add_argument("--threads", type=int, default=None, help="threads per worker (DRT_THREADS_PER_WORKER)")
     s.add_argument("--log-level", default="info", choices=["debug", "info", "warning", "error"])
+    # Off by default: a line per request (the monitor and pipelines poll) cost ~0.2 ms, a fifth of a status request.
+    s.add_argument("--access-log", action="store_true", help="log every request (uvicorn's access log, at info)")
     add_commands(sub)
     return parser
 
@@ -56,7 +58,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
             super().handle_exit(sig, frame)
 
     Server(uvicorn.Config(app, host=args.host, port=args.port, log_level=args.log_level,
-                          timeout_graceful_shutdown=10)).run()
+                          access_log=args.access_log, timeout_graceful_shutdown=10)).run()
     return 0
 
 
