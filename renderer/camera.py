@@ -24,8 +24,10 @@ from renderer.motion.kernels import MotionKeys, keys_matrix, upload_keys
 from renderer.motion.transform import matrix_at
 from renderer.sampling.warps import square_to_uniform_disk_concentric
 from renderer.scene.model import Camera
+from renderer.struct_refs import by_reference
 
 
+@by_reference
 @wp.struct
 class CameraParams:
     """Everything a kernel needs to make camera rays. Lengths in scene units."""

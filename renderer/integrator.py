@@ -76,6 +76,7 @@ from renderer.shading.materials import (
 )
 from renderer.shading.raycone import bounce_spread, camera_cone, uv_density, uv_footprint
 from renderer.shading.textures import Textures
+from renderer.struct_refs import by_reference
 
 # Rendering needs no gradients: no adjoint code (half the compile time and code size).
 wp.set_module_options({"enable_backward": False})
@@ -282,6 +283,22 @@ class PathSettings:
     seed: wp.uint32
 
 
+@by_reference
+@wp.struct
+class Wave:
+    """The samples one launch draws: ``count`` consecutive sample indices from ``start`` for each active pixel of
+    a tile's region. (A struct rather than separate arguments: a kernel with array arguments of its own gets a
+    Warp CPU variant that copies all its arguments, the scene structs included, once per thread.)"""
+
+    active: wp.array(dtype=wp.int32)  # region pixels still sampling (adaptive sampling); slot = position here
+    region_x0: int
+    region_y0: int
+    region_w: int
+    start: int  # sample index of this wave's first sample
+    count: int  # samples per pixel in this wave
+    counters: wp.array(dtype=wp.int64)  # [rays traced, non-finite samples zeroed]
+
+
 @wp.kernel
 def trace_wave_kernel(
     geo: Geometry,
@@ -290,22 +307,16 @@ def trace_wave_kernel(
     lights: Lights,
     cam: CameraParams,
     buf: SampleBuffer,
-    counters: wp.array(dtype=wp.int64),  # [rays traced, non-finite samples zeroed]
     settings: PathSettings,
-    region_x0: int,
-    region_y0: int,
-    region_w: int,
-    active: wp.array(dtype=wp.int32),  # region pixels still sampling (adaptive sampling); slot = position here
-    wave_start: int,  # sample index of this wave's first sample
-    wave: int,  # samples per pixel in this wave
+    wave: Wave,
 ):
     tid = wp.tid()
-    j = tid % wave
-    pr = active[tid // wave]
-    px = region_x0 + pr % region_w
-    py = region_y0 + pr // region_w
+    j = tid % wave.count
+    pr = wave.active[tid // wave.count]
+    px = wave.region_x0 + pr % wave.region_w
+    py = wave.region_y0 + pr // wave.region_w
     pixel = wp.uint32(py * cam.width + px)
-    index = wp.uint32(wave_start + j)
+    index = wp.uint32(wave.start + j)
     seed = settings.seed
 
     film_u = sample_2d(seed, pixel, index, wp.uint32(DIM_FILM))
@@ -492,10 +503,10 @@ def trace_wave_kernel(
     sample = wp.vec4(L[0], L[1], L[2], alpha)
     if not finite3(L):
         sample = wp.vec4(0.0, 0.0, 0.0, alpha)
-        wp.atomic_add(counters, 1, wp.int64(1))
+        wp.atomic_add(wave.counters, 1, wp.int64(1))
     buf.film[tid] = film_u
     buf.rgba[tid] = sample
     buf.depth[tid] = depth_aov
     buf.normal[tid] = normal_aov
     buf.albedo[tid] = albedo_aov
-    wp.atomic_add(counters, 0, wp.int64(rays))
+    wp.atomic_add(wave.counters, 0, wp.int64(rays))

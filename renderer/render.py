@@ -30,7 +30,7 @@ from renderer.film import denoise
 from renderer.film.adaptive import Convergence
 from renderer.film.exr import timecode_from_frame, write_exr
 from renderer.framing import Framing, resolve_framing
-from renderer.integrator import PathSettings, trace_wave_kernel
+from renderer.integrator import PathSettings, Wave, trace_wave_kernel
 from renderer.lights.table import upload_lights
 from renderer.motion.transform import matrix_at
 # MAX_SPP and RenderOptions are re-exported: ``renderer.render`` is the library API the README shows.
@@ -185,10 +185,14 @@ def render_tile(prep: PreparedScene, tile: Tile,
                 break
         slot_of[:] = -1
         slot_of[pixels] = np.arange(pixels.size, dtype=np.int32)
-        active_wp = wp.array(pixels, dtype=wp.int32, device=dev)
+        launch = Wave()
+        launch.active = wp.array(pixels, dtype=wp.int32, device=dev)
+        launch.region_x0, launch.region_y0, launch.region_w = rx0, ry0, rw
+        launch.start, launch.count = start, wave
+        launch.counters = counters
         wp.launch(trace_wave_kernel, dim=pixels.size * wave, device=dev,
                   inputs=[prep.geometry, prep.materials, prep.textures, prep.lights, prep.camera.params, buf,
-                          counters, settings, rx0, ry0, rw, active_wp, start, wave])
+                          settings, launch])
         wp.launch(film.gather_kernel, dim=tile.width * tile.height, device=dev,
                   inputs=[buf, acc, wave, rx0, ry0, rw, rh, wp.array(slot_of, dtype=wp.int32, device=dev),
                           tile.x0, tile.y0, tile.width, kind, float(film.FILTER_RADIUS[kind]), margin])

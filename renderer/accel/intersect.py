@@ -22,6 +22,7 @@ from __future__ import annotations
 import warp as wp
 
 from renderer.motion.kernels import MotionKeys, find_segment, keys_matrix
+from renderer.struct_refs import by_reference
 
 STACK_SIZE = 64
 stack_t = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
@@ -29,6 +30,7 @@ stack_t = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
 BIG = 3.4e38
 
 
+@by_reference
 @wp.struct
 class Geometry:
     """Every mesh and instance of a scene, uploaded for traversal. Offsets index the concatenated arrays."""

@@ -17,6 +17,8 @@ import math
 import numpy as np
 import warp as wp
 
+from renderer.struct_refs import by_reference
+
 # Rendering needs no gradients: no adjoint code (half the compile time and code size).
 wp.set_module_options({"enable_backward": False})
 
@@ -103,6 +105,7 @@ def filter_weight_np(kind: int, dx, dy) -> np.ndarray:
     return f1(dx) * f1(dy)
 
 
+@by_reference
 @wp.struct
 class SampleBuffer:
     """One wave of samples of a tile's region (tile + margin): index (slot * wave + j), where slot is the
@@ -115,6 +118,7 @@ class SampleBuffer:
     albedo: wp.array(dtype=wp.vec3)
 
 
+@by_reference
 @wp.struct
 class TileAccum:
     """Filtered sums of a tile's pixels: sum(w * value) and sum(w); AOVs average over covered samples."""

@@ -17,7 +17,10 @@ import math
 import numpy as np
 import warp as wp
 
+from renderer.struct_refs import by_reference
 
+
+@by_reference
 @wp.struct
 class EnvMap:
     """A lat-long environment: radiance texels and the sampling CDFs (empty when there is no texture)."""

@@ -28,11 +28,13 @@ from renderer.accel.intersect import (
 from renderer.accel.occlusion import blas_transmittance, transmittance
 from renderer.shading.materials import Materials
 from renderer.shading.textures import Textures
+from renderer.struct_refs import by_reference
 
 MAX_GROUPS = 31  # link groups per mask (bits of an int32)
 FALLOFF_STEPS = 8  # slices of a shadow:falloff zone, each with the fade strength at its middle
 
 
+@by_reference
 @wp.struct
 class Links:
     light_bit: wp.array(dtype=wp.int32)  # per light: its light-link group bit, -1 unlinked (lights everything)

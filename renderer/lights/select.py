@@ -22,6 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from renderer.struct_refs import by_reference
+
 MAX_CLUSTERS = 64
 
 
@@ -36,6 +38,7 @@ class SelectEstimate:
     extent: float  # finite: radius of the light's shape
 
 
+@by_reference
 @wp.struct
 class Selection:
     count: int  # clusters

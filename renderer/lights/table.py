@@ -34,8 +34,10 @@ from renderer.scene.model import (
     Scene,
     Shaping,
 )
+from renderer.struct_refs import by_reference
 
 
+@by_reference
 @wp.struct
 class Lights:
     count: int

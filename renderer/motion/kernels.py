@@ -9,7 +9,10 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from renderer.struct_refs import by_reference
 
+
+@by_reference
 @wp.struct
 class MotionKeys:
     """All transform keys of a scene, concatenated. Times are normalised shutter time in [0, 1]."""

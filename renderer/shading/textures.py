@@ -45,6 +45,7 @@ from renderer.lights.envmap import dir_to_latlong_np as direction_to_latlong  # 
 from renderer.lights.envmap import latlong_mean  # noqa: F401
 from renderer.lights.envmap import latlong_to_dir_np as latlong_to_direction  # noqa: F401
 from renderer.scene.model import Texture
+from renderer.struct_refs import by_reference
 
 # No gradients are ever taken: no adjoint code (half the compile time and code size).
 wp.set_module_options({"enable_backward": False})
@@ -211,6 +212,7 @@ def image_texture(name: str, loaded: list[LoadedImage], udims: list[int] | None 
 # The kernel-side atlas
 
 
+@by_reference
 @wp.struct
 class Textures:
     """All texture images of a scene for the kernels (see the module docstring).
