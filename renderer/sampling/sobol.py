@@ -139,14 +139,14 @@ def owen_scramble(v: wp.uint32, seed: wp.uint32) -> wp.uint32:
 
 @wp.func
 def sobol_dim1(index: wp.uint32) -> wp.uint32:
-    """Sobol's second dimension (32-bit fraction); dimension 0 is ``reverse_bits32(index)``."""
+    """Sobol's second dimension (32-bit fraction); dimension 0 is ``reverse_bits32(index)``.
+
+    Branch-free over all 32 bits: the scrambled index has random high bits, so a loop stopping at the highest set
+    bit ran about 32 rounds anyway, with an unpredictable branch in each."""
     r = wp.uint32(0)
     v = W_SOBOL_V1
-    i = index
-    while i != wp.uint32(0):
-        if (i & wp.uint32(1)) != wp.uint32(0):
-            r = r ^ v
-        i = i >> wp.uint32(1)
+    for k in range(32):
+        r = r ^ (v & (wp.uint32(0) - ((index >> wp.uint32(k)) & wp.uint32(1))))
         v = v ^ (v >> wp.uint32(1))
     return r
 
