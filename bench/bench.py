@@ -222,8 +222,9 @@ def main() -> None:
         r, cyc_s = production_figures(PRODUCTION, args.production_spp, bpy)
         st = r["stats"]
         samples = 640 * 360 * args.production_spp
-        vs = (f"live Cycles {cyc_s:.2f} s = {samples / cyc_s / 1e6:.3f} Msamples/s, ours {r['sps'] * cyc_s / samples:.2f}x"
-              if cyc_s else "Cycles: set BPY to a Python with bpy to measure it side by side")
+        vs = (f"live Cycles {cyc_s:.2f} s = {samples / cyc_s / 1e6:.3f} Msamples/s, "
+              f"ours {r['sps'] * cyc_s / samples:.2f}x" if cyc_s
+              else "Cycles: set BPY to a Python with bpy to measure it side by side")
         print(f"production scene {PRODUCTION.parent.name} (camera + layout + a sun): {st.triangles} triangles stored "
               f"(instanced, subdivided), "
               f"USD load + subdivision {r['load']:.2f} s, flatten + hierarchy + upload {r['prepare']:.2f} s "
