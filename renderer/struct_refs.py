@@ -16,7 +16,13 @@ from __future__ import annotations
 
 import re
 
-import warp._src.codegen as _codegen
+try:
+    import warp._src.codegen as _codegen
+except ImportError:  # Warp before 1.10 kept its code generator public
+    try:
+        import warp.codegen as _codegen
+    except ImportError:
+        _codegen = None
 
 _names: set[str] = set()
 _param = None  # compiled patterns for the registered names
@@ -40,20 +46,20 @@ def references(source: str) -> str:
     return _kernel_local.sub(r"\1& \2", _param.sub(r"\1 &\2\3", source))
 
 
-# Warp's own generators, kept on its module so that a second import (a reload) wraps them once only
-_warp_codegen_func = getattr(_codegen, "_drt_codegen_func", _codegen.codegen_func)
-_warp_codegen_kernel = getattr(_codegen, "_drt_codegen_kernel", _codegen.codegen_kernel)
+def _install(codegen) -> None:
+    """Wrap Warp's function and kernel generators (kept on its module, so that a reload wraps them once only)."""
+    func = getattr(codegen, "_drt_codegen_func", codegen.codegen_func)
+    kernel = getattr(codegen, "_drt_codegen_kernel", codegen.codegen_kernel)
+
+    def codegen_func(*args, **kwargs):
+        return references(func(*args, **kwargs))
+
+    def codegen_kernel(*args, **kwargs):
+        return references(kernel(*args, **kwargs))
+
+    codegen._drt_codegen_func, codegen._drt_codegen_kernel = func, kernel
+    codegen.codegen_func, codegen.codegen_kernel = codegen_func, codegen_kernel
 
 
-def _codegen_func(*args, **kwargs):
-    return references(_warp_codegen_func(*args, **kwargs))
-
-
-def _codegen_kernel(*args, **kwargs):
-    return references(_warp_codegen_kernel(*args, **kwargs))
-
-
-_codegen._drt_codegen_func = _warp_codegen_func
-_codegen._drt_codegen_kernel = _warp_codegen_kernel
-_codegen.codegen_func = _codegen_func
-_codegen.codegen_kernel = _codegen_kernel
+if _codegen is not None and hasattr(_codegen, "codegen_func") and hasattr(_codegen, "codegen_kernel"):
+    _install(_codegen)
