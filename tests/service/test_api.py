@@ -264,7 +264,6 @@ def test_token_through_dependency_override(client, tmp_path):
     assert client.get("/v1/jobs").status_code == 200
 
 
-
 def test_status_of_a_locked_database_is_read_on_the_thread_pool(client, card):
     """The status route reads on the event loop without waiting; when the database refuses that read (locked by
     another process), the same answer comes from a read on the thread pool, which may wait."""
@@ -289,7 +288,6 @@ def test_status_of_a_locked_database_is_read_on_the_thread_pool(client, card):
     assert missing.status_code == 404 and missing.json() == {"detail": "job not found"}
     assert [w for w, _ in reads] == [False, True, False, True]
     assert reads[0][1] != reads[1][1]  # the waiting read ran on another thread than the one that refused
-
 
 
 def test_the_inspection_processes_are_ready_when_the_service_starts(client):
