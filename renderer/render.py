@@ -6,7 +6,8 @@
     write_frame("out.exr", prep, sums)
 
 ``render_tile`` is a pure function of (scene, options, tile): it returns the tile's filtered sums and weights,
-the same bits whoever renders it, in whatever tiling, on however many threads. The service splits frames
+the same bits whoever renders it; ``assemble`` makes them a frame that has the same bits in whatever tiling,
+on however many threads. The service splits frames
 into tiles and calls it from its workers.
 """
 from __future__ import annotations
@@ -25,8 +26,7 @@ from renderer.accel.upload import GeometryStats, upload_geometry
 from renderer.camera import CameraSetup, ndc_matrix, setup_camera
 from renderer.device import init_warp
 from renderer.errors import Cancelled, SettingsError
-from renderer.film import film
-from renderer.film import denoise
+from renderer.film import borders, denoise, film
 from renderer.film.adaptive import Convergence
 from renderer.film.exr import timecode_from_frame, write_exr
 from renderer.framing import Framing, resolve_framing
@@ -136,6 +136,10 @@ def render_tile(prep: PreparedScene, tile: Tile,
                 time_budget: float | None = None) -> TileSums:
     """Render one tile: its filtered sums and weights, a pure function of (scene, options, tile).
 
+    The tile renders its own pixels' samples only. Its arrays hold its pixels' sums (final except within the
+    filter's reach of its edge, where they hold its own samples' share) and, under ``band.``, the partial sums
+    that ``assemble`` combines with the neighbouring tiles' into the exact border pixels (``film.borders``).
+
     ``on_wave(samples_done_in_tile, samples_total_in_tile)`` is called after every wave; raising
     ``Cancelled`` from it stops the render. ``time_budget`` (seconds) stops sampling before the wave that would
     overrun it (progressive rendering; the result then depends on the machine's speed). Samples per pixel are
@@ -148,14 +152,15 @@ def render_tile(prep: PreparedScene, tile: Tile,
     t_start = time.perf_counter()
     kind = film.FILTERS[opts.filter]
     margin = film.filter_margin(kind)
-    rx0, ry0 = max(0, tile.x0 - margin), max(0, tile.y0 - margin)
-    rx1, ry1 = min(W, tile.x1 + margin), min(H, tile.y1 + margin)
-    rw, rh = rx1 - rx0, ry1 - ry0
+    ex0, ey0, ex1, ey1 = borders.extended_region(tile.x0, tile.y0, tile.x1, tile.y1, margin, W, H)
+    tw, th = tile.width, tile.height
+    targets = (ex1 - ex0) * (ey1 - ey0)
+    directions = borders.directions(margin)
     waves = film.wave_schedule(opts.spp)
     max_wave = max(e - s for s, e in waves)
     dev = prep.device
-    buf = film.new_sample_buffer(rw * rh * max_wave, dev)
-    acc = film.new_tile_accum(tile.width * tile.height, dev)
+    buf = film.new_sample_buffer(tw * th * max_wave, dev)
+    acc = film.new_tile_accum(directions * targets, dev)
     counters = wp.zeros(2, dtype=wp.int64, device=dev)  # rays traced, non-finite samples zeroed
     settings = PathSettings()
     settings.max_depth = int(opts.max_depth)
@@ -165,13 +170,9 @@ def render_tile(prep: PreparedScene, tile: Tile,
     settings.time_filter = TIME_FILTERS[opts.time_filter]
     settings.frame_s = frame_shutter_time(prep.scene)
     settings.seed = wp.uint32(opts.seed)
-    conv = Convergence(rw * rh, opts.noise_threshold, opts.min_spp)
-    slot_of = np.full(rw * rh, -1, np.int32)
-    # which region pixels are the tile's own (for the samples-per-pixel count and progress)
-    own = np.zeros((rh, rw), bool)
-    own[tile.y0 - ry0:tile.y1 - ry0, tile.x0 - rx0:tile.x1 - rx0] = True
-    own = own.ravel()
-    total = tile.width * tile.height * opts.spp
+    conv = Convergence(tw * th, opts.noise_threshold, opts.min_spp)
+    slot_of = np.full(tw * th, -1, np.int32)
+    total = tw * th * opts.spp
     for start, end in waves:
         wave = end - start
         pixels = conv.active_pixels()
@@ -187,33 +188,27 @@ def render_tile(prep: PreparedScene, tile: Tile,
         slot_of[pixels] = np.arange(pixels.size, dtype=np.int32)
         launch = Wave()
         launch.active = wp.array(pixels, dtype=wp.int32, device=dev)
-        launch.region_x0, launch.region_y0, launch.region_w = rx0, ry0, rw
+        launch.region_x0, launch.region_y0, launch.region_w = tile.x0, tile.y0, tw
         launch.start, launch.count = start, wave
         launch.counters = counters
         wp.launch(trace_wave_kernel, dim=pixels.size * wave, device=dev,
                   inputs=[prep.geometry, prep.materials, prep.textures, prep.lights, prep.camera.params, buf,
                           settings, launch])
-        wp.launch(film.gather_kernel, dim=tile.width * tile.height, device=dev,
-                  inputs=[buf, acc, wave, rx0, ry0, rw, rh, wp.array(slot_of, dtype=wp.int32, device=dev),
-                          tile.x0, tile.y0, tile.width, kind, float(film.FILTER_RADIUS[kind]), margin])
+        wp.launch(film.axis_weights_kernel, dim=pixels.size * wave, device=dev,
+                  inputs=[buf, kind, float(film.FILTER_RADIUS[kind])])
+        wp.launch(film.gather_kernel, dim=targets, device=dev,
+                  inputs=[buf, acc, wave, tile.x0, tile.y0, tw, th, wp.array(slot_of, dtype=wp.int32, device=dev),
+                          ex0, ey0, ex1 - ex0, margin])
         rgb = None
         if conv.enabled:
             rgb = buf.rgba.numpy()[:pixels.size * wave].reshape(pixels.size, wave, 4)[..., :3]
         conv.add_wave(pixels, rgb, start, wave)
         conv.update()
         if on_wave is not None:
-            on_wave(min(total, int(conv.count[own].sum())), total)
-    h, w = tile.height, tile.width
-    arrays = {
-        "rgba": acc.rgba.numpy().reshape(h, w, 4),
-        "weight": acc.weight.numpy().reshape(h, w),
-        "depth": acc.depth.numpy().reshape(h, w),
-        "hit_weight": acc.hit_weight.numpy().reshape(h, w),
-        "normal": acc.normal.numpy().reshape(h, w, 3),
-        "albedo": acc.albedo.numpy().reshape(h, w, 3),
-        "spp": conv.count.reshape(rh, rw)[tile.y0 - ry0:tile.y1 - ry0, tile.x0 - rx0:tile.x1 - rx0]
-        .astype(np.float32),
-    }
+            on_wave(min(total, int(conv.count.sum())), total)
+    arrays = borders.split_tile(film.accum_partials(acc, directions, ey1 - ey0, ex1 - ex0),
+                                (tile.x0, tile.y0, tile.x1, tile.y1), margin, W, H)
+    arrays["spp"] = conv.count.reshape(th, tw).astype(np.float32)
     c = counters.numpy()
     return TileSums(tile=tile, arrays=arrays, rays=int(c[0]), nonfinite=int(c[1]))
 
@@ -248,14 +243,9 @@ def split_tiles(width: int, height: int, tile_size: int) -> list[Tile]:
 
 
 def assemble(tiles: list[TileSums], width: int, height: int) -> dict[str, np.ndarray]:
-    """Place tile sums into full-image arrays (tiles must not overlap)."""
-    full: dict[str, np.ndarray] = {}
-    for t in tiles:
-        for k, a in t.arrays.items():
-            if k not in full:
-                full[k] = np.zeros((height, width) + a.shape[2:], np.float32)
-            full[k][t.tile.y0:t.tile.y1, t.tile.x0:t.tile.x1] = a
-    return full
+    """The frame's sums from tiles that cover it without overlapping (``borders.assemble``)."""
+    return borders.assemble([((t.tile.x0, t.tile.y0, t.tile.x1, t.tile.y1), t.arrays) for t in tiles], width,
+                            height)
 
 
 @dataclass

@@ -35,6 +35,8 @@ from pathlib import Path
 
 from sqlalchemy.exc import IntegrityError
 
+from renderer.film import film
+from renderer.film.borders import check_tile
 from renderer.film.exr import write_exr
 from renderer.render import Tile, TileSums, assemble
 from schemas import JobCreate, JobState
@@ -268,9 +270,12 @@ class Scheduler:
     def _frame_task(self, plan: JobPlan, frame: FramePlan) -> FrameTask:
         """The frame's checkpointed tiles, assembled (the sums ``render_frame`` would give: tiles are pure)."""
         parts, bad = [], set()
+        margin = film.filter_margin(film.FILTERS[plan.spec.filter])
         for t, box in enumerate(plan.boxes):
             try:
-                parts.append(TileSums(tile=Tile(*box), arrays=load_tile(plan.files.tile(frame.idx, t))))
+                arrays = load_tile(plan.files.tile(frame.idx, t))
+                check_tile(arrays, box, margin, plan.width, plan.height)  # e.g. an older layout: rendered again
+                parts.append(TileSums(tile=Tile(*box), arrays=arrays))
             except Exception:  # noqa: BLE001 - missing, truncated or garbage: np.load raises several kinds
                 bad.add(t)
         if bad:

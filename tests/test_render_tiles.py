@@ -3,10 +3,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import warp as wp
 
 from renderer.film import film
 from renderer.motion.transform import make_transform
-from renderer.render import RenderOptions, Tile, auto_tile_size, prepare, render_frame, render_tile, split_tiles
+from renderer.render import (RenderOptions, Tile, assemble, auto_tile_size, prepare, render_frame, render_tile,
+                             split_tiles)
 from renderer.scene.model import (LIGHT_RECT, LIGHT_SPHERE, Camera, Instance, Light, Material, Mesh, MotionTransform,
                             Scene)
 
@@ -53,9 +55,16 @@ def test_bit_identical_across_tilings_and_threads(scene, filter_name):
         other = render_frame(prep, tile_size=tile_size, threads=threads).sums
         for k in ref:
             assert np.array_equal(ref[k], other[k]), (filter_name, tile_size, threads, k)
-    # a tile rendered alone equals its region of the frame
-    t = render_tile(prep, Tile(11, 5, 30, 17))
-    assert np.array_equal(t.arrays["rgba"], ref["rgba"][5:17, 11:30])
+    # tiles of any shape assemble the same frame; a tile alone has its pixels beyond the filter's reach of its
+    # edge final
+    parts = [Tile(0, 0, 40, 5), Tile(0, 5, 11, 17), Tile(11, 5, 30, 17), Tile(30, 5, 40, 17), Tile(0, 17, 40, 28)]
+    rendered = [render_tile(prep, t) for t in parts]
+    mosaic = assemble(rendered, 40, 28)
+    for k in ref:
+        assert np.array_equal(ref[k], mosaic[k]), (filter_name, k)
+    m = film.filter_margin(film.FILTERS[filter_name])
+    alone = rendered[2].arrays["rgba"]
+    assert np.array_equal(alone[m:12 - m, m:19 - m], ref["rgba"][5 + m:17 - m, 11 + m:30 - m])
     assert ref["rgba"][..., :3].max() > 0.05  # the scene is lit
 
 
@@ -124,3 +133,19 @@ def test_progress_reaches_the_total_and_cancellation_stops_between_waves(scene):
     with pytest.raises(Cancelled):
         render_tile(prep, Tile(0, 0, 16, 16), stop_after_two)
     assert waves == [16 * 16 * 1, 16 * 16 * 2]  # stopped after the second wave, before the third
+
+
+@pytest.mark.parametrize("name", list(film.FILTERS))
+def test_the_kernels_axis_weights_make_the_filter(name):
+    kind = film.FILTERS[name]
+    rng = np.random.default_rng(3)
+    u = rng.random((500, 2)).astype(np.float32)
+    u[:4] = [[0.0, 0.0], [0.5, 0.5], [0.999, 0.25], [0.25, 0.0]]  # pixel edges and centre
+    buf = film.new_sample_buffer(len(u), "cpu")
+    buf.film = wp.array(u, dtype=wp.vec2, device="cpu")
+    wp.launch(film.axis_weights_kernel, dim=len(u), inputs=[buf, kind, float(film.FILTER_RADIUS[kind])], device="cpu")
+    wx, wy = buf.wx.numpy(), buf.wy.numpy()
+    for o in (-1, 0, 1):  # toward the pixel at offset o (the sample sits at u - 0.5 - o from its centre)
+        for p in (-1, 0, 1):
+            want = film.filter_weight_np(kind, u[:, 0] - 0.5 - o, u[:, 1] - 0.5 - p)
+            np.testing.assert_allclose(wx[:, o + 1] * wy[:, p + 1], want, rtol=1e-5, atol=1e-6)

@@ -2,9 +2,9 @@
 
 Samples are taken uniformly over each pixel's area (the film dimensions of the sample) and every sample
 contributes to all pixels whose filter covers it, weighted by the filter: pixel = sum(w L) / sum(w). A tile
-therefore also renders the samples of a margin of ``ceil(radius - 0.5)`` pixels around it, so that its border
-pixels receive exactly the contributions they would get in one whole-frame render: no seams, and the sums run
-over the same samples in the same order whatever the tiling.
+renders the samples of its own pixels only and adds them to its pixels and to a ring of ``ceil(radius - 0.5)``
+pixels around it, as partial sums per source direction that ``borders`` assembles exactly: no seams, no sample
+rendered twice, and the sums run over the same samples in the same order whatever the tiling.
 
 The sample budget is spent in *waves* of 1, 1, 2, 4, ... samples per pixel (capped), a schedule that depends on
 the sample count only, never on tile size or threads: the floating-point sums are then bit-identical across
@@ -33,11 +33,12 @@ FILTER_BLACKMAN_HARRIS = FILTERS["blackman-harris"]
 # support that Cycles uses).
 FILTER_RADIUS = {FILTER_BOX: 0.5, FILTER_TRIANGLE: 1.0, FILTER_GAUSSIAN: 1.5, FILTER_BLACKMAN_HARRIS: 1.5}
 GAUSSIAN_SIGMA = 0.5
+assert max(FILTER_RADIUS.values()) <= 1.5  # a sample reaches one pixel beyond its own at most (``axis_weights``)
 MAX_WAVE = 32  # samples per pixel per wave (bounds the sample buffer of a tile)
 
 
 def filter_margin(kind: int) -> int:
-    """Pixels of margin a tile must render so that its own pixels see every sample their filter covers."""
+    """How many pixels a sample's filter reaches beyond its own pixel (the ring of ``borders``): 0 or 1."""
     return int(math.ceil(FILTER_RADIUS[kind] - 0.5))
 
 
@@ -72,19 +73,9 @@ def filter_1d(kind: int, x: float, radius: float):
     return 1.0
 
 
-@wp.func
-def filter_weight(kind: int, dx: float, dy: float, radius: float):
-    """Weight of a sample at offset (dx, dy) pixels from a pixel centre."""
-    if kind == FILTER_BOX:
-        # half-open pixel square, so a sample on a pixel edge belongs to exactly one pixel
-        if dx >= -0.5 and dx < 0.5 and dy >= -0.5 and dy < 0.5:
-            return 1.0
-        return 0.0
-    return filter_1d(kind, dx, radius) * filter_1d(kind, dy, radius)
-
-
 def filter_weight_np(kind: int, dx, dy) -> np.ndarray:
-    """NumPy twin of ``filter_weight`` (tests)."""
+    """Weight of a sample at offset (dx, dy) pixels from a pixel centre (tests; the kernels multiply
+    ``axis_weights``)."""
     r = FILTER_RADIUS[kind]
     dx, dy = np.asarray(dx, np.float64), np.asarray(dy, np.float64)
     if kind == FILTER_BOX:
@@ -108,20 +99,23 @@ def filter_weight_np(kind: int, dx, dy) -> np.ndarray:
 @by_reference
 @wp.struct
 class SampleBuffer:
-    """One wave of samples of a tile's region (tile + margin): index (slot * wave + j), where slot is the
-    pixel's position in the wave's list of pixels still sampling (every region pixel without adaptive sampling)."""
+    """One wave of samples of a tile's pixels: index (slot * wave + j), where slot is the pixel's position in
+    the wave's list of pixels still sampling (every tile pixel without adaptive sampling)."""
 
     film: wp.array(dtype=wp.vec2)  # sample position within its pixel, [0, 1)^2
     rgba: wp.array(dtype=wp.vec4)  # premultiplied radiance and coverage
     depth: wp.array(dtype=wp.float32)  # camera depth of the first hit (0 when nothing was hit)
     normal: wp.array(dtype=wp.vec3)  # world shading normal of the first hit
     albedo: wp.array(dtype=wp.vec3)
+    wx: wp.array(dtype=wp.vec3)  # filter weights along x toward the pixels at offsets -1, 0, +1 (``axis_weights``)
+    wy: wp.array(dtype=wp.vec3)
 
 
 @by_reference
 @wp.struct
 class TileAccum:
-    """Filtered sums of a tile's pixels: sum(w * value) and sum(w); AOVs average over covered samples."""
+    """Filtered sums of a tile's target pixels, one set per source direction (``borders``): sum(w * value) and
+    sum(w); AOVs average over covered samples."""
 
     rgba: wp.array(dtype=wp.vec4)
     weight: wp.array(dtype=wp.float32)
@@ -138,6 +132,8 @@ def new_sample_buffer(n: int, device: str) -> SampleBuffer:
     b.depth = wp.zeros(n, dtype=wp.float32, device=device)
     b.normal = wp.zeros(n, dtype=wp.vec3, device=device)
     b.albedo = wp.zeros(n, dtype=wp.vec3, device=device)
+    b.wx = wp.zeros(n, dtype=wp.vec3, device=device)
+    b.wy = wp.zeros(n, dtype=wp.vec3, device=device)
     return b
 
 
@@ -152,66 +148,93 @@ def new_tile_accum(n: int, device: str) -> TileAccum:
     return a
 
 
+@wp.func
+def axis_weights(kind: int, u: float, radius: float):
+    """Filter weights of a sample at position u in [0, 1) of its pixel, along one axis, for the pixels at
+    offsets -1, 0, +1 from its own (``filter_margin`` is at most 1). The box filter's pixel is half-open, so
+    its own pixel always takes the whole sample."""
+    if kind == FILTER_BOX:
+        return wp.vec3(0.0, 1.0, 0.0)
+    # the sample's offset from the centre of the pixel at offset o is u - 0.5 - o
+    return wp.vec3(filter_1d(kind, u + 0.5, radius), filter_1d(kind, u - 0.5, radius),
+                   filter_1d(kind, u - 1.5, radius))
+
+
+@wp.kernel
+def axis_weights_kernel(buf: SampleBuffer, filter_kind: int, radius: float):
+    """Each sample's weights toward its own and neighbouring pixels along x and y (the weight toward a pixel is
+    their product)."""
+    i = wp.tid()
+    f = buf.film[i]
+    buf.wx[i] = axis_weights(filter_kind, f[0], radius)
+    buf.wy[i] = axis_weights(filter_kind, f[1], radius)
+
+
 @wp.kernel
 def gather_kernel(
     buf: SampleBuffer,
-    acc: TileAccum,
+    acc: TileAccum,  # per-direction partial sums: direction d of target pixel t at t * directions + d
     wave: int,  # samples per pixel in this wave
-    region_x0: int,  # region origin and size (pixels, full-image coordinates)
-    region_y0: int,
-    region_w: int,
-    region_h: int,
-    slot_of: wp.array(dtype=wp.int32),  # a region pixel's slot in this wave's buffer, -1: it has stopped
-    tile_x0: int,
+    tile_x0: int,  # the tile: its pixels are the wave's sample pixels (full-image coordinates)
     tile_y0: int,
     tile_w: int,
-    filter_kind: int,
-    radius: float,
+    tile_h: int,
+    slot_of: wp.array(dtype=wp.int32),  # a tile pixel's slot in this wave's buffer, -1: it has stopped
+    ext_x0: int,  # the target pixels: the tile and its ring of ``margin`` pixels (``borders.extended_region``)
+    ext_y0: int,
+    ext_w: int,
     margin: int,
 ):
-    """Add one wave's samples to each tile pixel, in a fixed order (neighbour rows, columns, samples)."""
+    """Add one wave's samples to each target pixel's partial sums, one per source direction (``borders``),
+    each in sample order."""
     tid = wp.tid()
-    px = tile_x0 + tid % tile_w
-    py = tile_y0 + tid // tile_w
-    cx = float(px) + 0.5
-    cy = float(py) + 0.5
-    rgba = acc.rgba[tid]
-    wsum = acc.weight[tid]
-    dsum = acc.depth[tid]
-    hsum = acc.hit_weight[tid]
-    nsum = acc.normal[tid]
-    asum = acc.albedo[tid]
+    px = ext_x0 + tid % ext_w
+    py = ext_y0 + tid // ext_w
+    side = 2 * margin + 1
     for oy in range(-margin, margin + 1):
-        qy = py + oy
-        ry = qy - region_y0
-        if ry >= 0 and ry < region_h:
-            for ox in range(-margin, margin + 1):
-                qx = px + ox
-                rx = qx - region_x0
-                slot = int(-1)
-                if rx >= 0 and rx < region_w:
-                    slot = slot_of[ry * region_w + rx]
-                if slot >= 0:
-                    base = slot * wave
-                    for j in range(wave):
-                        f = buf.film[base + j]
-                        w = filter_weight(filter_kind, float(qx) + f[0] - cx, float(qy) + f[1] - cy, radius)
-                        if w != 0.0:
-                            c = buf.rgba[base + j]
-                            rgba = rgba + c * w
-                            wsum = wsum + w
-                            if c[3] > 0.0:
-                                hw = w * c[3]
-                                dsum = dsum + buf.depth[base + j] * hw
-                                hsum = hsum + hw
-                                nsum = nsum + buf.normal[base + j] * hw
-                                asum = asum + buf.albedo[base + j] * hw
-    acc.rgba[tid] = rgba
-    acc.weight[tid] = wsum
-    acc.depth[tid] = dsum
-    acc.hit_weight[tid] = hsum
-    acc.normal[tid] = nsum
-    acc.albedo[tid] = asum
+        sy = py + oy - tile_y0
+        for ox in range(-margin, margin + 1):
+            sx = px + ox - tile_x0
+            slot = int(-1)
+            if sy >= 0 and sy < tile_h and sx >= 0 and sx < tile_w:
+                slot = slot_of[sy * tile_w + sx]
+            if slot >= 0:
+                k = tid * side * side + (oy + margin) * side + ox + margin
+                rgba = acc.rgba[k]
+                wsum = acc.weight[k]
+                dsum = acc.depth[k]
+                hsum = acc.hit_weight[k]
+                nsum = acc.normal[k]
+                asum = acc.albedo[k]
+                base = slot * wave
+                for j in range(wave):
+                    # the target lies at offset (-ox, -oy) from the sample's pixel
+                    w = buf.wx[base + j][1 - ox] * buf.wy[base + j][1 - oy]
+                    if w != 0.0:
+                        c = buf.rgba[base + j]
+                        rgba = rgba + c * w
+                        wsum = wsum + w
+                        if c[3] > 0.0:
+                            hw = w * c[3]
+                            dsum = dsum + buf.depth[base + j] * hw
+                            hsum = hsum + hw
+                            nsum = nsum + buf.normal[base + j] * hw
+                            asum = asum + buf.albedo[base + j] * hw
+                acc.rgba[k] = rgba
+                acc.weight[k] = wsum
+                acc.depth[k] = dsum
+                acc.hit_weight[k] = hsum
+                acc.normal[k] = nsum
+                acc.albedo[k] = asum
+
+
+def accum_partials(acc: TileAccum, directions: int, rows: int, columns: int) -> dict[str, np.ndarray]:
+    """The partial sums as (directions, rows, columns[, c]) arrays (``borders.split_tile``'s input)."""
+    shape = (rows, columns, directions)
+    arrays = {"rgba": acc.rgba.numpy().reshape(shape + (4,)), "weight": acc.weight.numpy().reshape(shape),
+              "depth": acc.depth.numpy().reshape(shape), "hit_weight": acc.hit_weight.numpy().reshape(shape),
+              "normal": acc.normal.numpy().reshape(shape + (3,)), "albedo": acc.albedo.numpy().reshape(shape + (3,))}
+    return {k: np.moveaxis(a, 2, 0) for k, a in arrays.items()}
 
 
 def resolve(sums: dict[str, np.ndarray], exposure_scale: float = 1.0) -> dict[str, np.ndarray]:
