@@ -228,23 +228,25 @@ def _worker_threads() -> int:
 
 # Render work yields the CPU to whatever shares the machine with it: on the embedded LocalCluster that is the API
 # answering status requests and inspecting uploads, which must stay fast while tiles render. A niceness, raised
-# once per worker process (never lowered: that needs privileges); DRT_RENDER_NICENESS=0 leaves it alone.
+# once per rendering thread (never lowered: that needs privileges); DRT_RENDER_NICENESS=0 leaves it alone. Per
+# thread, because on Linux a niceness belongs to the thread that set it: a worker's other task threads (and the
+# worker's own event loop) would otherwise render, or answer the scheduler, at the old one.
 RENDER_NICENESS = 10
-_niced = False
+_niced = threading.local()
 
 
 def background_priority() -> None:
-    """Raise this process's niceness to DRT_RENDER_NICENESS (default RENDER_NICENESS), once, in a worker process of
-    its own (a nanny's child): workers running as threads of the service (or of a test) leave it alone."""
-    global _niced
-    if _niced:
+    """Raise the calling thread's niceness to DRT_RENDER_NICENESS (default RENDER_NICENESS), once per thread, in a
+    worker process of its own (a nanny's child): workers running as threads of the service (or of a test) leave it
+    alone."""
+    if getattr(_niced, "done", False):
         return
-    _niced = True
+    _niced.done = True
     if multiprocessing.parent_process() is None:
         return
     try:
         want = int(os.environ.get("DRT_RENDER_NICENESS", RENDER_NICENESS))
-        if want > os.getpriority(os.PRIO_PROCESS, 0):
+        if want > os.getpriority(os.PRIO_PROCESS, 0):  # 0: the calling thread on Linux, the process elsewhere
             os.setpriority(os.PRIO_PROCESS, 0, min(want, 19))
     except (ValueError, OSError, AttributeError):  # not a number, not permitted, or not a POSIX system
         pass

@@ -1,27 +1,42 @@
-"""Render work yields the CPU to the API: a worker process of its own lowers its priority, a worker running as
-threads of the service's (or the tests') process leaves it alone."""
+"""Render work yields the CPU to the API: every rendering thread of a worker process of its own lowers its
+priority, a worker running as threads of the service's (or the tests') process leaves it alone."""
 from __future__ import annotations
 
 import multiprocessing
 import os
+import threading
 
 from service import worker
 
 
 def _child(q):
-    worker.background_priority()
-    q.put(os.getpriority(os.PRIO_PROCESS, 0))
+    # two task threads one after the other, as a worker with two threads runs tiles; each reads its own niceness
+    rendering = []
+
+    def task():
+        worker.background_priority()
+        worker.background_priority()  # a second tile on the same thread: nothing more to do
+        rendering.append(os.getpriority(os.PRIO_PROCESS, 0))  # 0: the calling thread on Linux
+
+    for _ in range(2):
+        t = threading.Thread(target=task)
+        t.start()
+        t.join()
+    q.put((rendering, os.getpriority(os.PRIO_PROCESS, 0)))
 
 
-def test_a_worker_process_lowers_its_priority_and_the_service_keeps_its_own(monkeypatch):
+def test_every_rendering_thread_of_a_worker_process_yields_and_the_service_keeps_its_priority(monkeypatch):
     before = os.getpriority(os.PRIO_PROCESS, 0)
-    monkeypatch.setattr(worker, "_niced", False)
+    monkeypatch.setattr(worker, "_niced", threading.local())
     worker.background_priority()  # this process has no parent process: a threads-mode "worker"
     assert os.getpriority(os.PRIO_PROCESS, 0) == before
     ctx = multiprocessing.get_context("spawn")
     q = ctx.Queue()
     p = ctx.Process(target=_child, args=(q,))
     p.start()
-    got = q.get(timeout=60)
+    rendering, main_thread = q.get(timeout=60)
     p.join(timeout=60)
-    assert got == max(before, worker.RENDER_NICENESS)
+    want = max(before, worker.RENDER_NICENESS)
+    assert rendering == [want, want]
+    assert main_thread == before  # the worker's event loop keeps answering the scheduler at its own
+
