@@ -24,14 +24,14 @@ from .api.deps import require_token
 from .auth import TokenFirst
 from .errors import ApiError
 from .events import ChangeFeed
+from .latency import tune_api_process
 from .runtime import Runtime
 from .settings import ServiceSettings
 from .uploads import UploadTooLarge
 
 log = logging.getLogger("drt.service")
 
-MULTIPART_OVERHEAD = 1 << 20
-SUBMISSION_THREADS = 8  # room for the settings field and part headers next to the largest scene
+MULTIPART_OVERHEAD = 1 << 20  # room for the settings field and part headers next to the largest scene
 
 
 class _BodyTooLarge(HTTPException):
@@ -89,10 +89,14 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     async def lifespan(app: FastAPI):
         # Starting Dask blocks (worker processes start): keep it off the event loop.
         app.state.runtime = await run_in_threadpool(Runtime.start, settings)
-        # Submissions wait for a worker to load their scene; they get threads of their own, so that a burst of
-        # them never holds every thread of the pool that status requests need.
-        app.state.submit_limiter = anyio.CapacityLimiter(SUBMISSION_THREADS)
+        # Submissions wait for an inspection process to load their scene; they get threads of their own, so that
+        # a burst of them never holds every thread of the pool that status requests need. One per inspection
+        # process and one more to read the next upload meanwhile: more threads inspect no faster, they only
+        # contend for the GIL with the event loop (50 clients at once, bench/load_test.py: status p99 15-21 ms
+        # with 3 threads, 25-53 ms with 8).
+        app.state.submit_limiter = anyio.CapacityLimiter(settings.inspect_processes + 1)
         app.state.feed = ChangeFeed(app.state.runtime.store)  # the monitor's server-sent events
+        tune_api_process()  # startup is done: freeze its heap, shorten the GIL switch interval
         try:
             yield
         finally:

@@ -35,6 +35,7 @@ from pathlib import Path
 from schemas import JobCreate
 
 from .errors import ApiError
+from .latency import freeze_heap
 from .spec import RenderSpec
 from .uploads import StoredScene, UploadError, check_asset_paths, hide_dir
 
@@ -101,6 +102,7 @@ def _serve(requests: Connection, answers: Connection) -> None:
     import renderer.render  # noqa: F401 - warm-up: pxr, Warp and the importer, before the first request
     import renderer.usd.importer  # noqa: F401
 
+    freeze_heap()
     answers.send("ready")
     while True:
         try:
