@@ -261,16 +261,8 @@ def _area_pdf(t: float, dir: wp.vec3, normal: wp.vec3, area: float) -> float:
 
 
 @wp.func
-def _safe_asin(x: float) -> float:
-    return wp.asin(wp.clamp(x, -1.0, 1.0))
-
-
-@wp.func
-def _angle_between(a: wp.vec3, b: wp.vec3) -> float:
-    """Angle between unit vectors, accurate near 0 and pi."""
-    if wp.dot(a, b) < 0.0:
-        return PI - 2.0 * _safe_asin(0.5 * wp.length(a + b))
-    return 2.0 * _safe_asin(0.5 * wp.length(b - a))
+def _safe_acos(x: float) -> float:
+    return wp.acos(wp.clamp(x, -1.0, 1.0))
 
 
 @wp.func
@@ -299,21 +291,20 @@ def _sph_rect_angles(x0: float, y0: float, z0: float, x1: float, y1: float):
     """Internal angles of the spherical rectangle and the z of two edge-plane normals (Urena et al. 2013).
 
     Returns (g0 + g1, g2 + g3, b0, b1, solid_angle). solid_angle is 0 when p_ref lies in the plane.
+    The edge planes' unit normals are n0 = (0, z0, -y0) / r0, n1 = (-z0, 0, x1) / r1, n2 = (0, -z0, y1) / r2,
+    n3 = (z0, 0, -x0) / r3 (the normalised cross products of consecutive corners, written out as pbrt-v4 does),
+    so the cosines of the internal angles, -n_i . n_(i+1), are products of corner coordinates (as in Cycles).
     """
-    v00 = wp.vec3(x0, y0, z0)
-    v01 = wp.vec3(x0, y1, z0)
-    v10 = wp.vec3(x1, y0, z0)
-    v11 = wp.vec3(x1, y1, z0)
-    n0 = wp.normalize(wp.cross(v00, v10))
-    n1 = wp.normalize(wp.cross(v10, v11))
-    n2 = wp.normalize(wp.cross(v11, v01))
-    n3 = wp.normalize(wp.cross(v01, v00))
-    g01 = _angle_between(-n0, n1) + _angle_between(-n1, n2)
-    g23 = _angle_between(-n2, n3) + _angle_between(-n3, n0)
+    r0 = wp.sqrt(z0 * z0 + y0 * y0)
+    r1 = wp.sqrt(z0 * z0 + x1 * x1)
+    r2 = wp.sqrt(z0 * z0 + y1 * y1)
+    r3 = wp.sqrt(z0 * z0 + x0 * x0)
+    g01 = _safe_acos(y0 * x1 / (r0 * r1)) + _safe_acos(-x1 * y1 / (r1 * r2))
+    g23 = _safe_acos(x0 * y1 / (r2 * r3)) + _safe_acos(-x0 * y0 / (r3 * r0))
     solid_angle = g01 + g23 - TWO_PI
     if z0 == 0.0:
         solid_angle = 0.0
-    return g01, g23, n0[2], n2[2], solid_angle
+    return g01, g23, -y0 / r0, y1 / r2, solid_angle
 
 
 @wp.func
