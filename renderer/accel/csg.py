@@ -27,16 +27,14 @@ from renderer.accel.intersect import (
     BIG,
     Geometry,
     Hit,
-    box_entry,
     instance_visible,
     instance_world_to_object,
     leaf_triangle,
     mesh_keys_at,
-    node_box,
     safe_inverse,
-    stack_t,
     triangle_hit_edges,
 )
+from renderer.accel.wide import entries, leaf_range, wide_stack_t
 from renderer.shading.materials import Materials, eval_opacity
 from renderer.shading.textures import Textures
 
@@ -67,8 +65,8 @@ def mesh_next_hit(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmin: float, 
     boff = geo.mesh_bound_off[m]
     poff = geo.mesh_prim_off[m]
     inv_d = safe_inverse(rd)
-    stack = stack_t()
-    stack[0] = 0
+    stack = wide_stack_t()
+    stack[0] = 0  # the root
     sp = int(1)
     t_best = tmax
     found = float(BIG)
@@ -77,12 +75,10 @@ def mesh_next_hit(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmin: float, 
     hb2 = float(0.0)
     while sp > 0:
         sp -= 1
-        n = stack[sp]
-        a = geo.blas_a[noff + n]
-        b = geo.blas_b[noff + n]
-        if a < 0:
-            first = -(a + 1)
-            for i in range(b):
+        ref = stack[sp]
+        if ref < 0:
+            first, count = leaf_range(ref)
+            for i in range(count):
                 slot = poff + first + i
                 lt = geo.blas_prim[slot]
                 v0, e1, e2 = leaf_triangle(geo, m, slot, lt, nk, k0, k1, u)
@@ -94,14 +90,12 @@ def mesh_next_hit(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmin: float, 
                     hb1 = b1
                     hb2 = b2
         else:
-            lo_a, hi_a = node_box(geo.blas_lo, geo.blas_hi, boff + a * nk, k0, k1, u)
-            if box_entry(lo_a, hi_a, ro, inv_d, t_best) < BIG:
-                stack[sp] = a
-                sp += 1
-            lo_b, hi_b = node_box(geo.blas_lo, geo.blas_hi, boff + b * nk, k0, k1, u)
-            if box_entry(lo_b, hi_b, ro, inv_d, t_best) < BIG:
-                stack[sp] = b
-                sp += 1
+            c = geo.blas_child[noff + ref]
+            d = entries(geo.blas_box, boff + ref * nk * 6, c, k0, k1, u, ro, inv_d, t_best)
+            for j in range(4):
+                if d[j] < BIG:
+                    stack[sp] = c[j]
+                    sp += 1
     return found, tri, hb1, hb2
 
 
@@ -114,34 +108,30 @@ def mesh_crossings(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, s: float):
     boff = geo.mesh_bound_off[m]
     poff = geo.mesh_prim_off[m]
     inv_d = safe_inverse(rd)
-    stack = stack_t()
-    stack[0] = 0
+    stack = wide_stack_t()
+    stack[0] = 0  # the root
     sp = int(1)
-    count = int(0)
+    crossed = int(0)
     while sp > 0:
         sp -= 1
-        n = stack[sp]
-        a = geo.blas_a[noff + n]
-        b = geo.blas_b[noff + n]
-        if a < 0:
-            first = -(a + 1)
-            for i in range(b):
+        ref = stack[sp]
+        if ref < 0:
+            first, count = leaf_range(ref)
+            for i in range(count):
                 slot = poff + first + i
                 lt = geo.blas_prim[slot]
                 v0, e1, e2 = leaf_triangle(geo, m, slot, lt, nk, k0, k1, u)
                 t, b1, b2 = triangle_hit_edges(v0, e1, e2, ro, rd, float(BIG))
                 if t < BIG:
-                    count += 1
+                    crossed += 1
         else:
-            lo_a, hi_a = node_box(geo.blas_lo, geo.blas_hi, boff + a * nk, k0, k1, u)
-            if box_entry(lo_a, hi_a, ro, inv_d, float(BIG)) < BIG:
-                stack[sp] = a
-                sp += 1
-            lo_b, hi_b = node_box(geo.blas_lo, geo.blas_hi, boff + b * nk, k0, k1, u)
-            if box_entry(lo_b, hi_b, ro, inv_d, float(BIG)) < BIG:
-                stack[sp] = b
-                sp += 1
-    return count
+            c = geo.blas_child[noff + ref]
+            d = entries(geo.blas_box, boff + ref * nk * 6, c, k0, k1, u, ro, inv_d, float(BIG))
+            for j in range(4):
+                if d[j] < BIG:
+                    stack[sp] = c[j]
+                    sp += 1
+    return crossed
 
 
 @wp.func(inline=True)

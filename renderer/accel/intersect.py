@@ -13,14 +13,16 @@ Design (the paper asks that a moving object cost no more per ray than a still on
   the instance's swept bounds on the adjacent segments (``geometry.instance_key_bounds`` pads the keys with
   the measured deviation of curved motion from the linear blend). A still scene has ``K = 1``.
 
-Both levels share one node layout (see ``accel_build.Bvh``): ``node_a >= 0`` is an inner node with children
-``node_a``/``node_b``; otherwise the node is a leaf with primitives ``prim[-(node_a+1) : ... + node_b]``.
-Traversal is a stack walk, nearer child first.
+The top level keeps the binary layout of ``build.Bvh``: ``node_a >= 0`` is an inner node with children
+``node_a``/``node_b``; otherwise the node is a leaf with primitives ``prim[-(node_a+1) : ... + node_b]``. The
+bottom level is the same tree collapsed to four-wide nodes (``wide``). Traversal is a stack walk, nearer child
+first.
 """
 from __future__ import annotations
 
 import warp as wp
 
+from renderer.accel.wide import dist_stack_t, entries, far_to_near, leaf_range, wide_stack_t
 from renderer.motion.kernels import MotionKeys, find_segment, keys_matrix
 from renderer.struct_refs import by_reference
 
@@ -41,10 +43,10 @@ class Geometry:
     tri_vidx: wp.array(dtype=wp.vec3i)  # global triangle -> local vertex indices
     tri_material: wp.array(dtype=wp.int32)  # global triangle -> material index
     normals: wp.array(dtype=wp.vec3)  # 3 per global triangle (object space) when mesh_has_normals
-    blas_a: wp.array(dtype=wp.int32)
-    blas_b: wp.array(dtype=wp.int32)
-    blas_lo: wp.array(dtype=wp.vec3)  # node n of mesh m, key k at mesh_bound_off[m] + (n - node_off) * K + k
-    blas_hi: wp.array(dtype=wp.vec3)
+    # four-wide node boxes (``wide``): node n of mesh m, key k, coordinate c at mesh_bound_off[m] + (n * K + k) * 6
+    # + c; its child references at blas_child[mesh_node_off[m] + n]
+    blas_box: wp.array(dtype=wp.vec4)
+    blas_child: wp.array(dtype=wp.vec4i)
     blas_prim: wp.array(dtype=wp.int32)  # local triangle index per leaf slot
     # Still meshes (one point key): each leaf slot's triangle as a vertex and two edges, contiguous in leaf
     # order, so a leaf's triangle tests read consecutive memory instead of gathering indexed vertices.
@@ -222,47 +224,46 @@ def node_box(lo: wp.array(dtype=wp.vec3), hi: wp.array(dtype=wp.vec3), b: int, k
 
 @wp.func(inline=True)  # one call site: no copy of the Geometry struct
 def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float, s: float, best: Hit, inst: int):
-    """Closest triangle of mesh m (object-space ray) nearer than tmax; updates and returns ``best``."""
+    """Closest triangle of mesh m (object-space ray) nearer than tmax; updates and returns ``best``. A walk of
+    the four-wide tree, nearest child first, skipping what lies beyond the best hit so far."""
     k0, k1, u = mesh_keys_at(geo, m, s)
     nk = geo.mesh_nkeys[m]
     noff = geo.mesh_node_off[m]
     boff = geo.mesh_bound_off[m]
     poff = geo.mesh_prim_off[m]
     inv_d = safe_inverse(rd)
-    stack = stack_t()
-    stack[0] = 0
+    stack = wide_stack_t()
+    dist = dist_stack_t()
+    stack[0] = 0  # the root, entered at distance 0
+    dist[0] = 0.0
     sp = int(1)
     t_best = tmax
     while sp > 0:
         sp -= 1
-        n = stack[sp]
-        a = geo.blas_a[noff + n]
-        b = geo.blas_b[noff + n]
-        if a < 0:
-            first = -(a + 1)
-            for i in range(b):
-                slot = poff + first + i
-                lt = geo.blas_prim[slot]
-                v0, e1, e2 = leaf_triangle(geo, m, slot, lt, nk, k0, k1, u)
-                t, b1, b2 = triangle_hit_edges(v0, e1, e2, ro, rd, t_best)
-                if t < t_best:
-                    t_best = t
-                    best.t = t
-                    best.inst = inst
-                    best.tri = geo.mesh_tri_off[m] + lt
-                    best.b1 = b1
-                    best.b2 = b2
-        else:
-            lo_a, hi_a = node_box(geo.blas_lo, geo.blas_hi, boff + a * nk, k0, k1, u)
-            lo_b, hi_b = node_box(geo.blas_lo, geo.blas_hi, boff + b * nk, k0, k1, u)
-            near, far, count = visit_order(a, b, box_entry(lo_a, hi_a, ro, inv_d, t_best),
-                                           box_entry(lo_b, hi_b, ro, inv_d, t_best))
-            if count == 2:
-                stack[sp] = far
-                sp += 1
-            if count >= 1:
-                stack[sp] = near
-                sp += 1
+        if dist[sp] < t_best:
+            ref = stack[sp]
+            if ref < 0:
+                first, count = leaf_range(ref)
+                for i in range(count):
+                    slot = poff + first + i
+                    lt = geo.blas_prim[slot]
+                    v0, e1, e2 = leaf_triangle(geo, m, slot, lt, nk, k0, k1, u)
+                    t, b1, b2 = triangle_hit_edges(v0, e1, e2, ro, rd, t_best)
+                    if t < t_best:
+                        t_best = t
+                        best.t = t
+                        best.inst = inst
+                        best.tri = geo.mesh_tri_off[m] + lt
+                        best.b1 = b1
+                        best.b2 = b2
+            else:
+                d, c = far_to_near(entries(geo.blas_box, boff + ref * nk * 6, geo.blas_child[noff + ref], k0, k1,
+                                           u, ro, inv_d, t_best), geo.blas_child[noff + ref])
+                for j in range(4):
+                    if d[j] < BIG:
+                        stack[sp] = c[j]
+                        dist[sp] = d[j]
+                        sp += 1
     return best
 
 

@@ -24,6 +24,7 @@ from renderer.accel.intersect import (
     tlas_keys_at,
     triangle_hit_edges,
 )
+from renderer.accel.wide import entries, leaf_range, wide_stack_t
 from renderer.shading.materials import Materials, eval_opacity
 from renderer.shading.textures import Textures
 
@@ -46,35 +47,31 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
     boff = geo.mesh_bound_off[m]
     poff = geo.mesh_prim_off[m]
     inv_d = safe_inverse(rd)
-    stack = stack_t()
-    stack[0] = 0
+    stack = wide_stack_t()
+    stack[0] = 0  # the root
     sp = int(1)
     tr = trans
     while sp > 0 and tr > 0.0:
         sp -= 1
-        n = stack[sp]
-        a = geo.blas_a[noff + n]
-        b = geo.blas_b[noff + n]
-        if a < 0:
-            first = -(a + 1)
-            for i in range(b):
+        ref = stack[sp]
+        if ref < 0:
+            first, count = leaf_range(ref)
+            for i in range(count):
                 slot = poff + first + i
                 lt = geo.blas_prim[slot]
                 v0, e1, e2 = leaf_triangle(geo, m, slot, lt, nk, k0, k1, u)
                 t, b1, b2 = triangle_hit_edges(v0, e1, e2, ro, rd, tmax)
-                if t < BIG:
+                if t < BIG and tr > 0.0:
                     tri = geo.mesh_tri_off[m] + lt
                     opacity = eval_opacity(mats, tex, geo.tri_material[tri], hit_uv(geo, m, tri, b1, b2), s)
                     tr = tr * (1.0 - opacity)
         else:
-            lo_a, hi_a = node_box(geo.blas_lo, geo.blas_hi, boff + a * nk, k0, k1, u)
-            if box_entry(lo_a, hi_a, ro, inv_d, tmax) < BIG:
-                stack[sp] = a
-                sp += 1
-            lo_b, hi_b = node_box(geo.blas_lo, geo.blas_hi, boff + b * nk, k0, k1, u)
-            if box_entry(lo_b, hi_b, ro, inv_d, tmax) < BIG:
-                stack[sp] = b
-                sp += 1
+            c = geo.blas_child[noff + ref]
+            d = entries(geo.blas_box, boff + ref * nk * 6, c, k0, k1, u, ro, inv_d, tmax)
+            for j in range(4):
+                if d[j] < BIG:
+                    stack[sp] = c[j]
+                    sp += 1
     return tr
 
 

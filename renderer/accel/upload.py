@@ -1,6 +1,6 @@
 """Uploading a Scene's meshes and instances into the two-level, time-keyed hierarchy of ``accel``.
 
-Builds one bottom-level BVH per mesh (bounds per point key), the instances' world bounds on a uniform grid of
+Builds one bottom-level BVH per mesh (bounds per point key; binned SAH, then collapsed to four-wide nodes), the instances' world bounds on a uniform grid of
 top-level time keys (padded so that the blend between two keys contains the curved path in between), and the
 top-level BVH over them.
 """
@@ -14,6 +14,7 @@ import warp as wp
 from renderer.accel.build import Bvh, build_bvh
 from renderer.accel.csg import OPERATIONS as CSG_OPERATIONS
 from renderer.accel.intersect import Geometry
+from renderer.accel.wide import WideBvh, collapse
 from renderer.accel.triangle_kernels import leaf_triangles, triangle_boxes
 from renderer.motion.kernels import upload_keys
 from renderer.motion.transform import matrix_at
@@ -154,13 +155,15 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
 
     t_start = time.perf_counter()
     blas: list[Bvh] = []
+    wide: list[WideBvh] = []
     for mesh in scene.meshes:
         lo, hi = _mesh_prim_bounds(mesh, device)
         blas.append(build_bvh(lo, hi, max_leaf=BLAS_MAX_LEAF, c_trav=BLAS_TRAVERSAL_COST))
+        wide.append(collapse(blas[-1], device))
 
     g = Geometry()
-    n_nodes = np.cumsum([0] + [len(b.node_a) for b in blas])
-    n_bounds = np.cumsum([0] + [len(b.node_a) * len(m.point_times) for b, m in zip(blas, scene.meshes)])
+    n_nodes = np.cumsum([0] + [w.num_nodes for w in wide])
+    n_bounds = np.cumsum([0] + [len(w.box) for w in wide])
     n_tris = np.cumsum([0] + [len(m.triangles) for m in scene.meshes])
     n_verts = np.cumsum([0] + [m.points.shape[0] * m.points.shape[1] for m in scene.meshes])
     n_keys = np.cumsum([0] + [len(m.point_times) for m in scene.meshes])
@@ -174,10 +177,8 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     normals = [m.normals.reshape(-1, 3) if m.normals is not None else np.zeros((len(m.triangles) * 3, 3))
                for m in scene.meshes]
     g.normals = _v3(cat(normals, (1, 3), np.float32), device)
-    g.blas_a = _i32(cat([b.node_a for b in blas], (1,), np.int32), device)
-    g.blas_b = _i32(cat([b.node_b for b in blas], (1,), np.int32), device)
-    g.blas_lo = _v3(cat([b.node_lower.reshape(-1, 3) for b in blas], (1, 3), np.float32), device)
-    g.blas_hi = _v3(cat([b.node_upper.reshape(-1, 3) for b in blas], (1, 3), np.float32), device)
+    g.blas_box = wp.array(cat([w.box for w in wide], (1, 4), np.float32), dtype=wp.vec4, device=device)
+    g.blas_child = wp.array(cat([w.child for w in wide], (1, 4), np.int32), dtype=wp.vec4i, device=device)
     g.blas_prim = _i32(cat([b.prim_order for b in blas], (1,), np.int32), device)
     v0, e1, e2 = [], [], []
     for mesh, b in zip(scene.meshes, blas):
@@ -246,7 +247,7 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     upload_csg(g, scene, device)
 
     leaf_bytes = 3 * 12 * sum(len(x) for x in v0)  # the leaf-ordered still triangles
-    nbytes = sum(b.nbytes for b in blas) + tlas.nbytes + leaf_bytes
+    nbytes = sum(w.nbytes for w in wide) + tlas.nbytes + leaf_bytes
     stats = GeometryStats(
         triangles=int(n_tris[-1]),
         blas_nodes=int(n_nodes[-1]),

@@ -1,0 +1,238 @@
+"""Four-wide bottom-level hierarchies: the binary SAH tree of ``build`` collapsed to nodes of up to four children.
+
+A walk of a binary tree pops a node, loads two child boxes and pushes what it hit; a four-wide tree halves the
+levels, the pops and the pushes, and its node keeps the four children's boxes side by side (one ``vec4`` per
+box coordinate), so the four slab tests are straight-line vector arithmetic.
+
+Layout (``WideBvh``; node 0 is the root; K time keys as in ``build``)::
+
+    box:   (W * K * 6,) vec4   node w, key k at (w * K + k) * 6 + c, c = lo x, lo y, lo z, hi x, hi y, hi z:
+                               component j of each is child j's box at that key (an unused slot's is a point
+                               far away; ``entries`` skips it by its child reference).
+    child: (W,) vec4i          child j: an inner node's index (> 0), a leaf ``leaf_ref(first, count)`` (< 0), or
+                               0 for an unused slot (the root is nobody's child)
+    prim_order                 as in ``build``: a leaf's primitives are prim_order[first : first + count]
+
+Collapse (top-down, one thread): a wide node starts from a binary node's two children and repeatedly opens the
+inner child of largest key-averaged surface area (the child a ray is most likely to enter) until it has four
+children or only leaves. Boxes stay the binary tree's per-key boxes, so they are as tight at every time.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from renderer.accel.build import Bvh
+
+wp.set_module_options({"enable_backward": False})
+
+EMPTY = wp.constant(3.0e38)  # the coordinate of an unused child slot's point box
+LEAF_BITS = wp.constant(4)  # a leaf reference packs its count in the low bits: at most 15 primitives per leaf
+MAX_FIRST = (1 << (31 - LEAF_BITS)) - 1
+# A walk pops one node and pushes at most four children: with a wide depth of at most the binary depth
+# (build.MAX_DEPTH = 48), 3 * 48 + 4 entries never overflow.
+STACK_SIZE = 160
+wide_stack_t = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
+dist_stack_t = wp.types.vector(length=STACK_SIZE, dtype=wp.float32)
+BIG = 3.4e38
+
+
+@dataclass
+class WideBvh:
+    box: np.ndarray  # (W * K * 6, 4) float32
+    child: np.ndarray  # (W, 4) int32
+    prim_order: np.ndarray  # (N,) int32
+    num_keys: int
+
+    @property
+    def num_nodes(self) -> int:
+        return int(self.child.shape[0])
+
+    @property
+    def nbytes(self) -> int:
+        return self.box.nbytes + self.child.nbytes + self.prim_order.nbytes
+
+
+def leaf_ref(first: int, count: int) -> int:
+    return -((first << LEAF_BITS) | count) - 1
+
+
+@wp.func
+def leaf_range(ref: int):
+    """(first, count) of a leaf reference."""
+    v = -(ref + 1)
+    return v >> LEAF_BITS, v & ((1 << LEAF_BITS) - 1)
+
+
+@wp.func
+def half_area(lo: wp.vec3, hi: wp.vec3):
+    d = hi - lo
+    return d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
+
+
+@wp.kernel
+def collapse_kernel(
+    num_keys: int,
+    node_a: wp.array(dtype=wp.int32),
+    node_b: wp.array(dtype=wp.int32),
+    node_lo: wp.array(dtype=wp.vec3),  # binary node n, key k at n * K + k
+    node_hi: wp.array(dtype=wp.vec3),
+    pending: wp.array(dtype=wp.int32),  # scratch: binary nodes waiting to become wide nodes (one per wide node)
+    box: wp.array(dtype=wp.vec4),
+    child: wp.array(dtype=wp.vec4i),
+    count: wp.array(dtype=wp.int32),  # out: wide nodes
+):
+    """The whole collapse, one thread: wide node w is made from binary inner node pending[w]; new wide nodes are
+    numbered in the order they are found, so pending doubles as the work queue."""
+    nw = int(1)
+    w = int(0)
+    while w < nw:
+        n = pending[w]
+        c = wp.vec4i(node_a[n], node_b[n], -1, -1)
+        nc = int(2)
+        while nc < 4:
+            best = int(-1)
+            best_area = float(-1.0)
+            for j in range(nc):
+                cj = c[j]
+                if node_a[cj] >= 0:
+                    area = float(0.0)
+                    for k in range(num_keys):
+                        area += half_area(node_lo[cj * num_keys + k], node_hi[cj * num_keys + k])
+                    if area > best_area:
+                        best_area = area
+                        best = j
+            if best < 0:
+                break
+            opened = c[best]
+            c[best] = node_a[opened]
+            c[nc] = node_b[opened]
+            nc += 1
+        refs = wp.vec4i(0, 0, 0, 0)
+        for j in range(4):
+            if j < nc:
+                cj = c[j]
+                if node_a[cj] < 0:
+                    first = -(node_a[cj] + 1)
+                    refs[j] = -((first << LEAF_BITS) | node_b[cj]) - 1
+                else:
+                    pending[nw] = cj
+                    refs[j] = nw
+                    nw += 1
+        child[w] = refs
+        for k in range(num_keys):
+            lx = wp.vec4(EMPTY)
+            ly = wp.vec4(EMPTY)
+            lz = wp.vec4(EMPTY)
+            hx = wp.vec4(EMPTY)
+            hy = wp.vec4(EMPTY)
+            hz = wp.vec4(EMPTY)
+            for j in range(nc):
+                lo = node_lo[c[j] * num_keys + k]
+                hi = node_hi[c[j] * num_keys + k]
+                lx[j] = lo[0]
+                ly[j] = lo[1]
+                lz[j] = lo[2]
+                hx[j] = hi[0]
+                hy[j] = hi[1]
+                hz[j] = hi[2]
+            base = (w * num_keys + k) * 6
+            box[base + 0] = lx
+            box[base + 1] = ly
+            box[base + 2] = lz
+            box[base + 3] = hx
+            box[base + 4] = hy
+            box[base + 5] = hz
+        w += 1
+    count[0] = nw
+
+
+def collapse(bvh: Bvh, device: str = "cpu") -> WideBvh:
+    """The four-wide form of a binary ``Bvh`` (same primitive order, same per-key boxes)."""
+    m, k = bvh.num_nodes, bvh.num_keys
+    if bvh.num_prims > MAX_FIRST:
+        raise ValueError(f"{bvh.num_prims} primitives in one mesh: at most {MAX_FIRST}")
+    counts = bvh.node_b[bvh.node_a < 0]
+    if counts.size and counts.max() >= 1 << LEAF_BITS:
+        raise ValueError(f"leaves of up to {(1 << LEAF_BITS) - 1} primitives, got {counts.max()}")
+    if bvh.node_a[0] < 0:  # the root is a leaf: one wide node holding it
+        box = np.full((k, 6, 4), 3.0e38, np.float32)
+        box[:, 0:3, 0] = bvh.node_lower[0]
+        box[:, 3:6, 0] = bvh.node_upper[0]
+        if bvh.num_prims == 0:
+            box[:, :, 0] = 3.0e38
+        child = np.array([[leaf_ref(-(int(bvh.node_a[0]) + 1), int(bvh.node_b[0])), 0, 0, 0]], np.int32)
+        return WideBvh(box=box.reshape(-1, 4), child=child, prim_order=bvh.prim_order, num_keys=k)
+    with wp.ScopedDevice(device):
+        inner = int((bvh.node_a >= 0).sum())
+        pending = wp.zeros(max(1, inner), dtype=wp.int32)
+        box = wp.empty(max(1, inner) * k * 6, dtype=wp.vec4)
+        child = wp.empty(max(1, inner), dtype=wp.vec4i)
+        count = wp.zeros(1, dtype=wp.int32)
+        wp.launch(collapse_kernel, dim=1,
+                  inputs=[k, wp.array(bvh.node_a, dtype=wp.int32), wp.array(bvh.node_b, dtype=wp.int32),
+                          wp.array(bvh.node_lower.reshape(-1, 3), dtype=wp.vec3),
+                          wp.array(bvh.node_upper.reshape(-1, 3), dtype=wp.vec3), pending, box, child, count])
+        nw = int(count.numpy()[0])
+        return WideBvh(box=box.numpy()[:nw * k * 6].copy(), child=child.numpy()[:nw].copy(),
+                       prim_order=bvh.prim_order, num_keys=k)
+
+
+@wp.func
+def _slabs(lo: wp.vec4, hi: wp.vec4, o: float, inv: float):
+    t0 = (lo - wp.vec4(o)) * inv
+    t1 = (hi - wp.vec4(o)) * inv
+    return wp.min(t0, t1), wp.max(t0, t1)
+
+
+@wp.func
+def entries(box: wp.array(dtype=wp.vec4), base: int, c: wp.vec4i, k0: int, k1: int, u: float, ro: wp.vec3,
+            inv_d: wp.vec3, tmax: float):
+    """Entry distances of the ray into the four child boxes of a node (keys starting at ``base``, blended
+    between keys k0 and k1; ``c`` its child references), BIG for a child it misses before tmax or an unused
+    slot. The slab test of ``intersect.box_entry``."""
+    b0 = base + k0 * 6
+    lx = box[b0 + 0]
+    ly = box[b0 + 1]
+    lz = box[b0 + 2]
+    hx = box[b0 + 3]
+    hy = box[b0 + 4]
+    hz = box[b0 + 5]
+    if k1 != k0:
+        b1 = base + k1 * 6
+        lx = wp.lerp(lx, box[b1 + 0], u)
+        ly = wp.lerp(ly, box[b1 + 1], u)
+        lz = wp.lerp(lz, box[b1 + 2], u)
+        hx = wp.lerp(hx, box[b1 + 3], u)
+        hy = wp.lerp(hy, box[b1 + 4], u)
+        hz = wp.lerp(hz, box[b1 + 5], u)
+    nx, fx = _slabs(lx, hx, ro[0], inv_d[0])
+    ny, fy = _slabs(ly, hy, ro[1], inv_d[1])
+    nz, fz = _slabs(lz, hz, ro[2], inv_d[2])
+    tn = wp.max(wp.max(nx, ny), wp.max(nz, wp.vec4(0.0)))
+    tf = wp.min(wp.min(fx, fy), wp.min(fz, wp.vec4(tmax))) * 1.00000024  # robust for flat boxes (Ize 2013)
+    return wp.vec4(wp.where(tn[0] <= tf[0] and c[0] != 0, tn[0], BIG),
+                   wp.where(tn[1] <= tf[1] and c[1] != 0, tn[1], BIG),
+                   wp.where(tn[2] <= tf[2] and c[2] != 0, tn[2], BIG),
+                   wp.where(tn[3] <= tf[3] and c[3] != 0, tn[3], BIG))
+
+
+@wp.func
+def _order(da: float, ca: int, db: float, cb: int):
+    """The pair with the larger distance first."""
+    if da < db:
+        return db, cb, da, ca
+    return da, ca, db, cb
+
+
+@wp.func
+def far_to_near(d: wp.vec4, c: wp.vec4i):
+    """The four (distance, child) pairs sorted by decreasing distance (five compare-exchanges)."""
+    d0, c0, d1, c1 = _order(d[0], c[0], d[1], c[1])
+    d2, c2, d3, c3 = _order(d[2], c[2], d[3], c[3])
+    d0, c0, d2, c2 = _order(d0, c0, d2, c2)
+    d1, c1, d3, c3 = _order(d1, c1, d3, c3)
+    d1, c1, d2, c2 = _order(d1, c1, d2, c2)
+    return wp.vec4(d0, d1, d2, d3), wp.vec4i(c0, c1, c2, c3)
