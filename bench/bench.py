@@ -134,7 +134,7 @@ def gloss_noise_at_equal_time(scenes, cycles_sps: float, reference_spp: int = 10
 
 
 COMPILE_MODULES = ("renderer.integrator", "renderer.film.film", "renderer.accel.build_kernels",
-                   "renderer.accel.triangle_kernels")
+                   "renderer.accel.triangle_kernels", "renderer.accel.wide")
 
 
 def first_compile_seconds() -> dict[str, tuple[float, float]]:
