@@ -7,8 +7,7 @@
 
 ``render_tile`` is a pure function of (scene, options, tile): it returns the tile's filtered sums and weights,
 the same bits whoever renders it; ``assemble`` makes them a frame that has the same bits in whatever tiling,
-on however many threads. The service splits frames
-into tiles and calls it from its workers.
+on however many threads. The service splits frames into tiles and calls it from its workers.
 """
 from __future__ import annotations
 

@@ -13,10 +13,9 @@ Design (the paper asks that a moving object cost no more per ray than a still on
   the instance's swept bounds on the adjacent segments (``geometry.instance_key_bounds`` pads the keys with
   the measured deviation of curved motion from the linear blend). A still scene has ``K = 1``.
 
-The top level keeps the binary layout of ``build.Bvh``: ``node_a >= 0`` is an inner node with children
-``node_a``/``node_b``; otherwise the node is a leaf with primitives ``prim[-(node_a+1) : ... + node_b]``. The
-bottom level is the same tree collapsed to four-wide nodes (``wide``). Traversal is a stack walk, nearer child
-first.
+Both levels are binned-SAH trees (``build``) collapsed to four-wide nodes (``wide``): a node holds its four
+children's boxes per key and their references (an inner node, or a leaf's range of primitives). Traversal is a
+stack walk, nearest child first for closest hits.
 """
 from __future__ import annotations
 
@@ -25,9 +24,6 @@ import warp as wp
 from renderer.accel.wide import dist_stack_t, entries, far_to_near, leaf_range, wide_stack_t
 from renderer.motion.kernels import MotionKeys, find_segment, keys_matrix
 from renderer.struct_refs import by_reference
-
-STACK_SIZE = 64
-stack_t = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
 
 BIG = 3.4e38
 
@@ -70,10 +66,10 @@ class Geometry:
     mesh_color_off: wp.array(dtype=wp.int32)
     tri_solid: wp.array(dtype=wp.int32)  # per global triangle, 1: part of a closed surface (refracts, absorbs)
     # --- top level
-    tlas_a: wp.array(dtype=wp.int32)
-    tlas_b: wp.array(dtype=wp.int32)
-    tlas_lo: wp.array(dtype=wp.vec3)  # node n, key k at n * tlas_nkeys + k (uniform key times k / (K - 1))
-    tlas_hi: wp.array(dtype=wp.vec3)
+    # four-wide nodes as the bottom level's: node n, key k (uniform key times k / (K - 1)), coordinate c at
+    # (n * tlas_nkeys + k) * 6 + c
+    tlas_box: wp.array(dtype=wp.vec4)
+    tlas_child: wp.array(dtype=wp.vec4i)
     tlas_prim: wp.array(dtype=wp.int32)  # instance index per leaf slot
     tlas_nkeys: int
     inst_mesh: wp.array(dtype=wp.int32)
@@ -104,20 +100,6 @@ class Hit:
     tri: int  # global triangle index
     b1: float  # barycentric weight of vertex 1
     b2: float  # barycentric weight of vertex 2
-
-
-@wp.func
-def box_entry(lo: wp.vec3, hi: wp.vec3, ro: wp.vec3, inv_d: wp.vec3, tmax: float):
-    """Slab test: entry distance of the ray into [lo, hi], or BIG if it misses before tmax."""
-    t0 = wp.cw_mul(lo - ro, inv_d)
-    t1 = wp.cw_mul(hi - ro, inv_d)
-    tn = wp.min(t0, t1)
-    tf = wp.max(t0, t1)
-    tnear = wp.max(wp.max(tn[0], tn[1]), wp.max(tn[2], 0.0))
-    tfar = wp.min(wp.min(tf[0], tf[1]), wp.min(tf[2], tmax))
-    if tnear <= tfar * 1.00000024:  # robust for flat boxes (Ize 2013: 2 ulp slack)
-        return tnear
-    return float(BIG)
 
 
 @wp.func
@@ -200,28 +182,6 @@ def instance_object_to_world(geo: Geometry, inst: int, s: float):
     return keys_matrix(geo.keys, geo.inst_xf_off[inst], geo.inst_xf_count[inst], s)
 
 
-@wp.func
-def visit_order(a: int, b: int, ta: float, tb: float):
-    """Children to push for a closest-hit walk: (nearer, farther, how many were hit); the nearer is popped first."""
-    if ta < BIG and tb < BIG:
-        if ta <= tb:
-            return a, b, 2
-        return b, a, 2
-    if ta < BIG:
-        return a, a, 1
-    if tb < BIG:
-        return b, b, 1
-    return a, b, 0
-
-
-@wp.func
-def node_box(lo: wp.array(dtype=wp.vec3), hi: wp.array(dtype=wp.vec3), b: int, k0: int, k1: int, u: float):
-    """Box of a node whose keys start at b, interpolated between keys k0 and k1."""
-    if k1 == k0:
-        return lo[b + k0], hi[b + k0]
-    return wp.lerp(lo[b + k0], lo[b + k1], u), wp.lerp(hi[b + k0], hi[b + k1], u)
-
-
 @wp.func(inline=True)  # one call site: no copy of the Geometry struct
 def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float, s: float, best: Hit, inst: int):
     """Closest triangle of mesh m (object-space ray) nearer than tmax; updates and returns ``best``. A walk of
@@ -257,8 +217,8 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float, s
                         best.b1 = b1
                         best.b2 = b2
             else:
-                d, c = far_to_near(entries(geo.blas_box, boff + ref * nk * 6, geo.blas_child[noff + ref], k0, k1,
-                                           u, ro, inv_d, t_best), geo.blas_child[noff + ref])
+                c = geo.blas_child[noff + ref]
+                d, c = far_to_near(entries(geo.blas_box, boff + ref * nk * 6, c, k0, k1, u, ro, inv_d, t_best), c)
                 for j in range(4):
                     if d[j] < BIG:
                         stack[sp] = c[j]
@@ -292,32 +252,30 @@ def intersect_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, tmax: float, s: f
     k0, k1, u = tlas_keys_at(geo, s)
     nk = geo.tlas_nkeys
     inv_d = safe_inverse(rd)
-    stack = stack_t()
-    stack[0] = 0
+    stack = wide_stack_t()
+    dist = dist_stack_t()
+    stack[0] = 0  # the root, entered at distance 0
+    dist[0] = 0.0
     sp = int(1)
     while sp > 0:
         sp -= 1
-        n = stack[sp]
-        a = geo.tlas_a[n]
-        b = geo.tlas_b[n]
-        if a < 0:
-            first = -(a + 1)
-            for i in range(b):
-                inst = geo.tlas_prim[first + i]
-                if instance_visible(geo, inst, s) and geo.inst_csg[inst] < 0:
-                    w2o = instance_world_to_object(geo, inst, s)
-                    ro_o = wp.transform_point(w2o, ro)
-                    rd_o = wp.transform_vector(w2o, rd)
-                    best = blas_closest(geo, geo.inst_mesh[inst], ro_o, rd_o, best.t, s, best, inst)
-        else:
-            lo_a, hi_a = node_box(geo.tlas_lo, geo.tlas_hi, a * nk, k0, k1, u)
-            lo_b, hi_b = node_box(geo.tlas_lo, geo.tlas_hi, b * nk, k0, k1, u)
-            near, far, count = visit_order(a, b, box_entry(lo_a, hi_a, ro, inv_d, best.t),
-                                           box_entry(lo_b, hi_b, ro, inv_d, best.t))
-            if count == 2:
-                stack[sp] = far
-                sp += 1
-            if count >= 1:
-                stack[sp] = near
-                sp += 1
+        if dist[sp] < best.t:
+            ref = stack[sp]
+            if ref < 0:
+                first, count = leaf_range(ref)
+                for i in range(count):
+                    inst = geo.tlas_prim[first + i]
+                    if instance_visible(geo, inst, s) and geo.inst_csg[inst] < 0:
+                        w2o = instance_world_to_object(geo, inst, s)
+                        ro_o = wp.transform_point(w2o, ro)
+                        rd_o = wp.transform_vector(w2o, rd)
+                        best = blas_closest(geo, geo.inst_mesh[inst], ro_o, rd_o, best.t, s, best, inst)
+            else:
+                c = geo.tlas_child[ref]
+                d, c = far_to_near(entries(geo.tlas_box, ref * nk * 6, c, k0, k1, u, ro, inv_d, best.t), c)
+                for j in range(4):
+                    if d[j] < BIG:
+                        stack[sp] = c[j]
+                        dist[sp] = d[j]
+                        sp += 1
     return best

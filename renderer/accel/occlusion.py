@@ -13,14 +13,11 @@ from renderer.accel.csg import csg_transmittance
 from renderer.accel.intersect import (
     BIG,
     Geometry,
-    box_entry,
     instance_visible,
     instance_world_to_object,
     leaf_triangle,
     mesh_keys_at,
-    node_box,
     safe_inverse,
-    stack_t,
     tlas_keys_at,
     triangle_hit_edges,
 )
@@ -82,32 +79,28 @@ def transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd
     k0, k1, u = tlas_keys_at(geo, s)
     nk = geo.tlas_nkeys
     inv_d = safe_inverse(rd)
-    stack = stack_t()
-    stack[0] = 0
+    stack = wide_stack_t()
+    stack[0] = 0  # the root
     sp = int(1)
     tr = float(1.0)
     while sp > 0 and tr > 0.0:
         sp -= 1
-        n = stack[sp]
-        a = geo.tlas_a[n]
-        b = geo.tlas_b[n]
-        if a < 0:
-            first = -(a + 1)
-            for i in range(b):
+        ref = stack[sp]
+        if ref < 0:
+            first, count = leaf_range(ref)
+            for i in range(count):
                 inst = geo.tlas_prim[first + i]
                 if instance_visible(geo, inst, s) and tr > 0.0 and geo.inst_csg[inst] < 0:
                     w2o = instance_world_to_object(geo, inst, s)
                     tr = blas_transmittance(geo, mats, tex, geo.inst_mesh[inst], wp.transform_point(w2o, ro),
                                             wp.transform_vector(w2o, rd), tmax, s, tr)
         else:
-            lo_a, hi_a = node_box(geo.tlas_lo, geo.tlas_hi, a * nk, k0, k1, u)
-            if box_entry(lo_a, hi_a, ro, inv_d, tmax) < BIG:
-                stack[sp] = a
-                sp += 1
-            lo_b, hi_b = node_box(geo.tlas_lo, geo.tlas_hi, b * nk, k0, k1, u)
-            if box_entry(lo_b, hi_b, ro, inv_d, tmax) < BIG:
-                stack[sp] = b
-                sp += 1
+            c = geo.tlas_child[ref]
+            d = entries(geo.tlas_box, ref * nk * 6, c, k0, k1, u, ro, inv_d, tmax)
+            for j in range(4):
+                if d[j] < BIG:
+                    stack[sp] = c[j]
+                    sp += 1
     if tr > 0.0 and geo.csg_groups > 0:
         tr = csg_transmittance(geo, mats, tex, ro, rd, tmax, s, tr)
     return tr

@@ -228,11 +228,9 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
         mesh = scene.meshes[inst.mesh]
         klo, khi = instance_key_bounds(inst, blas[inst.mesh], mesh.point_times.astype(np.float64), nk)
         lo[:, i], hi[:, i] = klo, khi
-    tlas = build_bvh(lo, hi)
-    g.tlas_a = _i32(tlas.node_a, device)
-    g.tlas_b = _i32(tlas.node_b, device)
-    g.tlas_lo = _v3(tlas.node_lower.reshape(-1, 3), device)
-    g.tlas_hi = _v3(tlas.node_upper.reshape(-1, 3), device)
+    tlas = collapse(build_bvh(lo, hi), device)
+    g.tlas_box = wp.array(tlas.box, dtype=wp.vec4, device=device)
+    g.tlas_child = wp.array(tlas.child, dtype=wp.vec4i, device=device)
     g.tlas_prim = _i32(tlas.prim_order if len(tlas.prim_order) else [0], device)
     g.tlas_nkeys = nk
 
@@ -253,7 +251,7 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     stats = GeometryStats(
         triangles=int(n_tris[-1]),
         blas_nodes=int(n_nodes[-1]),
-        tlas_nodes=len(tlas.node_a),
+        tlas_nodes=tlas.num_nodes,
         tlas_keys=nk,
         build_seconds=time.perf_counter() - t_start,
         nbytes=int(nbytes),

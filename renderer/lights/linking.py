@@ -17,15 +17,13 @@ import warp as wp
 from renderer.accel.intersect import (
     BIG,
     Geometry,
-    box_entry,
     instance_visible,
     instance_world_to_object,
-    node_box,
     safe_inverse,
-    stack_t,
     tlas_keys_at,
 )
 from renderer.accel.occlusion import blas_transmittance, transmittance
+from renderer.accel.wide import entries, leaf_range, wide_stack_t
 from renderer.shading.materials import Materials
 from renderer.shading.textures import Textures
 from renderer.struct_refs import by_reference
@@ -103,18 +101,16 @@ def caster_transmittance(geo: Geometry, mats: Materials, tex: Textures, links: L
     k0, k1, u = tlas_keys_at(geo, s)
     nk = geo.tlas_nkeys
     inv_d = safe_inverse(rd)
-    stack = stack_t()
-    stack[0] = 0
+    stack = wide_stack_t()
+    stack[0] = 0  # the root
     sp = int(1)
     tr = float(1.0)
     while sp > 0 and tr > 0.0:
         sp -= 1
-        n = stack[sp]
-        a = geo.tlas_a[n]
-        b = geo.tlas_b[n]
-        if a < 0:
-            first = -(a + 1)
-            for i in range(b):
+        ref = stack[sp]
+        if ref < 0:
+            first, count = leaf_range(ref)
+            for i in range(count):
                 inst = geo.tlas_prim[first + i]
                 casts = ((links.inst_caster[inst] >> bit) & 1) != 0
                 if casts and instance_visible(geo, inst, s) and tr > 0.0:
@@ -122,14 +118,12 @@ def caster_transmittance(geo: Geometry, mats: Materials, tex: Textures, links: L
                     tr = blas_transmittance(geo, mats, tex, geo.inst_mesh[inst], wp.transform_point(w2o, ro),
                                             wp.transform_vector(w2o, rd), tmax, s, tr)
         else:
-            lo_a, hi_a = node_box(geo.tlas_lo, geo.tlas_hi, a * nk, k0, k1, u)
-            if box_entry(lo_a, hi_a, ro, inv_d, tmax) < BIG:
-                stack[sp] = a
-                sp += 1
-            lo_b, hi_b = node_box(geo.tlas_lo, geo.tlas_hi, b * nk, k0, k1, u)
-            if box_entry(lo_b, hi_b, ro, inv_d, tmax) < BIG:
-                stack[sp] = b
-                sp += 1
+            c = geo.tlas_child[ref]
+            d = entries(geo.tlas_box, ref * nk * 6, c, k0, k1, u, ro, inv_d, tmax)
+            for j in range(4):
+                if d[j] < BIG:
+                    stack[sp] = c[j]
+                    sp += 1
     return tr
 
 
