@@ -147,6 +147,9 @@ def rect_texel(lights: Lights, li: int, corner: wp.vec3, ex: wp.vec3, ey: wp.vec
 @wp.func
 def rect_frame(lights: Lights, li: int, s: float):
     """World corner, edge vectors and emitting normal of a rect light at time s."""
+    if lights.xf_count[li] == 1:
+        return (lights.rect_still[4 * li], lights.rect_still[4 * li + 1], lights.rect_still[4 * li + 2],
+                lights.rect_still[4 * li + 3])
     m = light_matrix(lights, li, s)
     size = lights.size[li]
     ex = wp.transform_vector(m, wp.vec3(size[0], 0.0, 0.0))

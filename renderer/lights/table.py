@@ -48,6 +48,9 @@ class Lights:
     xf_off: wp.array(dtype=wp.int32)
     xf_count: wp.array(dtype=wp.int32)
     xf_still: wp.array(dtype=wp.mat44)  # light-to-world of lights that do not move (xf_count == 1)
+    # rect lights that do not move: world corner, edge vectors and emitting normal at 4 li .. 4 li + 3, computed
+    # once here (in float64) instead of from xf_still at every sample (``sample.rect_frame``)
+    rect_still: wp.array(dtype=wp.vec3)
     keys: MotionKeys
     select_cdf: wp.array(dtype=wp.float32)  # (count,) cumulative selection probability
     select_pdf: wp.array(dtype=wp.float32)  # (count,) probability of choosing each light
@@ -164,6 +167,20 @@ def _upload_images(lt: Lights, images: list, device: str) -> None:
     i32 = lambda a, d: wp.array(np.array(a or [d], np.int32), dtype=wp.int32, device=device)  # noqa: E731
     lt.img_off, lt.img_w, lt.img_h = i32(offs, -1), i32(ws, 0), i32(hs, 0)
     lt.img = wp.array(np.concatenate(data) if data else np.zeros((1, 3), np.float32), dtype=wp.vec3, device=device)
+
+
+def rect_frames(matrices, sizes) -> np.ndarray:
+    """(n, 4, 3) float32: each light's rect (size width x height, centred, in its z = 0 plane, facing -z) in the
+    world under its matrix: corner, edge along x, edge along y, emitting normal (``sample.rect_frame``)."""
+    m = np.asarray(matrices, np.float64)
+    wh = np.asarray(sizes, np.float64)[:, :2]
+    ex = m[:, :3, 0] * wh[:, :1]
+    ey = m[:, :3, 1] * wh[:, 1:2]
+    corner = m[:, :3, 3] - 0.5 * ex - 0.5 * ey
+    n = np.cross(ex, ey)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    front = -np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+    return np.stack([corner, ex, ey, front], 1).astype(np.float32)
 
 
 def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
@@ -291,6 +308,7 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
     lt.xf_count = i32(kcounts, [1])
     still = [matrix_at(xf, 0.0) for xf in transforms] or [np.eye(4)]
     lt.xf_still = wp.array(np.array(still, np.float32), dtype=wp.mat44, device=device)
+    lt.rect_still = wp.array(rect_frames(still, size or [[0, 0, 0, 0]]).reshape(-1, 3), dtype=wp.vec3, device=device)
     p = np.array(powers or [1.0], np.float64)
     p = p / p.sum()
     cdf_sel = np.cumsum(p)
