@@ -1,4 +1,4 @@
-"""Four-wide bottom-level hierarchies: the binary SAH tree of ``build`` collapsed to nodes of up to four children.
+"""Four-wide hierarchies (both levels): the binary SAH tree of ``build`` collapsed to nodes of up to four children.
 
 A walk of a binary tree pops a node, loads two child boxes and pushes what it hit; a four-wide tree halves the
 levels, the pops and the pushes, and its node keeps the four children's boxes side by side (one ``vec4`` per
