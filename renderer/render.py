@@ -132,12 +132,16 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> Prepar
 
 def render_tile(prep: PreparedScene, tile: Tile,
                 on_wave: Callable[[int, int], None] | None = None, *,
-                time_budget: float | None = None) -> TileSums:
+                time_budget: float | None = None, shared_borders: bool = False) -> TileSums:
     """Render one tile: its filtered sums and weights, a pure function of (scene, options, tile).
 
-    The tile renders its own pixels' samples only. Its arrays hold its pixels' sums (final except within the
-    filter's reach of its edge, where they hold its own samples' share) and, under ``band.``, the partial sums
-    that ``assemble`` combines with the neighbouring tiles' into the exact border pixels (``film.borders``).
+    By default the tile is final on its own: it also draws the samples of the ring of pixels its filter reaches
+    (``filter_margin``), so its pixels equal the same pixels of a whole-frame render, bit for bit (a crop).
+    With ``shared_borders`` (what ``render_frame`` and the service do) it draws its own pixels' samples only, so no
+    sample is drawn by two tiles: its arrays then hold its pixels' sums (final except within the filter's reach of
+    its edge, where they hold its own samples' share) and, under ``band.``, the partial sums that ``assemble``
+    adds to the neighbouring tiles' into the exact border pixels (``film.borders``). Either way the sums are the
+    same per-direction partials added in the same order, so both give the same bits.
 
     ``on_wave(samples_done_in_tile, samples_total_in_tile)`` is called after every wave; raising
     ``Cancelled`` from it stops the render. ``time_budget`` (seconds) stops sampling before the wave that would
@@ -151,14 +155,18 @@ def render_tile(prep: PreparedScene, tile: Tile,
     t_start = time.perf_counter()
     kind = film.FILTERS[opts.filter]
     margin = film.filter_margin(kind)
-    ex0, ey0, ex1, ey1 = borders.extended_region(tile.x0, tile.y0, tile.x1, tile.y1, margin, W, H)
-    tw, th = tile.width, tile.height
+    ring = borders.extended_region(tile.x0, tile.y0, tile.x1, tile.y1, margin, W, H)
+    own = (tile.x0, tile.y0, tile.x1, tile.y1)
+    # sample pixels (sx0, sy0) .. (sx1, sy1) and target pixels (ex0, ey0) .. (ex1, ey1)
+    sx0, sy0, sx1, sy1 = own if shared_borders else ring
+    ex0, ey0, ex1, ey1 = ring if shared_borders else own
+    sw, sh = sx1 - sx0, sy1 - sy0
     targets = (ex1 - ex0) * (ey1 - ey0)
     directions = borders.directions(margin)
     waves = film.wave_schedule(opts.spp)
     max_wave = max(e - s for s, e in waves)
     dev = prep.device
-    buf = film.new_sample_buffer(tw * th * max_wave, dev)
+    buf = film.new_sample_buffer(sw * sh * max_wave, dev)
     acc = film.new_tile_accum(directions * targets, dev)
     counters = wp.zeros(2, dtype=wp.int64, device=dev)  # rays traced, non-finite samples zeroed
     settings = PathSettings()
@@ -169,9 +177,13 @@ def render_tile(prep: PreparedScene, tile: Tile,
     settings.time_filter = TIME_FILTERS[opts.time_filter]
     settings.frame_s = frame_shutter_time(prep.scene)
     settings.seed = wp.uint32(opts.seed)
-    conv = Convergence(tw * th, opts.noise_threshold, opts.min_spp)
-    slot_of = np.full(tw * th, -1, np.int32)
-    total = tw * th * opts.spp
+    conv = Convergence(sw * sh, opts.noise_threshold, opts.min_spp)
+    slot_of = np.full(sw * sh, -1, np.int32)
+    # the tile's own pixels among the sample pixels (its samples-per-pixel count and progress)
+    mine = np.zeros((sh, sw), bool)
+    mine[tile.y0 - sy0:tile.y1 - sy0, tile.x0 - sx0:tile.x1 - sx0] = True
+    mine = mine.ravel()
+    total = tile.width * tile.height * opts.spp
     for start, end in waves:
         wave = end - start
         pixels = conv.active_pixels()
@@ -187,7 +199,7 @@ def render_tile(prep: PreparedScene, tile: Tile,
         slot_of[pixels] = np.arange(pixels.size, dtype=np.int32)
         launch = Wave()
         launch.active = wp.array(pixels, dtype=wp.int32, device=dev)
-        launch.region_x0, launch.region_y0, launch.region_w = tile.x0, tile.y0, tw
+        launch.region_x0, launch.region_y0, launch.region_w = sx0, sy0, sw
         launch.start, launch.count = start, wave
         launch.counters = counters
         wp.launch(trace_wave_kernel, dim=pixels.size * wave, device=dev,
@@ -196,7 +208,7 @@ def render_tile(prep: PreparedScene, tile: Tile,
         wp.launch(film.axis_weights_kernel, dim=pixels.size * wave, device=dev,
                   inputs=[buf, kind, float(film.FILTER_RADIUS[kind])])
         wp.launch(film.gather_kernel, dim=targets, device=dev,
-                  inputs=[buf, acc, wave, tile.x0, tile.y0, tw, th, wp.array(slot_of, dtype=wp.int32, device=dev),
+                  inputs=[buf, acc, wave, sx0, sy0, sw, sh, wp.array(slot_of, dtype=wp.int32, device=dev),
                           ex0, ey0, ex1 - ex0, margin])
         rgb = None
         if conv.enabled:
@@ -204,10 +216,14 @@ def render_tile(prep: PreparedScene, tile: Tile,
         conv.add_wave(pixels, rgb, start, wave)
         conv.update()
         if on_wave is not None:
-            on_wave(min(total, int(conv.count.sum())), total)
-    arrays = borders.split_tile(film.accum_partials(acc, directions, ey1 - ey0, ex1 - ex0),
-                                (tile.x0, tile.y0, tile.x1, tile.y1), margin, W, H)
-    arrays["spp"] = conv.count.reshape(th, tw).astype(np.float32)
+            on_wave(min(total, int(conv.count[mine].sum())), total)
+    partials = film.accum_partials(acc, directions, ey1 - ey0, ex1 - ex0)
+    if shared_borders:
+        arrays = borders.split_tile(partials, own, margin, W, H)
+    else:
+        arrays = {name: borders.combine(p) for name, p in partials.items()}
+    arrays["spp"] = conv.count.reshape(sh, sw)[tile.y0 - sy0:tile.y1 - sy0, tile.x0 - sx0:tile.x1 - sx0] \
+        .astype(np.float32)
     c = counters.numpy()
     return TileSums(tile=tile, arrays=arrays, rays=int(c[0]), nonfinite=int(c[1]))
 
@@ -276,7 +292,7 @@ def render_frame(prep: PreparedScene, *, tile_size: int | None = None, threads: 
                 if progress is not None:
                     progress(sum(done.values()), total)
         budget = tile_time_budget(prep.options, tile, prep.width, prep.height, min(threads, len(tiles)))
-        return render_tile(prep, tile, on_wave, time_budget=budget)
+        return render_tile(prep, tile, on_wave, time_budget=budget, shared_borders=True)
 
     t0 = time.perf_counter()
     if threads == 1:

@@ -268,7 +268,7 @@ def render_tile_task(task: TileTask, scene: ScenePackage) -> dict:
         with _cache_lock:
             _stats["running"] += 1  # tiles rendering now (tests watch a deleted job's tiles stop)
         try:
-            sums = render_tile(prep, tile, on_wave=_stop_check(), time_budget=budget)
+            sums = render_tile(prep, tile, on_wave=_stop_check(), time_budget=budget, shared_borders=True)
         finally:
             with _cache_lock:
                 _stats["running"] -= 1

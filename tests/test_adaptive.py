@@ -67,9 +67,12 @@ def test_adaptive_frames_are_bit_identical_across_tilings(scene):
         other = render_frame(prep, tile_size=tile_size, threads=threads).sums
         for k in ref:
             assert np.array_equal(ref[k], other[k]), (tile_size, threads, k)
-    t = render_tile(prep, Tile(11, 5, 30, 17))  # alone: final one pixel (the filter's reach) inside its edge
-    assert np.array_equal(t.arrays["rgba"][1:-1, 1:-1], ref["rgba"][6:16, 12:29])
+    t = render_tile(prep, Tile(11, 5, 30, 17))  # on its own: its margin's samples drawn too, every pixel final
+    assert np.array_equal(t.arrays["rgba"], ref["rgba"][5:17, 11:30])
     assert np.array_equal(t.arrays["spp"], ref["spp"][5:17, 11:30])
+    shared = render_tile(prep, Tile(11, 5, 30, 17), shared_borders=True)  # final one pixel inside its edge
+    assert np.array_equal(shared.arrays["rgba"][1:-1, 1:-1], ref["rgba"][6:16, 12:29])
+    assert np.array_equal(shared.arrays["spp"], ref["spp"][5:17, 11:30])
 
 
 @pytest.mark.parametrize("limit", [1.0, 3.0])

@@ -55,16 +55,22 @@ def test_bit_identical_across_tilings_and_threads(scene, filter_name):
         other = render_frame(prep, tile_size=tile_size, threads=threads).sums
         for k in ref:
             assert np.array_equal(ref[k], other[k]), (filter_name, tile_size, threads, k)
-    # tiles of any shape assemble the same frame; a tile alone has its pixels beyond the filter's reach of its
-    # edge final
+    # tiles of any shape sharing their borders assemble the same frame; one of them alone has its pixels beyond
+    # the filter's reach of its edge final
     parts = [Tile(0, 0, 40, 5), Tile(0, 5, 11, 17), Tile(11, 5, 30, 17), Tile(30, 5, 40, 17), Tile(0, 17, 40, 28)]
-    rendered = [render_tile(prep, t) for t in parts]
+    rendered = [render_tile(prep, t, shared_borders=True) for t in parts]
     mosaic = assemble(rendered, 40, 28)
     for k in ref:
         assert np.array_equal(ref[k], mosaic[k]), (filter_name, k)
     m = film.filter_margin(film.FILTERS[filter_name])
-    alone = rendered[2].arrays["rgba"]
-    assert np.array_equal(alone[m:12 - m, m:19 - m], ref["rgba"][5 + m:17 - m, 11 + m:30 - m])
+    shared = rendered[2].arrays["rgba"]
+    assert np.array_equal(shared[m:12 - m, m:19 - m], ref["rgba"][5 + m:17 - m, 11 + m:30 - m])
+    # a tile rendered on its own (it draws its margin's samples too) equals its region of the frame everywhere
+    alone = render_tile(prep, Tile(11, 5, 30, 17))
+    for k in ref:
+        assert np.array_equal(alone.arrays[k], ref[k][5:17, 11:30]), (filter_name, k)
+    assert not any(k.startswith("band.") for k in alone.arrays)
+    assert assemble([alone], 40, 28)["rgba"][5:17, 11:30].tobytes() == ref["rgba"][5:17, 11:30].tobytes()
     assert ref["rgba"][..., :3].max() > 0.05  # the scene is lit
 
 

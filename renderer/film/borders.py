@@ -17,7 +17,9 @@ For a target whose whole neighbourhood lies in one tile, that tile adds the part
 tile border (the *band*: the tile's pixels within ``margin`` of its edge and the ring of ``margin`` pixels
 around it), the tile hands its partials over and ``assemble`` adds them, in the same order, once every tile is
 in. Each (direction, target) partial has exactly one owner (the owner of its source pixel) whatever the
-tiling, and other tiles hold exact zeros there, so the frame's bits do not depend on the tiling.
+tiling, and other tiles hold exact zeros there, so the frame's bits do not depend on the tiling. (A tile
+rendered on its own, ``render_tile`` without ``shared_borders``, draws its ring's samples too and adds all
+nine partials itself: the same bits.)
 """
 from __future__ import annotations
 

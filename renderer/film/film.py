@@ -1,10 +1,11 @@
 """The film: pixel reconstruction filters, sample waves, and the gather of samples into tile pixels.
 
 Samples are taken uniformly over each pixel's area (the film dimensions of the sample) and every sample
-contributes to all pixels whose filter covers it, weighted by the filter: pixel = sum(w L) / sum(w). A tile
-renders the samples of its own pixels only and adds them to its pixels and to a ring of ``ceil(radius - 0.5)``
-pixels around it, as partial sums per source direction that ``borders`` assembles exactly: no seams, no sample
-rendered twice, and the sums run over the same samples in the same order whatever the tiling.
+contributes to all pixels whose filter covers it, weighted by the filter: pixel = sum(w L) / sum(w). The
+gather keeps one partial sum per target pixel and source direction (``borders``): a tile of a frame draws its
+own pixels' samples only and hands the partials of its border over for assembly (no sample drawn twice), a tile
+rendered on its own also draws the ring of ``ceil(radius - 0.5)`` pixels around it; either way the sums run over
+the same samples in the same order whatever the tiling: no seams.
 
 The sample budget is spent in *waves* of 1, 1, 2, 4, ... samples per pixel (capped), a schedule that depends on
 the sample count only, never on tile size or threads: the floating-point sums are then bit-identical across
