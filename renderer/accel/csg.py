@@ -29,10 +29,9 @@ from renderer.accel.intersect import (
     Hit,
     instance_visible,
     instance_world_to_object,
-    leaf_triangle,
+    leaf_hit,
     mesh_keys_at,
     safe_inverse,
-    triangle_hit_edges,
 )
 from renderer.accel.wide import entries, leaf_range, wide_stack_t
 from renderer.shading.materials import Materials, eval_opacity
@@ -79,10 +78,7 @@ def mesh_next_hit(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmin: float, 
         if ref < 0:
             first, count = leaf_range(ref)
             for i in range(count):
-                slot = poff + first + i
-                lt = geo.blas_prim[slot]
-                v0, e1, e2 = leaf_triangle(geo, m, slot, lt, nk, k0, k1, u)
-                t, b1, b2 = triangle_hit_edges(v0, e1, e2, ro, rd, t_best)
+                t, b1, b2, lt = leaf_hit(geo, m, poff + first + i, nk, k0, k1, u, ro, rd, t_best)
                 if t < t_best and t > tmin:
                     t_best = t
                     found = t
@@ -118,10 +114,7 @@ def mesh_crossings(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, s: float):
         if ref < 0:
             first, count = leaf_range(ref)
             for i in range(count):
-                slot = poff + first + i
-                lt = geo.blas_prim[slot]
-                v0, e1, e2 = leaf_triangle(geo, m, slot, lt, nk, k0, k1, u)
-                t, b1, b2 = triangle_hit_edges(v0, e1, e2, ro, rd, float(BIG))
+                t, b1, b2, lt = leaf_hit(geo, m, poff + first + i, nk, k0, k1, u, ro, rd, float(BIG))
                 if t < BIG:
                     crossed += 1
         else:

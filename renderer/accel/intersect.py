@@ -161,6 +161,17 @@ def leaf_triangle(geo: Geometry, m: int, slot: int, lt: int, nkeys: int, k0: int
 
 
 @wp.func
+def leaf_hit(geo: Geometry, m: int, slot: int, nkeys: int, k0: int, k1: int, u: float, ro: wp.vec3, rd: wp.vec3,
+             tmax: float):
+    """The triangle in leaf slot ``slot`` of mesh m against the object-space ray at the walk's time: (t, or BIG on a
+    miss, b1, b2, its local triangle index). Every bottom-level walk tests its leaves with this."""
+    lt = geo.blas_prim[slot]
+    v0, e1, e2 = leaf_triangle(geo, m, slot, lt, nkeys, k0, k1, u)
+    t, b1, b2 = triangle_hit_edges(v0, e1, e2, ro, rd, tmax)
+    return t, b1, b2, lt
+
+
+@wp.func
 def mesh_keys_at(geo: Geometry, m: int, s: float):
     """Local point-key indices (k0, k1) bracketing time s for mesh m, and the blend u."""
     off = geo.mesh_key_off[m]
@@ -205,10 +216,7 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float, s
             if ref < 0:
                 first, count = leaf_range(ref)
                 for i in range(count):
-                    slot = poff + first + i
-                    lt = geo.blas_prim[slot]
-                    v0, e1, e2 = leaf_triangle(geo, m, slot, lt, nk, k0, k1, u)
-                    t, b1, b2 = triangle_hit_edges(v0, e1, e2, ro, rd, t_best)
+                    t, b1, b2, lt = leaf_hit(geo, m, poff + first + i, nk, k0, k1, u, ro, rd, t_best)
                     if t < t_best:
                         t_best = t
                         best.t = t

@@ -15,11 +15,10 @@ from renderer.accel.intersect import (
     Geometry,
     instance_visible,
     instance_world_to_object,
-    leaf_triangle,
+    leaf_hit,
     mesh_keys_at,
     safe_inverse,
     tlas_keys_at,
-    triangle_hit_edges,
 )
 from renderer.accel.wide import entries, leaf_range, wide_stack_t
 from renderer.shading.materials import Materials, eval_opacity
@@ -54,10 +53,7 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
         if ref < 0:
             first, count = leaf_range(ref)
             for i in range(count):
-                slot = poff + first + i
-                lt = geo.blas_prim[slot]
-                v0, e1, e2 = leaf_triangle(geo, m, slot, lt, nk, k0, k1, u)
-                t, b1, b2 = triangle_hit_edges(v0, e1, e2, ro, rd, tmax)
+                t, b1, b2, lt = leaf_hit(geo, m, poff + first + i, nk, k0, k1, u, ro, rd, tmax)
                 if t < BIG and tr > 0.0:
                     tri = geo.mesh_tri_off[m] + lt
                     opacity = eval_opacity(mats, tex, geo.tri_material[tri], hit_uv(geo, m, tri, b1, b2), s)
