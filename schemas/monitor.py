@@ -26,7 +26,9 @@ class FarmTask(BaseModel):
     job_id: str
     frame_index: int = Field(description="position of the frame in the job's `frames`")
     frame: float | None = Field(None, description="the frame's time code (null if the job is gone)")
-    tile: int | None = Field(description="tile index (null for a frame's assembly)")
+    tile: int | None = Field(description="tile index (null for a frame's assembly); a batch's first tile")
+    tiles: list[int] = Field(default_factory=list, description="every tile the task renders, one after the other "
+                                                                "(small tiles go in batches); empty for an assembly")
 
 
 class FarmWorker(BaseModel):

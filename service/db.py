@@ -417,22 +417,30 @@ class Store:
     def tile_done(self, job_id: str, frame_idx: int, tile_idx: int, samples: int, seconds: float) -> bool:
         """Record a checkpointed tile of a running job. False (nothing recorded) if the job is no longer running
         or the tile was already recorded."""
-        tile = (job_id, frame_idx, tile_idx)
+        return bool(self.tiles_done(job_id, frame_idx, [(tile_idx, samples, seconds)]))
+
+    def tiles_done(self, job_id: str, frame_idx: int, tiles: list[tuple[int, int, float]]) -> list[int]:
+        """Record checkpointed tiles (index, samples, seconds) of a running job in one transaction; returns the
+        indices recorded (none if the job is no longer running; not those already recorded)."""
+        recorded = []
         with self._tx() as c:
-            already = c.execute("SELECT done FROM tiles WHERE job_id = ? AND frame_idx = ? AND tile_idx = ?",
-                                tile).fetchone()
-            if already is not None and already[0]:
-                return False
-            if c.execute("UPDATE jobs SET tiles_done = tiles_done + 1, samples_done = samples_done + ?, "
-                         "updated_at = ? WHERE id = ? AND state = ?",
-                         (samples, time.time(), job_id, sm.RUNNING.value)).rowcount == 0:
-                return False
-            c.execute("INSERT INTO tiles (job_id, frame_idx, tile_idx, attempts, done, seconds) "
-                      "VALUES (?, ?, ?, 1, 1, ?) ON CONFLICT (job_id, frame_idx, tile_idx) "
-                      "DO UPDATE SET done = 1, seconds = excluded.seconds, error = NULL", (*tile, seconds))
-            c.execute("UPDATE frames SET tiles_done = tiles_done + 1 WHERE job_id = ? AND idx = ?",
-                      (job_id, frame_idx))
-        return True
+            for tile_idx, samples, seconds in tiles:
+                tile = (job_id, frame_idx, tile_idx)
+                already = c.execute("SELECT done FROM tiles WHERE job_id = ? AND frame_idx = ? AND tile_idx = ?",
+                                    tile).fetchone()
+                if already is not None and already[0]:
+                    continue
+                if c.execute("UPDATE jobs SET tiles_done = tiles_done + 1, samples_done = samples_done + ?, "
+                             "updated_at = ? WHERE id = ? AND state = ?",
+                             (samples, time.time(), job_id, sm.RUNNING.value)).rowcount == 0:
+                    return recorded  # the job is no longer running
+                c.execute("INSERT INTO tiles (job_id, frame_idx, tile_idx, attempts, done, seconds) "
+                          "VALUES (?, ?, ?, 1, 1, ?) ON CONFLICT (job_id, frame_idx, tile_idx) "
+                          "DO UPDATE SET done = 1, seconds = excluded.seconds, error = NULL", (*tile, seconds))
+                c.execute("UPDATE frames SET tiles_done = tiles_done + 1 WHERE job_id = ? AND idx = ?",
+                          (job_id, frame_idx))
+                recorded.append(tile_idx)
+        return recorded
 
     def done_tiles(self, job_id: str) -> dict[int, set[int]]:
         out: dict[int, set[int]] = defaultdict(set)

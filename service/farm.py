@@ -1,8 +1,8 @@
 """The farm as the monitor shows it: Dask's workers with the drt tasks each holds, and a job's tile map.
 
 Which tile a worker renders is read from the Dask task keys the scheduler gives its tasks,
-``drt-<kind>-<job id>-<frame index>-<tile index>-<nonce>`` (``kind`` is ``tile`` or ``frame``; a frame's assembly
-has tile index -1). Keys of other shapes (scene inspection) are counted, not named.
+``drt-<kind>-<job id>-<frame index>-<tile indices>-<nonce>`` (``kind`` is ``tile`` or ``frame``; the indices of a
+batch of tiles joined by dots; a frame's assembly has tile index -1). Keys of other shapes are counted, not named.
 """
 from __future__ import annotations
 
@@ -16,15 +16,16 @@ from .db import JobNotFound, JobRow, Store
 from .engine import Engine
 from .settings import ServiceSettings
 
-_KEY = re.compile(r"^drt-(tile|frame)-([0-9A-Za-z]+)-(\d+)-(-?\d+)-[0-9A-Za-z]+$")
+_KEY = re.compile(r"^drt-(tile|frame)-([0-9A-Za-z]+)-(\d+)-(-?\d+(?:\.\d+)*)-[0-9A-Za-z]+$")
 
 
 def parse_key(key) -> FarmTask | None:
     m = _KEY.match(key if isinstance(key, str) else str(key))
     if m is None:
         return None
-    kind, job_id, frame_idx, tile_idx = m.group(1), m.group(2), int(m.group(3)), int(m.group(4))
-    return FarmTask(kind=kind, job_id=job_id, frame_index=frame_idx, tile=tile_idx if kind == "tile" else None)
+    kind, job_id, frame_idx = m.group(1), m.group(2), int(m.group(3))
+    tiles = [int(t) for t in m.group(4).split(".")] if kind == "tile" else []
+    return FarmTask(kind=kind, job_id=job_id, frame_index=frame_idx, tile=tiles[0] if tiles else None, tiles=tiles)
 
 
 def processing(engine: Engine) -> dict[str, list]:
@@ -91,8 +92,8 @@ def tile_map(row: JobRow, store: Store, engine: Engine) -> TileMap:
     rendering: dict[int, set[int]] = defaultdict(set)
     for keys in processing(engine).values():
         for t in (parse_key(k) for k in keys):
-            if t is not None and t.job_id == row.id and t.tile is not None:
-                rendering[t.frame_index].add(t.tile)
+            if t is not None and t.job_id == row.id:
+                rendering[t.frame_index].update(t.tiles)
     per_frame = row.tiles_per_frame
     columns = -(-row.width // row.tile_size)
     frames = []

@@ -48,11 +48,13 @@ from .engine import ClusterUnavailable, Engine
 from .settings import ServiceSettings
 from .spec import RenderSpec
 from .uploads import SceneStore
-from .worker import FrameTask, TileTask, exr_attributes, frame_image_task, render_tile_task, scene_package
+from .worker import (FrameTask, TileTask, exr_attributes, frame_image_task, render_tile_task, scene_package,
+                     whole_frame_task)
 
 log = logging.getLogger("drt.scheduler")
 
 FINISH = -1  # the "tile index" of a frame's assembly task in attempt records
+MAX_BATCH = 64  # tiles in one task at most (their indices name the task's Dask key)
 
 
 class UnreadableCheckpoints(Exception):
@@ -70,6 +72,7 @@ class FramePlan:
     queue: collections.deque  # tile indices still to submit
     done: set[int]
     inflight: set[int] = field(default_factory=set)
+    solo: set[int] = field(default_factory=set)  # tiles of a batch that failed: retried one per task
     finishing: bool = False
     finished: bool = False
 
@@ -88,15 +91,29 @@ class JobPlan:
     frames: list[FramePlan]
     files: JobFiles
 
-    def next_work(self) -> tuple[FramePlan, int] | None:
-        """(frame, tile index) to submit next, or (frame, FINISH) to assemble a frame, or None."""
+    def tile_samples(self, tile_idx: int) -> int:
+        x0, y0, x1, y1 = self.boxes[tile_idx]
+        return (x1 - x0) * (y1 - y0) * self.spp
+
+    def next_work(self, batch_samples: int = 0) -> tuple[FramePlan, tuple[int, ...]] | None:
+        """(frame, tile indices) to submit next as one task, or (frame, (FINISH,)) to assemble a frame, or None.
+
+        Tiles go in batches of the frame's next tiles up to ``batch_samples`` samples together (always at least
+        one; 0: one tile per task), so that a tiny job costs one task rather than one per tile. A tile that was
+        in a failed batch goes alone, so that a failure is charged to the tile that fails."""
         for f in self.frames:
             if f.finished or f.finishing:
                 continue
             if f.queue:
-                return f, f.queue.popleft()
+                first = f.queue.popleft()
+                batch, samples = [first], self.tile_samples(first)
+                while (first not in f.solo and f.queue and f.queue[0] not in f.solo and len(batch) < MAX_BATCH
+                       and samples + self.tile_samples(f.queue[0]) <= batch_samples):
+                    samples += self.tile_samples(f.queue[0])
+                    batch.append(f.queue.popleft())
+                return f, tuple(batch)
             if len(f.done) == len(self.boxes) and not f.inflight:
-                return f, FINISH
+                return f, (FINISH,)
         return None
 
 
@@ -104,10 +121,11 @@ class JobPlan:
 class InFlight:
     job_id: str
     frame_idx: int
-    tile_idx: int
+    tiles: tuple[int, ...]  # the tiles the task renders, or (FINISH,)
     future: object
     submitted: float
     generation: int  # the engine's client the future belongs to
+    whole: bool = False  # every tile of the frame and its EXR channels in one task (no checkpoints)
 
 
 class Scheduler:
@@ -228,15 +246,20 @@ class Scheduler:
             if all(f.finished for f in plan.frames):  # e.g. stopped between its last frame and its success
                 self._succeed(plan)
                 continue
+            # a time limit is shared out tile by tile over the threads: its tiles go one per task
+            batch = 0 if plan.spec.time_limit else self.settings.task_samples
             while len(self._inflight) < cap:
-                work = plan.next_work()
+                work = plan.next_work(batch)
                 if work is None:
                     break
-                frame, tile_idx = work
+                frame, tiles = work
                 if plan.state == sm.QUEUED and not self._claim(plan):
                     break  # canceled meanwhile: the plan is dropped
+                # a frame that fits in one batch: its tiles and its EXR channels in one task, no checkpoints
+                whole = (tiles != (FINISH,) and len(tiles) == len(plan.boxes)
+                         and sum(map(plan.tile_samples, tiles)) <= batch)
                 try:
-                    self._submit(plan, frame, tile_idx)
+                    self._submit(plan, frame, tiles, whole)
                 except ClusterUnavailable as e:
                     log.info("cluster unavailable, holding work: %s", e)
                     return
@@ -283,29 +306,31 @@ class Scheduler:
         return FrameTask(spec=plan.spec, frame=frame.time, sums=assemble(parts, plan.width, plan.height),
                          cache_size=self.settings.scene_cache_size)
 
-    def _submit(self, plan: JobPlan, frame: FramePlan, tile_idx: int) -> None:
+    def _submit(self, plan: JobPlan, frame: FramePlan, tiles: tuple[int, ...], whole: bool = False) -> None:
         s = self.settings
+        finish = tiles == (FINISH,)
         try:
             scene = self._scene(plan)
-            if tile_idx == FINISH:
-                task = self._frame_task(plan, frame)
-                fn, kind, priority = frame_image_task, "frame", plan.priority + 1
+            if finish:
+                args = (frame_image_task, self._frame_task(plan, frame))
+                kind, priority = "frame", plan.priority + 1
             else:
-                task = TileTask(spec=plan.spec, frame=frame.time, tile=plan.boxes[tile_idx], width=plan.width,
-                                height=plan.height, cache_size=s.scene_cache_size)
-                fn, kind, priority = render_tile_task, "tile", plan.priority
-            key = f"drt-{kind}-{plan.job_id}-{frame.idx}-{tile_idx}-{uuid.uuid4().hex[:8]}"
+                task = TileTask(spec=plan.spec, frame=frame.time, tiles=tuple(plan.boxes[t] for t in tiles),
+                                width=plan.width, height=plan.height, cache_size=s.scene_cache_size)
+                args = (whole_frame_task, render_tile_task, task) if whole else (render_tile_task, task)
+                kind, priority = "tile", plan.priority
+            key = f"drt-{kind}-{plan.job_id}-{frame.idx}-{'.'.join(map(str, tiles))}-{uuid.uuid4().hex[:8]}"
             generation = self.engine.generation
-            future = self.engine.submit(fn, task, scene, key=key, priority=priority)
+            future = self.engine.submit(*args, scene, key=key, priority=priority)
         except BaseException:
-            if tile_idx != FINISH:
-                frame.queue.appendleft(tile_idx)  # not submitted: it stays to do (the cluster may be back later)
+            if not finish:
+                frame.queue.extendleft(reversed(tiles))  # not submitted: they stay to do (the cluster may be back)
             raise
-        if tile_idx == FINISH:
+        if finish:
             frame.finishing = True
         else:
-            frame.inflight.add(tile_idx)
-        self._inflight[key] = InFlight(plan.job_id, frame.idx, tile_idx, future, time.monotonic(), generation)
+            frame.inflight.update(tiles)
+        self._inflight[key] = InFlight(plan.job_id, frame.idx, tiles, future, time.monotonic(), generation, whole)
         future.add_done_callback(lambda fut, key=key: self._events.put(("done", key)))
 
     # -- results -----------------------------------------------------------------------------------------------
@@ -327,38 +352,52 @@ class Scheduler:
                 result = fut.result()
             except Exception as e:  # noqa: BLE001 - fetching the result can fail if its worker just died
                 if not self.engine.available() or rec.generation != self.engine.generation:
-                    self._lost(plan, frame, rec.tile_idx, f"{type(e).__name__}: {e}")
+                    self._lost(plan, frame, rec.tiles, f"{type(e).__name__}: {e}")
                 else:
-                    self._failed_attempt(plan, frame, rec.tile_idx, f"{type(e).__name__}: {e}")
+                    self._failed_attempt(plan, frame, rec.tiles, f"{type(e).__name__}: {e}")
                 return
             if result.get("stopped"):
                 return  # the job was canceled or failed while this tile ran; the plan is being dropped
             if "error" in result:
                 self._fail(plan.job_id, result["error"])
-            elif rec.tile_idx == FINISH:
+            elif rec.tiles == (FINISH,):
                 self._frame_image(plan, frame, result)
+            elif rec.whole:
+                self._whole_frame(plan, frame, rec.tiles, result)
             else:
-                self._tile_rendered(plan, frame, rec.tile_idx, result)
+                self._tiles_rendered(plan, frame, rec.tiles, result)
         elif fut.status == "error":
             exc = fut.exception()
-            self._failed_attempt(plan, frame, rec.tile_idx, f"{type(exc).__name__}: {exc}")
+            self._failed_attempt(plan, frame, rec.tiles, f"{type(exc).__name__}: {exc}")
         else:
             # Cancelled without our asking (we forget a future before we cancel it): Dask cancels every future
             # when the connection to the scheduler is lost. Not the tile's fault: it is submitted again.
             reason = getattr(getattr(fut, "_state", None), "exception", None)
-            self._lost(plan, frame, rec.tile_idx, str(reason) if reason else f"task {fut.status}")
+            self._lost(plan, frame, rec.tiles, str(reason) if reason else f"task {fut.status}")
 
-    def _lost(self, plan: JobPlan, frame: FramePlan, tile_idx: int, why: str) -> None:
+    @staticmethod
+    def _what(frame: FramePlan, tiles: tuple[int, ...]) -> str:
+        if tiles == (FINISH,):
+            return f"frame {frame.time:g} assembly"
+        if len(tiles) == 1:
+            return f"tile {tiles[0]} of frame {frame.time:g}"
+        return f"tiles {', '.join(map(str, tiles))} of frame {frame.time:g}"
+
+    def _lost(self, plan: JobPlan, frame: FramePlan, tiles: tuple[int, ...], why: str) -> None:
         """A task the cluster lost: do it again, without counting an attempt."""
         self.tiles_lost += 1
-        log.info("job %s: %s lost (%s); resubmitting", plan.job_id,
-                 f"frame {frame.time:g} assembly" if tile_idx == FINISH else f"tile {tile_idx}",
+        log.info("job %s: %s lost (%s); resubmitting", plan.job_id, self._what(frame, tiles),
                  " ".join(why.split())[:200])
-        if tile_idx == FINISH:
+        self._requeue(frame, tiles)
+
+    @staticmethod
+    def _requeue(frame: FramePlan, tiles: tuple[int, ...]) -> None:
+        """The task's work is to do again, first in its frame's queue."""
+        if tiles == (FINISH,):
             frame.finishing = False
         else:
-            frame.inflight.discard(tile_idx)
-            frame.queue.appendleft(tile_idx)
+            frame.inflight.difference_update(tiles)
+            frame.queue.extendleft(reversed(tiles))
 
     def _redo(self, plan: JobPlan, frame: FramePlan, tiles: set[int]) -> None:
         """Render tiles again whose checkpoints cannot be read (not the tiles' fault: no attempt is counted)."""
@@ -379,19 +418,35 @@ class Scheduler:
             return
         self._frame_written(plan, frame)
 
-    def _tile_rendered(self, plan: JobPlan, frame: FramePlan, tile_idx: int, result: dict) -> None:
-        frame.inflight.discard(tile_idx)
+    def _tiles_rendered(self, plan: JobPlan, frame: FramePlan, tiles: tuple[int, ...], result: dict) -> None:
+        frame.inflight.difference_update(tiles)
         try:
-            save_tile(plan.files.tile(frame.idx, tile_idx), result["arrays"])
+            for t, arrays in zip(tiles, result["arrays"], strict=True):
+                save_tile(plan.files.tile(frame.idx, t), arrays)
         except FileNotFoundError:  # the job's files are gone: it was deleted
             self._drop(plan.job_id)
             return
-        x0, y0, x1, y1 = plan.boxes[tile_idx]
-        samples = (x1 - x0) * (y1 - y0) * plan.spp
-        if self.store.tile_done(plan.job_id, frame.idx, tile_idx, samples, float(result.get("seconds", 0.0))):
-            frame.done.add(tile_idx)
+        recorded = self.store.tiles_done(plan.job_id, frame.idx, [
+            (t, plan.tile_samples(t), float(seconds)) for t, seconds in zip(tiles, result["seconds"], strict=True)])
+        now = time.monotonic()
+        for t in recorded:
+            frame.done.add(t)
             self.tiles_completed += 1
-            self._tile_times.append(time.monotonic())
+            self._tile_times.append(now)
+
+    def _whole_frame(self, plan: JobPlan, frame: FramePlan, tiles: tuple[int, ...], result: dict) -> None:
+        """A frame rendered in one task: its tiles are recorded (progress, samples, seconds) and its EXR written."""
+        frame.inflight.difference_update(tiles)
+        recorded = self.store.tiles_done(plan.job_id, frame.idx, [
+            (t, plan.tile_samples(t), float(seconds)) for t, seconds in zip(tiles, result["seconds"], strict=True)])
+        now = time.monotonic()
+        for t in recorded:
+            frame.done.add(t)
+            self.tiles_completed += 1
+            self._tile_times.append(now)
+        if len(frame.done) != len(plan.boxes):
+            return  # the job stopped running meanwhile (nothing recorded): it is being dropped
+        self._frame_image(plan, frame, result)
 
     def _frame_written(self, plan: JobPlan, frame: FramePlan) -> None:
         frame.finishing = False
@@ -410,20 +465,21 @@ class Scheduler:
             pass  # canceled at the last moment: the user's word stands
         self._drop(plan.job_id)
 
-    def _failed_attempt(self, plan: JobPlan, frame: FramePlan, tile_idx: int, message: str) -> None:
+    def _failed_attempt(self, plan: JobPlan, frame: FramePlan, tiles: tuple[int, ...], message: str) -> None:
+        """A task failed: an attempt is charged to each tile it carried (which one failed is not known), and the
+        tiles of a batch are tried again one per task, so that a tile that keeps failing is named alone."""
         self.tiles_failed += 1
         message = " ".join(message.split())
-        attempts = self.store.tile_attempt(plan.job_id, frame.idx, tile_idx, error=message)
-        what = f"frame {frame.time:g} assembly" if tile_idx == FINISH else f"tile {tile_idx} of frame {frame.time:g}"
-        if attempts <= self.settings.tile_retries:
-            log.warning("%s of job %s failed (attempt %d), retrying: %s", what, plan.job_id, attempts, message)
-            if tile_idx == FINISH:
-                frame.finishing = False
-            else:
-                frame.inflight.discard(tile_idx)
-                frame.queue.appendleft(tile_idx)
+        attempts = {t: self.store.tile_attempt(plan.job_id, frame.idx, t, error=message) for t in tiles}
+        worst = max(attempts, key=attempts.get)
+        if attempts[worst] <= self.settings.tile_retries:
+            log.warning("%s of job %s failed (attempt %d), retrying%s: %s", self._what(frame, tiles), plan.job_id,
+                        attempts[worst], " one by one" if len(tiles) > 1 else "", message)
+            if len(tiles) > 1:
+                frame.solo.update(tiles)
+            self._requeue(frame, tiles)
             return
-        self._fail(plan.job_id, f"{what} failed after {attempts} attempts: {message}")
+        self._fail(plan.job_id, f"{self._what(frame, (worst,))} failed after {attempts[worst]} attempts: {message}")
 
     def _fail(self, job_id: str, message: str) -> None:
         log.warning("job %s failed: %s", job_id, message)

@@ -38,7 +38,10 @@ class ServiceSettings(BaseSettings):
     max_usdz_entries: int = Field(10_000, ge=1)
     max_frames: int = Field(10_000, ge=1, description="frames per job")
     max_tiles: int = Field(200_000, ge=1, description="tiles per job (frames x tiles per frame)")
-    max_in_flight: int = Field(0, ge=0, description="tiles submitted to Dask at once (0: twice the worker threads)")
+    max_in_flight: int = Field(0, ge=0, description="tasks submitted to Dask at once (0: twice the worker threads)")
+    task_samples: int = Field(
+        65536, ge=0, description="a frame's tiles go to Dask in batches of up to this many samples, one task each "
+                                 "(0: one tile per task); tiny jobs cost one task, not one per tile")
     tile_retries: int = Field(2, ge=0, le=20, description="extra attempts for a tile whose task failed")
     inspect_timeout: float = Field(120.0, gt=0, description="seconds to load a scene when a job is submitted")
     inspect_processes: int = Field(2, ge=1, le=64, description="local processes that inspect submitted scenes")

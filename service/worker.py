@@ -181,9 +181,11 @@ def clear_cache() -> None:
 
 @dataclass(frozen=True)
 class TileTask:
+    """Tiles of one frame rendered one after the other in one task (a batch: tiny tiles cost one task together)."""
+
     spec: RenderSpec
     frame: float
-    tile: TileBox
+    tiles: tuple[TileBox, ...]
     width: int  # the resolution the job was planned at
     height: int
     cache_size: int = 2
@@ -253,26 +255,34 @@ def background_priority() -> None:
 
 
 def render_tile_task(task: TileTask, scene: ScenePackage) -> dict:
+    """The task's tiles' sums, in its order: ``{"arrays": [per tile], "seconds": [per tile], "rays",
+    "nonfinite", "pid"}``, or ``{"stopped": True}``, or ``{"error"}``."""
     from renderer.errors import Cancelled, RenderError
     from renderer.render import Tile, render_tile, tile_time_budget
 
     background_priority()
+    arrays, seconds, rays, nonfinite = [], [], 0, 0
     try:
         prep = prepared(task.spec, task.frame, scene, task.cache_size)
         if (prep.width, prep.height) != (task.width, task.height):
             return {"error": f"frame {task.frame:g} renders at {prep.width}x{prep.height}, "
                              f"not at the job's {task.width}x{task.height}"}
-        t0 = time.perf_counter()
-        tile = Tile(*task.tile)
-        budget = tile_time_budget(prep.options, tile, prep.width, prep.height, _worker_threads())
+        stop_check = _stop_check()
         with _cache_lock:
-            _stats["running"] += 1  # tiles rendering now (tests watch a deleted job's tiles stop)
+            _stats["running"] += 1  # tasks rendering now (tests watch a deleted job's tiles stop)
         try:
-            sums = render_tile(prep, tile, on_wave=_stop_check(), time_budget=budget, shared_borders=True)
+            for box in task.tiles:
+                t0 = time.perf_counter()
+                tile = Tile(*box)
+                budget = tile_time_budget(prep.options, tile, prep.width, prep.height, _worker_threads())
+                sums = render_tile(prep, tile, on_wave=stop_check, time_budget=budget, shared_borders=True)
+                arrays.append(sums.arrays)
+                seconds.append(time.perf_counter() - t0)
+                rays += sums.rays
+                nonfinite += sums.nonfinite
         finally:
             with _cache_lock:
                 _stats["running"] -= 1
-        seconds = time.perf_counter() - t0
     except Cancelled:
         with _cache_lock:
             _stats["stopped"] += 1
@@ -280,9 +290,8 @@ def render_tile_task(task: TileTask, scene: ScenePackage) -> dict:
     except RenderError as e:
         return {"error": _one_line(e)}
     with _cache_lock:
-        _stats["tiles"] += 1
-    return {"arrays": sums.arrays, "rays": sums.rays, "nonfinite": sums.nonfinite, "seconds": seconds,
-            "pid": os.getpid()}
+        _stats["tiles"] += len(task.tiles)
+    return {"arrays": arrays, "rays": rays, "nonfinite": nonfinite, "seconds": seconds, "pid": os.getpid()}
 
 
 # -- frames -----------------------------------------------------------------------------------------------------
@@ -310,6 +319,24 @@ def frame_image_task(task: FrameTask, scene: ScenePackage) -> dict:
                 "windows": frame_windows(prep)}
     except RenderError as e:
         return {"error": _one_line(e)}
+
+
+def whole_frame_task(render_tiles, task: TileTask, scene: ScenePackage) -> dict:
+    """Every tile of a frame and then its EXR channels, in one task (a frame small enough for one batch): the tiles
+    as ``render_tiles`` (the tile task) renders them, assembled, and ``frame_image_task``'s result from the sums,
+    plus the tiles' ``seconds``. The same bits as tile tasks, checkpoints and an assembly task give."""
+    from renderer.render import Tile, TileSums, assemble
+
+    tiles = render_tiles(task, scene)
+    if "arrays" not in tiles:
+        return tiles  # stopped, or the renderer's error
+    parts = [TileSums(tile=Tile(*box), arrays=arrays) for box, arrays in zip(task.tiles, tiles["arrays"], strict=True)]
+    image = frame_image_task(FrameTask(spec=task.spec, frame=task.frame, sums=assemble(parts, task.width, task.height),
+                                       cache_size=task.cache_size), scene)
+    if "error" in image:
+        return image
+    return {**image, "seconds": tiles["seconds"], "rays": tiles["rays"], "nonfinite": tiles["nonfinite"],
+            "pid": tiles["pid"]}
 
 
 TIMECODE_FIELDS = ("hours", "minutes", "seconds", "frame", "dropFrame", "colorFrame", "fieldPhase", "bgf0", "bgf1",

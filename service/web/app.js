@@ -673,7 +673,10 @@
         h("p", { class: "muted" }, `${w.nthreads} thread(s) · CPU ${w.cpu === null ? "–" : w.cpu.toFixed(0) + "%"} · `
           + `memory ${bytes(w.memory)} of ${bytes(w.memory_limit)}`),
         w.tasks.length ? h("ul", { class: "tasks" }, w.tasks.map((t) => h("li", {},
-          t.kind === "tile" ? `tile ${t.tile}` : "assembling the EXR",
+          t.kind !== "tile" ? "assembling the EXR"
+            : (t.tiles || []).length > 4 ? `${t.tiles.length} tiles from ${t.tiles[0]}`
+            : (t.tiles || []).length > 1 ? `tiles ${t.tiles.join(", ")}`
+            : `tile ${t.tile}`,
           ` · frame ${t.frame === null ? "#" + t.frame_index : frameName(t.frame)} · job `,
           h("a", { href: `/jobs/${encodeURIComponent(t.job_id)}`, "data-internal": true }, t.job_id.slice(0, 8)))))
           : h("p", { class: "muted" }, "idle"),

@@ -328,14 +328,14 @@ _calls: dict = {}
 
 def flaky_tile(task, scene):
     """Tile 0 fails on its first attempt (a transient fault), the rest render normally."""
-    if task.tile[:2] == (0, 0) and not _calls.get("failed"):
+    if any(box[:2] == (0, 0) for box in task.tiles) and not _calls.get("failed"):
         _calls["failed"] = True
         raise RuntimeError("transient")
     return worker.render_tile_task(task, scene)
 
 
 def broken_tile(task, scene):
-    if task.tile[:2] == (0, 0):
+    if any(box[:2] == (0, 0) for box in task.tiles):
         raise RuntimeError("boom")
     return worker.render_tile_task(task, scene)
 
@@ -458,11 +458,11 @@ def test_a_running_tile_stops_when_its_future_is_cancelled(card):
     data = card.read_bytes()
     sha = hashlib.sha256(data).hexdigest()
     spec = RenderSpec.from_settings(JobCreate(width=64, height=64, spp=4096), card.name, sha)
-    task = worker.TileTask(spec=spec, frame=0.0, tile=(0, 0, 64, 64), width=64, height=64)
+    task = worker.TileTask(spec=spec, frame=0.0, tiles=((0, 0, 64, 64),), width=64, height=64)
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
             Client(cluster, set_as_default=False) as client:
         scene = client.submit(worker.scene_package, sha, card.name, data, pure=False)
-        small = worker.TileTask(spec=spec, frame=0.0, tile=(0, 0, 1, 1), width=64, height=64)
+        small = worker.TileTask(spec=spec, frame=0.0, tiles=((0, 0, 1, 1),), width=64, height=64)
         assert "arrays" in client.submit(worker.render_tile_task, small, scene, pure=False).result()  # prepared
         before = worker.stats()["stopped"]
         fut = client.submit(worker.render_tile_task, task, scene, pure=False)
