@@ -6,14 +6,17 @@ or a cancellation takes effect within about one tile's time, and waits for a tas
 
 * Workers see no file of the service: a job's scene goes to the cluster once per connection as a ``scene_package``
   task carrying the upload's bytes, and every tile task depends on it (Dask copies it to each worker that needs it).
-* A finished tile comes back as the task's result; this thread checkpoints it (atomically) on disk, then records
-  it in the database. When all tiles of a frame are recorded, they are assembled here, a worker turns the sums into
-  the EXR's channels and header (it holds the prepared frame), and this thread writes the EXR atomically; the frame
-  is marked done and its tile checkpoints are removed. The job succeeds when every frame is done.
-* A job that left the active states (canceled, failed, deleted) has its tasks cancelled (running tiles stop at their next
-  sample wave) and late results dropped.
+* Small tiles share a task: a frame's next tiles up to ``task_samples`` samples together (``JobPlan.next_work``).
+* Finished tiles come back as the task's result; this thread checkpoints each (atomically) on disk, then records
+  them in the database. When all tiles of a frame are recorded, they are assembled here, a worker turns the sums
+  into the EXR's channels and header (it holds the prepared frame), and this thread writes the EXR atomically; the
+  frame is marked done and its tile checkpoints are removed. A frame that fits in one batch does all of that in
+  one task (``worker.whole_frame_task``: no checkpoint). The job succeeds when every frame is done.
+* A job that left the active states (canceled, failed, deleted) has its tasks cancelled (running tiles stop at
+  their next sample wave) and late results dropped.
 * A task that raises (including a worker that died three times running it, Dask's ``KilledWorker``) is submitted
-  again up to ``tile_retries`` times, one database record per attempt, then the job fails with the message.
+  again up to ``tile_retries`` times, one database record per attempt and tile, then the job fails with the
+  message; the tiles of a failed batch are tried again one per task, so the tile that keeps failing is named.
   A renderer error (bad scene or settings) fails the job at once: trying again would give the same answer.
   A task lost with the connection to the scheduler (Dask cancels every future then) is not a failure: it is
   submitted again, without counting an attempt, once the engine has reconnected.

@@ -5,8 +5,8 @@ scene reaches it through Dask (a ``ScenePackage``, the upload's bytes, is the re
 which every tile task depends, so Dask copies it to a worker once and recomputes it if the worker holding it dies),
 tiles go back as task results, and the service alone writes checkpoints, frames and the database.
 
-Tasks are pure functions of their arguments (a ``RenderSpec``, the scene's bytes, a frame, a tile), so Dask may run
-them anywhere and run them again after a worker dies: the result is the same bits.
+Tasks are pure functions of their arguments (a ``RenderSpec``, the scene's bytes, a frame, a batch of tiles), so
+Dask may run them anywhere and run them again after a worker dies: the result is the same bits.
 
 **Caches, per worker process.** (1) A package is written once to a private temporary directory of the process
 (``scene files``), keyed by its content hash, and its USD stage is opened once and kept in a ``Usd.StageCache``, so
