@@ -64,13 +64,45 @@ def drt(a, scene: str, out: str, spp: int, seed: int, *extra: str, size: tuple[i
     return seconds
 
 
+def blender_fixups(scene: str) -> dict:
+    """What Blender 5.2's USD import drops from a scene, read here with pxr for ``cycles_render.py`` to rebuild:
+    materials bound to implicit Gprims (it imports the sphere without them), implicit spheres as 64 x 32 smooth
+    UV spheres (ours; it makes 92-vertex ones), dome lights (it makes no world), the frame to render (the stage's
+    start; animated transforms it does import) and the camera's shutter. Colours are linear; only what the demo
+    scene uses."""
+    from pxr import Usd, UsdGeom, UsdLux, UsdShade
+
+    stage = Usd.Stage.Open(scene)
+    fx: dict = {"frame": stage.GetStartTimeCode(), "materials": {}, "spheres": {}, "world": None, "shutter": None}
+    for prim in stage.Traverse():
+        if prim.IsA(UsdGeom.Camera) and fx["shutter"] is None:
+            cam = UsdGeom.Camera(prim)
+            fx["shutter"] = [cam.GetShutterOpenAttr().Get(), cam.GetShutterCloseAttr().Get()]
+        if prim.IsA(UsdGeom.Gprim) and not prim.IsA(UsdGeom.Mesh):
+            mat, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+            shader = mat.ComputeSurfaceSource()[0] if mat else None
+            if shader:
+                get = lambda n, d: shader.GetInput(n).Get() if shader.GetInput(n) else d  # noqa: E731
+                fx["materials"][prim.GetName()] = dict(color=list(get("diffuseColor", (0.18,) * 3)),
+                                                       roughness=float(get("roughness", 0.5)),
+                                                       metallic=float(get("metallic", 0.0)))
+        if prim.IsA(UsdGeom.Sphere):
+            fx["spheres"][prim.GetName()] = UsdGeom.Sphere(prim).GetRadiusAttr().Get()
+        if prim.IsA(UsdLux.DomeLight):
+            light = UsdLux.DomeLight(prim)
+            scale = light.GetIntensityAttr().Get() * 2.0 ** light.GetExposureAttr().Get()
+            fx["world"] = [c * scale for c in light.GetColorAttr().Get()]
+    return fx
+
+
 def cycles(a, scene: str, out: str, spp: int, seed: int, motion: bool) -> float:
     cache = out + ".json"
     if os.path.exists(out) and os.path.exists(cache):
         return json.load(open(cache))["seconds"]
     p = subprocess.run([a.bpy, f"{HERE}/cycles_render.py", os.path.abspath(scene), out, str(a.w), str(a.h),
                         str(spp), str(seed)] + (["motion"] if motion else []),
-                       capture_output=True, text=True, env=dict(os.environ, HOME=a.out))
+                       capture_output=True, text=True,
+                       env=dict(os.environ, HOME=a.out, DRT_BLENDER_FIXUPS=json.dumps(blender_fixups(scene))))
     if p.returncode:
         sys.exit(p.stderr[-2000:])
     seconds = json.loads(p.stdout.strip().splitlines()[-1])["seconds"]
