@@ -45,13 +45,11 @@ from renderer.lights.sample import (
     sample_light,
 )
 from renderer.lights.linking import lit_by, shadow_factor
-from renderer.lights.select import select_light, select_pdf
+from renderer.lights.select import infinite_light, select_light, select_pdf
 from renderer.lights.table import Lights
 from renderer.options import TIME_FILTERS
 from renderer.sampling.sobol import (
-    BOUNCE_DIRECTION,
     BOUNCE_LIGHT_CHOICE,
-    BOUNCE_LIGHT_POSITION,
     BOUNCE_LOBE,
     BOUNCE_ROULETTE,
     DIM_FILM,
@@ -61,6 +59,7 @@ from renderer.sampling.sobol import (
     DIMS_PER_BOUNCE,
     sample_1d,
     sample_2d,
+    sample_3d,
 )
 from renderer.sampling.warps import sample_tent
 from renderer.scene.model import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_DOME, LIGHT_RECT, LIGHT_SPHERE
@@ -429,14 +428,30 @@ def trace_wave_kernel(
                 alive = 0
             else:
                 dim = wp.uint32(DIM_LIGHT_BASE + bounce * DIMS_PER_BOUNCE)
-                # --- next-event estimation: one light by power, one point on it, one shadow ray
-                if lights.count > 0:
-                    li, p_sel, u_tri = select_light(
-                        lights.select, sp.p, sample_1d(seed, pixel, index, dim + wp.uint32(BOUNCE_LIGHT_CHOICE)))
-                    origin_l = offset_origin(sp.p, sp.ng)
-                    wi, dist, Le_l, pdf_l, delta = sample_light(
-                        lights, geo, mats, tex, li, origin_l, ns, s, u_tri,
-                        sample_2d(seed, pixel, index, dim + wp.uint32(BOUNCE_LIGHT_POSITION)))
+                # --- next-event estimation: each infinite light, and one finite light chosen by the light cut;
+                # a point on each and one shadow ray each
+                n_infinite = lights.select.count - lights.select.n_finite
+                n_picks = n_infinite + wp.min(lights.select.n_finite, 1)
+                # the light and the point on it from one 3D sample, so that each light's share of the pixel's
+                # samples still spreads its points well (as Cycles' 3D light pattern)
+                u_light = sample_3d(seed, pixel, index, dim + wp.uint32(BOUNCE_LIGHT_CHOICE))
+                origin_l = offset_origin(sp.p, sp.ng)
+                for pick in range(n_picks):
+                    li = int(-1)
+                    p_sel = float(1.0)
+                    u_tri = u_light[2]
+                    if pick < n_infinite:
+                        li = infinite_light(lights.select, pick)
+                    else:
+                        li, p_sel, u_tri = select_light(lights.select, sp.p, u_light[2])
+                    wi = wp.vec3(0.0)
+                    dist = float(0.0)
+                    Le_l = wp.vec3(0.0)
+                    pdf_l = float(0.0)
+                    delta = False
+                    if li >= 0:
+                        wi, dist, Le_l, pdf_l, delta = sample_light(
+                            lights, geo, mats, tex, li, origin_l, ns, s, u_tri, wp.vec2(u_light[0], u_light[1]))
                     if pdf_l > 0.0 and (Le_l[0] > 0.0 or Le_l[1] > 0.0 or Le_l[2] > 0.0) and lit_by(
                             lights.links, li, hit.inst):
                         f = lobes_eval(lobes, wi)
@@ -460,8 +475,9 @@ def trace_wave_kernel(
                                     wp.cw_mul(wp.cw_mul(wp.cw_mul(beta, f), Le_l), tr) * (cos_i * w / (p_sel * pdf_l)),
                                     nee_clamp)
                 # --- the BSDF's own direction continues the path
-                wi, weight, pdf, flags = lobes_sample(lobes, sample_1d(seed, pixel, index, dim + wp.uint32(BOUNCE_LOBE)),
-                                                      sample_2d(seed, pixel, index, dim + wp.uint32(BOUNCE_DIRECTION)))
+                # the lobe and the direction from one 3D sample, so that each lobe's share keeps spread directions
+                u_bsdf = sample_3d(seed, pixel, index, dim + wp.uint32(BOUNCE_LOBE))
+                wi, weight, pdf, flags = lobes_sample(lobes, u_bsdf[2], wp.vec2(u_bsdf[0], u_bsdf[1]))
                 if pdf <= 0.0 or not finite3(weight) or (weight[0] <= 0.0 and weight[1] <= 0.0 and weight[2] <= 0.0):
                     alive = 0
                 else:

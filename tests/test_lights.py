@@ -9,8 +9,8 @@ import warp as wp
 from renderer.lights.select import Selection, select_light
 from renderer.lights.select import select_pdf as light_select_pdf
 from renderer.lights.table import delivered_irradiance, upload_lights
-from renderer.scene.model import (LIGHT_DOME, LIGHT_RECT, LIGHT_SPHERE, Camera, Instance, Light, Material, Mesh,
-                            MotionTransform, Scene)
+from renderer.scene.model import (LIGHT_DISTANT, LIGHT_DOME, LIGHT_RECT, LIGHT_SPHERE, Camera, Instance, Light,
+                                   Material, Mesh, MotionTransform, Scene)
 
 
 def translate(x, y, z):
@@ -59,7 +59,10 @@ def test_equal_lights_at_equal_distance_are_equally_likely():
 
 # --------------------------------------------------------------------------- spatially aware selection
 def test_selection_kernel_frequencies_match_its_pdf():
-    """select_light's choices at a point, over many uniform numbers, follow select_pdf (and the pdfs sum to 1)."""
+    """select_light's choices at a point, over many uniform numbers, follow select_pdf: the finite lights' pdfs
+    sum to 1; the dome is not among the choices, it is sampled at every point (pdf 1, ``infinite_light``)."""
+    from renderer.lights.select import infinite_light
+
     lights = [Light(LIGHT_SPHERE, f"s{i}", (1.0 + i % 3, 1, 1), MotionTransform.static(translate(i * 0.5, 1, 0)),
                     radius=0.05) for i in range(40)]
     lights.append(Light(LIGHT_DOME, "sky", (0.2, 0.2, 0.2), MotionTransform.static(np.eye(4))))
@@ -67,7 +70,7 @@ def test_selection_kernel_frequencies_match_its_pdf():
 
     @wp.kernel
     def run(sel: Selection, p: wp.vec3, picks: wp.array(dtype=wp.int32), probs: wp.array(dtype=wp.float32),
-            pdfs: wp.array(dtype=wp.float32)):
+            pdfs: wp.array(dtype=wp.float32), sky: wp.array(dtype=wp.int32)):
         i = wp.tid()
         u = (float(i) + 0.5) / float(picks.shape[0])
         li, pr, _ = select_light(sel, p, u)
@@ -75,19 +78,45 @@ def test_selection_kernel_frequencies_match_its_pdf():
         probs[i] = pr - light_select_pdf(sel, li, p)
         if i < pdfs.shape[0]:
             pdfs[i] = light_select_pdf(sel, i, p)
+        if i == 0:
+            sky[0] = sel.count - sel.n_finite
+            sky[1] = infinite_light(sel, 0)
 
     m = 200000
     picks = wp.zeros(m, dtype=wp.int32)
     probs = wp.zeros(m, dtype=wp.float32)
     pdfs = wp.zeros(n, dtype=wp.float32)
-    wp.launch(run, m, [lt.select, wp.vec3(3.0, 0.0, 0.0), picks, probs, pdfs])
+    sky = wp.zeros(2, dtype=wp.int32)
+    wp.launch(run, m, [lt.select, wp.vec3(3.0, 0.0, 0.0), picks, probs, pdfs, sky])
     pdf = pdfs.numpy()
-    assert abs(pdf.sum() - 1.0) < 1e-5 and (pdf > 0).all()
+    assert abs(pdf[:40].sum() - 1.0) < 1e-5 and (pdf > 0).all() and pdf[40] == 1.0
+    assert sky.numpy().tolist() == [1, 40]
     freq = np.bincount(picks.numpy(), minlength=n) / m
-    np.testing.assert_allclose(freq, pdf, atol=2e-4)
+    np.testing.assert_allclose(freq[:40], pdf[:40], atol=2e-4)
+    assert freq[40] == 0.0
     assert np.abs(probs.numpy()).max() < 1e-6
     near, far = pdf[6], pdf[39]  # the light above x = 3 against one 16.5 units away
     assert near > 20 * far
+
+
+def test_with_only_infinite_lights_nothing_is_chosen_by_the_cut():
+    from renderer.lights.select import infinite_light
+
+    lights = [Light(LIGHT_DOME, "sky", (0.2, 0.2, 0.2), MotionTransform.static(np.eye(4))),
+              Light(LIGHT_DISTANT, "sun", (5.0, 5.0, 5.0), MotionTransform.static(np.eye(4)))]
+    lt, n = upload_lights(unit_scene(lights))
+
+    @wp.kernel
+    def run(sel: Selection, out: wp.array(dtype=wp.float32)):
+        li, pr, _ = select_light(sel, wp.vec3(0.0), 0.5)
+        out[0] = float(li)
+        out[1] = float(sel.count - sel.n_finite)
+        out[2] = float(infinite_light(sel, 0) + 10 * infinite_light(sel, 1))
+        out[3] = light_select_pdf(sel, 0, wp.vec3(0.0)) + light_select_pdf(sel, 1, wp.vec3(0.0))
+
+    out = wp.zeros(4, dtype=wp.float32)
+    wp.launch(run, 1, [lt.select, out])
+    assert out.numpy().tolist() == [-1.0, 2.0, 10.0, 2.0]
 
 
 def row_of_lights_scene(tmp_path, n=1000):

@@ -204,3 +204,84 @@ def test_integration_converges_faster_than_monte_carlo():
     assert rmse < 0.1 * iid_rmse, f"RMSE {rmse:.2e} vs iid {iid_rmse:.2e}"
     # The estimator is unbiased across pixels (Owen scrambling): the mean error is within a few standard errors.
     assert abs(estimates.mean() - exact) < 4 * estimates.std() / np.sqrt(len(pixels)) + 1e-7
+
+
+# ---------------------------------------------------------------------------------------------- 3D requests
+
+
+@wp.kernel
+def k_samples_3d(seed: wp.uint32, pixel: wp.array(dtype=wp.uint32), index: wp.array(dtype=wp.uint32),
+                 dim: wp.uint32, out: wp.array(dtype=wp.vec3)):
+    i = wp.tid()
+    out[i] = SM.sample_3d(seed, pixel[i], index[i], dim)
+
+
+def warp_samples_3d(seed: int, pixel, index, dim: int) -> np.ndarray:
+    pixel, index = (np.ascontiguousarray(a, dtype=np.uint32).ravel() for a in np.broadcast_arrays(pixel, index))
+    out = wp.zeros(len(index), dtype=wp.vec3)
+    wp.launch(k_samples_3d, dim=len(index), inputs=[wp.uint32(seed), wp.array(pixel, dtype=wp.uint32),
+                                                    wp.array(index, dtype=wp.uint32), wp.uint32(dim), out],
+              device="cpu")
+    return out.numpy()
+
+
+def test_sobol_third_dimension_is_joe_kuo():
+    """Index order values, and the first 2^k points of the three unscrambled dimensions are scipy's Sobol points."""
+    from scipy.stats import qmc
+
+    np.testing.assert_array_equal(SM.np_sobol_dim2(np.arange(8)) / 2.0**32,
+                                  [0, 0.5, 0.75, 0.25, 0.375, 0.875, 0.625, 0.125])
+    idx = np.arange(1024, dtype=np.uint32)
+    ours = np.stack([SM.np_reverse_bits32(idx), SM.np_sobol_dim1(idx), SM.np_sobol_dim2(idx)], -1) / 2.0**32
+    ref = qmc.Sobol(3, scramble=False).random(1024)  # Gray-code order: equal as sets over 2^k
+    for k in (2, 5, 10):
+        a, b = ours[: 2**k], ref[: 2**k]
+        np.testing.assert_array_equal(a[np.lexsort(a.T[::-1])], b[np.lexsort(b.T[::-1])])
+
+
+def test_3d_warp_matches_numpy_and_extends_2d():
+    rng = np.random.default_rng(5)
+    pixel = rng.integers(0, 2**32, 20_000, dtype=np.uint64).astype(np.uint32)
+    index = rng.integers(0, 2**32, 20_000, dtype=np.uint64).astype(np.uint32)
+    index[:4] = [0, 1, 2**31, 2**32 - 1]
+    for seed, dim in ((0, 5), (77, 2**31 + 3)):
+        w = warp_samples_3d(seed, pixel, index, dim)
+        n = SM.np_sample_3d(seed, pixel, index, dim)
+        np.testing.assert_array_equal(w.view(np.uint32), n.view(np.uint32))
+        np.testing.assert_array_equal(n[:, :2], SM.np_sample_2d(seed, pixel, index, dim))
+        assert n.min() >= 0.0 and n.max() < 1.0
+
+
+def elementary_counts(points: np.ndarray, exps: tuple[int, ...]) -> np.ndarray:
+    cells = np.zeros(len(points), np.int64)
+    for d, e in enumerate(exps):
+        cells = cells * 2**e + np.floor(points[:, d] * 2**e).astype(np.int64)
+    return np.bincount(cells, minlength=2 ** sum(exps))
+
+
+@pytest.mark.parametrize("m", [5, 6, 8])
+def test_first_2_pow_m_3d_samples_form_a_1m3_net(m):
+    """Every elementary box of volume 2^(1-m) holds exactly 2 points (Sobol's first three dimensions: t = 1), so
+    the samples that make one binary choice on z keep a (1, m-1, 2)-net in (x, y): a light's or a lobe's share
+    of a pixel's samples is still well spread over the light or the directions."""
+    for seed, pixel, dim in [(0, 0, 5), (3, 4321, 8), (2**32 - 1, 99, 2**20)]:
+        pts = SM.np_sample_3d(seed, pixel, np.arange(2**m), dim)
+        for a in range(m):
+            for b in range(m - a):
+                c = m - 1 - a - b
+                assert (elementary_counts(pts, (a, b, c)) == 2).all(), (seed, pixel, dim, a, b, c)
+
+
+def test_3d_choice_keeps_its_points_spread_better_than_independent_dimensions():
+    """The point: choose 'light A' when z < 1/3 (64 samples, ~21 of them) and look at how evenly those land in
+    the 4 x 4 cells of (x, y). With one 3D request the counts stay near 21/16 per cell; with the choice from an
+    unrelated dimension they scatter as for random points."""
+    spread_3d, spread_indep = [], []
+    for pixel in range(300):
+        p3 = SM.np_sample_3d(1, pixel, np.arange(64), 5)
+        chosen = p3[p3[:, 2] < 1 / 3, :2]
+        spread_3d.append(np.var(elementary_counts(chosen, (2, 2))))
+        z = SM.np_sample_1d(1, pixel, np.arange(64), 40)
+        chosen = SM.np_sample_2d(1, pixel, np.arange(64), 5)[z < 1 / 3]
+        spread_indep.append(np.var(elementary_counts(chosen, (2, 2))))
+    assert np.mean(spread_3d) < 0.6 * np.mean(spread_indep)

@@ -1,18 +1,22 @@
-"""Choosing the light a shading point samples, in proportion to what each can deliver there.
+"""Choosing the lights a shading point samples: every infinite light, and one finite light chosen by a light cut.
 
-A two-level light cut, spatially aware: finite lights are grouped into at most ``MAX_CLUSTERS`` spatial
-clusters (recursive median splits along the widest axis); each infinite light (distant, dome) is a cluster of
-its own. At a shading point p a cluster is chosen in proportion to its estimated irradiance at p,
+**Infinite lights** (dome, distant) are each sampled at every shading point, with their own shadow ray
+(``infinite_light``; selection probability 1). Choosing between a sky and a lamp by a coin flip weighted by
+their estimated irradiance made the flip itself the noise: on the demo scene (a rect light and a dome lighting
+the same floor about equally) 64-spp relMSE was 8x that of either light alone.
 
-    finite:   min(Phi_c / (4 pi max(|p - centre_c|^2, R_c^2)), pi * cap_c)    (Phi_c the cluster's power,
-              R_c its radius, cap_c the brightest radiance in it: no light outshines a dome of its radiance)
-    infinite: the irradiance it delivers (distant: E; dome: pi * mean radiance),
+**Finite lights**: a two-level light cut, spatially aware: they are grouped into at most ``MAX_CLUSTERS`` spatial
+clusters (recursive median splits along the widest axis). At a shading point p a cluster is chosen in proportion
+to its estimated irradiance at p,
 
-then a light inside it in proportion to its power. Every light keeps a non-zero probability everywhere, so the
-estimate stays unbiased; near lights are chosen far more often than far ones, which is what keeps a row of a
-thousand lights quiet. ``select_pdf`` gives the same probability for a light found by BSDF sampling (MIS).
-Cost per shading point: O(clusters). With ``clusters=False`` all finite lights form one cluster (selection by
-power, as before).
+    min(Phi_c / (4 pi max(|p - centre_c|^2, R_c^2)), pi * cap_c)    (Phi_c the cluster's power, R_c its radius,
+                                                                     cap_c the brightest radiance in it)
+
+then a light inside it in proportion to its power. Every finite light keeps a non-zero probability everywhere, so
+the estimate stays unbiased; near lights are chosen far more often than far ones, which is what keeps a row of a
+thousand lights quiet. ``select_pdf`` gives the same probability for a light found by BSDF sampling (MIS): 1 for
+an infinite light. Cost per shading point: O(finite clusters). With ``clusters=False`` all finite lights form
+one cluster (selection by power).
 """
 from __future__ import annotations
 
@@ -41,7 +45,8 @@ class SelectEstimate:
 @by_reference
 @wp.struct
 class Selection:
-    count: int  # clusters
+    count: int  # clusters: the finite ones first, then one per infinite light
+    n_finite: int  # finite clusters
     kind: wp.array(dtype=wp.int32)  # 0 finite, 1 infinite
     centre: wp.array(dtype=wp.vec3)
     radius2: wp.array(dtype=wp.float32)  # squared radius (the distance below which the estimate stops rising)
@@ -66,7 +71,7 @@ def _split(idx: np.ndarray, pos: np.ndarray, leaf: int) -> list[np.ndarray]:
 
 
 def build_clusters(est: list[SelectEstimate], clusters: bool = True) -> list[np.ndarray]:
-    """Light indices per cluster: finite lights split spatially, each infinite light alone."""
+    """Light indices per cluster: finite lights split spatially, then each infinite light alone."""
     fin = np.array([i for i, e in enumerate(est) if e.finite], np.int64)
     groups: list[np.ndarray] = []
     if len(fin):
@@ -118,6 +123,7 @@ def upload_selection(est: list[SelectEstimate], device: str, clusters: bool = Tr
             cap.append(3.0e38)
     s = Selection()
     s.count = len(groups)
+    s.n_finite = sum(1 for g in groups if est[g[0]].finite)
     i32 = lambda a: wp.array(np.array(a or [0], np.int32), dtype=wp.int32, device=device)  # noqa: E731
     f32 = lambda a: wp.array(np.array(a or [0.0], np.float32), dtype=wp.float32, device=device)  # noqa: E731
     s.kind, s.first, s.n, s.order = i32(kinds), i32(first), i32(ns), i32(order)
@@ -144,18 +150,25 @@ def cluster_weight(sel: Selection, c: int, p: wp.vec3):
 
 
 @wp.func
+def infinite_light(sel: Selection, k: int) -> int:
+    """The k-th infinite light (0 <= k < ``sel.count - sel.n_finite``), sampled at every shading point."""
+    return sel.order[sel.first[sel.n_finite + k]]
+
+
+@wp.func
 def select_light(sel: Selection, p: wp.vec3, u: float):
-    """A light chosen at p from one uniform number: (index, its probability, u rescaled to [0, 1) again)."""
+    """A finite light chosen at p from one uniform number: (index, its probability, u rescaled to [0, 1) again);
+    index -1 when no finite light can deliver anything."""
     total = float(0.0)
-    for c in range(sel.count):
+    for c in range(sel.n_finite):
         total += cluster_weight(sel, c, p)
     if not (total > 0.0):
-        return int(0), 0.0, u
+        return int(-1), 0.0, u
     target = u * total
     acc = float(0.0)
-    chosen = sel.count - 1
+    chosen = sel.n_finite - 1
     w_c = float(0.0)
-    for c in range(sel.count):
+    for c in range(sel.n_finite):
         w = cluster_weight(sel, c, p)
         if acc + w > target and w > 0.0:
             chosen = c
@@ -163,7 +176,7 @@ def select_light(sel: Selection, p: wp.vec3, u: float):
             break
         acc += w
     if w_c <= 0.0:  # rounding at the top end: the last cluster with weight
-        for c in range(sel.count):
+        for c in range(sel.n_finite):
             w = cluster_weight(sel, c, p)
             if w > 0.0:
                 chosen = c
@@ -188,10 +201,13 @@ def select_light(sel: Selection, p: wp.vec3, u: float):
 
 @wp.func
 def select_pdf(sel: Selection, li: int, p: wp.vec3):
-    """Probability that ``select_light`` at p returns light li."""
+    """Probability that light li is sampled at p: 1 for an infinite light, ``select_light``'s for a finite one."""
+    c = sel.light_cluster[li]
+    if sel.kind[c] == 1:
+        return 1.0
     total = float(0.0)
-    for c in range(sel.count):
-        total += cluster_weight(sel, c, p)
+    for k in range(sel.n_finite):
+        total += cluster_weight(sel, k, p)
     if not (total > 0.0):
         return 0.0
-    return cluster_weight(sel, sel.light_cluster[li], p) / total * sel.light_p[li]
+    return cluster_weight(sel, c, p) / total * sel.light_p[li]

@@ -5,8 +5,8 @@ lights from their outer surface; a distant light arrives along its local -Z with
 a dome light from every direction (a constant colour or a lat-long texture, see ``envmap``); emissive meshes
 from both faces (as Cycles does).
 
-A shading point samples ONE light, chosen by ``select`` in proportion to the irradiance each can deliver at that
-point (spatial clusters of finite lights, each infinite light alone; see ``select``). ``select_pdf`` /
+A shading point samples every infinite light and ONE finite light, chosen by ``select`` in proportion to the
+irradiance each can deliver at that point (spatial clusters of finite lights; see ``select``). ``select_pdf`` /
 ``select_cdf`` keep the scene-wide estimate (delivered at the scene's centre, capped at pi times the radiance) for
 tools and tests. The sampling routines are in ``sample``.
 """

@@ -25,9 +25,11 @@ quadrant counts of (dim a, dim b) satisfy N00 = N11). Every cell is still equall
 unbiased; correlations are about 1.2x those of independent sequences, and integration error matches that of a
 random per-wave permutation (measured while writing tests/test_sampler.py).
 
-``sample_1d(.., dim)`` equals ``sample_2d(.., dim).x``: a 1D request uses the same pattern with one coordinate.
-A 2D request at ``dim`` consumes dims ``dim`` and ``dim + 1`` (its shuffle is keyed by ``dim``, the first of the
-pair); callers must not also request ``dim + 1`` on its own.
+``sample_1d(.., dim)`` equals ``sample_2d(.., dim).x``, and ``sample_2d(.., dim)`` the first two coordinates of
+``sample_3d(.., dim)``: a request uses one pattern with as many coordinates as it needs (Sobol's first three
+dimensions; in 3D the first 2^m samples form a (1, m, 3)-net). A 2D request at ``dim`` consumes dims ``dim`` and
+``dim + 1`` (its shuffle is keyed by ``dim``, the first), a 3D one ``dim`` .. ``dim + 2``; callers must not also
+request those on their own.
 
 Dimension allocation (the integrator follows this table; ``b`` is the bounce, 0 for the camera ray's first hit):
 
@@ -37,10 +39,10 @@ dims                                               request      use
 ``DIM_FILM`` = 0, 1                                ``2d``       position on the film inside the pixel
 ``DIM_TIME`` = 2                                   ``1d``       time within the shutter (box, or ``sample_tent``)
 ``DIM_LENS`` = 3, 4                                ``2d``       position on the lens (concentric disk)
-``DIM_LIGHT_BASE + b * DIMS_PER_BOUNCE`` + 0       ``1d``       choosing a light at bounce ``b``
-``DIM_LIGHT_BASE + b * DIMS_PER_BOUNCE`` + 1, 2    ``2d``       position on the chosen light
-``DIM_LIGHT_BASE + b * DIMS_PER_BOUNCE`` + 3       ``1d``       choosing a BSDF lobe
-``DIM_LIGHT_BASE + b * DIMS_PER_BOUNCE`` + 4, 5    ``2d``       the BSDF direction (gloss, translucency)
+``DIM_LIGHT_BASE + b * DIMS_PER_BOUNCE`` + 0..2    ``3d``       bounce ``b``'s lights: a point on each (x, y), the
+                                                                finite light the cut chooses (z)
+``DIM_LIGHT_BASE + b * DIMS_PER_BOUNCE`` + 3..5    ``3d``       the BSDF: a direction (x, y; gloss, translucency),
+                                                                the lobe (z)
 ``DIM_LIGHT_BASE + b * DIMS_PER_BOUNCE`` + 6       ``1d``       Russian roulette
 =================================================  ===========  ==========================================
 
@@ -59,10 +61,8 @@ DIM_TIME = 2
 DIM_LENS = 3
 DIM_LIGHT_BASE = 5  # first dimension of bounce 0
 DIMS_PER_BOUNCE = 7
-BOUNCE_LIGHT_CHOICE = 0
-BOUNCE_LIGHT_POSITION = 1
-BOUNCE_LOBE = 3
-BOUNCE_DIRECTION = 4
+BOUNCE_LIGHT_CHOICE = 0  # a 3D request: the point on the light and the choice of light together
+BOUNCE_LOBE = 3  # a 3D request: the BSDF direction and the choice of lobe together
 BOUNCE_ROULETTE = 6
 
 # Largest float32 below 1 (0x1.fffffep-1); every sample is <= this.
@@ -81,6 +81,7 @@ W_O1 = wp.constant(wp.uint32(_O1))
 W_O2 = wp.constant(wp.uint32(_O2))
 W_O3 = wp.constant(wp.uint32(_O3))
 W_SOBOL_V1 = wp.constant(wp.uint32(_SOBOL_V1))
+W_SOBOL2_V2 = wp.constant(wp.uint32(0xC0000000))  # Sobol's third dimension: v_2 = m_2 2^30, m_2 = 3
 W_MASK1 = wp.constant(wp.uint32(0x55555555))
 W_MASK2 = wp.constant(wp.uint32(0x33333333))
 W_MASK4 = wp.constant(wp.uint32(0x0F0F0F0F))
@@ -152,6 +153,24 @@ def sobol_dim1(index: wp.uint32) -> wp.uint32:
 
 
 @wp.func
+def sobol_dim2(index: wp.uint32) -> wp.uint32:
+    """Sobol's third dimension (32-bit fraction): primitive polynomial x^2 + x + 1, m = (1, 3), Joe & Kuo's
+    direction numbers: m_k = 2 m_(k-1) ^ 4 m_(k-2) ^ m_(k-2), v_k = m_k 2^(32-k). Branch-free like ``sobol_dim1``."""
+    r = wp.uint32(0)
+    m2 = wp.uint32(1)  # m_(k-2)
+    m1 = wp.uint32(3)  # m_(k-1)
+    r = r ^ (W_SOBOL_V1 & (wp.uint32(0) - (index & wp.uint32(1))))
+    r = r ^ (W_SOBOL2_V2 & (wp.uint32(0) - ((index >> wp.uint32(1)) & wp.uint32(1))))
+    for k in range(3, 33):
+        m = (m1 << wp.uint32(1)) ^ (m2 << wp.uint32(2)) ^ m2
+        v = m << wp.uint32(32 - k)
+        r = r ^ (v & (wp.uint32(0) - ((index >> wp.uint32(k - 1)) & wp.uint32(1))))
+        m2 = m1
+        m1 = m
+    return r
+
+
+@wp.func
 def u32_to_unit_float(x: wp.uint32) -> float:
     """Top 24 bits as a float32 in [0, 1 - 2^-24], exact."""
     return wp.float32(x >> wp.uint32(8)) * W_TO_UNIT
@@ -174,6 +193,20 @@ def sample_2d(seed: wp.uint32, pixel: wp.uint32, index: wp.uint32, dim: wp.uint3
     x = owen_scramble(reverse_bits32(i), mix32(h + wp.uint32(1)))
     y = owen_scramble(sobol_dim1(i), mix32(h + wp.uint32(2)))
     return wp.vec2(u32_to_unit_float(x), u32_to_unit_float(y))
+
+
+@wp.func
+def sample_3d(seed: wp.uint32, pixel: wp.uint32, index: wp.uint32, dim: wp.uint32) -> wp.vec3:
+    """A point in [0, 1)^3 for dimensions ``dim`` .. ``dim + 2``, stratified jointly (Sobol's first three dimensions
+    over one shuffled index): its first two coordinates are ``sample_2d(.., dim)``. For a discrete choice and a
+    2D point that depend on each other (a light and a point on it): the samples that make one choice keep
+    well-spread 2D points, which two independent requests would not."""
+    h = pattern_hash(seed, pixel, dim)
+    i = owen_scramble(index, h)
+    x = owen_scramble(reverse_bits32(i), mix32(h + wp.uint32(1)))
+    y = owen_scramble(sobol_dim1(i), mix32(h + wp.uint32(2)))
+    z = owen_scramble(sobol_dim2(i), mix32(h + wp.uint32(3)))
+    return wp.vec3(u32_to_unit_float(x), u32_to_unit_float(y), u32_to_unit_float(z))
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -243,6 +276,20 @@ def np_sobol_dim1(index) -> np.ndarray:
     return r
 
 
+def np_sobol_dim2(index) -> np.ndarray:
+    i = _u32(index)
+    r = np.zeros_like(i)
+    m2, m1 = 1, 3
+    r = r ^ np.where((i & _U(1)) != 0, _U(0x80000000), _U(0)).astype(np.uint32)
+    r = r ^ np.where(((i >> _U(1)) & _U(1)) != 0, _U(0xC0000000), _U(0)).astype(np.uint32)
+    for k in range(3, 33):
+        m = ((m1 << 1) ^ (m2 << 2) ^ m2) & 0xFFFFFFFF
+        v = _U((m << (32 - k)) & 0xFFFFFFFF)
+        r = r ^ np.where(((i >> _U(k - 1)) & _U(1)) != 0, v, _U(0)).astype(np.uint32)
+        m2, m1 = m1, m
+    return r
+
+
 def np_u32_to_unit_float(x) -> np.ndarray:
     return (_u32(x) >> _U(8)).astype(np.float32) * np.float32(2.0**-24)
 
@@ -266,3 +313,15 @@ def np_sample_2d(seed, pixel, index, dim) -> np.ndarray:
         x = np_owen_scramble(np_reverse_bits32(i), np_mix32(h + _U(1)))
         y = np_owen_scramble(np_sobol_dim1(i), np_mix32(h + _U(2)))
         return np.stack([np_u32_to_unit_float(x), np_u32_to_unit_float(y)], axis=-1)
+
+
+def np_sample_3d(seed, pixel, index, dim) -> np.ndarray:
+    """NumPy twin of ``sample_3d``: float32 array of the broadcast shape + (3,), bit-identical to Warp."""
+    with np.errstate(over="ignore"):
+        seed, pixel, index, dim = np.broadcast_arrays(_u32(seed), _u32(pixel), _u32(index), _u32(dim))
+        h = np_pattern_hash(seed, pixel, dim)
+        i = np_owen_scramble(index, h)
+        x = np_owen_scramble(np_reverse_bits32(i), np_mix32(h + _U(1)))
+        y = np_owen_scramble(np_sobol_dim1(i), np_mix32(h + _U(2)))
+        z = np_owen_scramble(np_sobol_dim2(i), np_mix32(h + _U(3)))
+        return np.stack([np_u32_to_unit_float(x), np_u32_to_unit_float(y), np_u32_to_unit_float(z)], axis=-1)
