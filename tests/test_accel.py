@@ -4,7 +4,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from renderer.accel.intersect import Geometry, intersect_closest
+from renderer.accel.intersect import Geometry, instance_object_to_world, instance_world_to_object, intersect_closest
+from renderer.motion.kernels import keys_matrix
 from renderer.shading.materials import Materials, upload_material_textures, upload_materials
 from renderer.accel.occlusion import transmittance
 from renderer.shading.textures import Textures
@@ -53,6 +54,9 @@ def make_scene(rng):
         Instance(0, make_transform([0, 0.5, 1], [rot_y(0, (3, 0, 0)), rot_y(90, (3, 1, 0)), rot_y(180, (3, 1, 0))])),
         Instance(1, make_transform([0, 1], [rot_y(0, (-3, 0, 0)), rot_y(30, (-2, 0, 1))])),
         Instance(1, MotionTransform.static(rot_y(45, (0, 0, -3))), visible_from=0.25, visible_to=0.75),
+        # only its translation moves: the matrices come from the still ones and the translation at s
+        Instance(0, make_transform([0, 0.5, 1], [rot_y(30, (0, 2, 0)), rot_y(30, (0.5, 2.5, 0)),
+                                                  rot_y(30, (1.5, 2, 0.5))])),
     ]
     cam = Camera("cam", MotionTransform.static(np.eye(4)))
     return Scene(meshes, instances, [Material("m", opacity=0.5)], [], cam, 0, 0, 1)
@@ -158,3 +162,24 @@ def test_cost_of_a_ray_does_not_depend_on_speed():
         xf = make_transform([0, 1], [np.eye(4), rot_y(0, (speed, 0, 0))])
         klo, khi = instance_key_bounds(Instance(0, xf), bvh, mesh.point_times.astype(np.float64), 3)
         np.testing.assert_allclose(khi - klo, np.tile(still_size, (3, 1)), rtol=1e-4, atol=1e-4)
+
+
+@wp.kernel
+def _instance_matrices(geo: Geometry, inst: int, times: wp.array(dtype=float), w2o: wp.array(dtype=wp.mat44),
+                       o2w: wp.array(dtype=wp.mat44), general: wp.array(dtype=wp.mat44)):
+    i = wp.tid()
+    w2o[i] = instance_world_to_object(geo, inst, times[i])
+    o2w[i] = instance_object_to_world(geo, inst, times[i])
+    general[i] = wp.inverse(keys_matrix(geo.keys, geo.inst_xf_off[inst], geo.inst_xf_count[inst], times[i]))
+
+
+def test_translate_only_motion_takes_the_short_path_and_agrees_with_the_general_one():
+    geo, _ = upload_geometry(make_scene(np.random.default_rng(3)))
+    assert geo.inst_translate_only.numpy().tolist() == [0, 0, 0, 0, 1]  # still, rotating, rotating, still, moving
+    s = np.linspace(0, 1, 41).astype(np.float32)
+    out = [wp.zeros(len(s), dtype=wp.mat44) for _ in range(3)]
+    wp.launch(_instance_matrices, len(s), [geo, 4, wp.array(s, dtype=float), *out])
+    w2o, o2w, general = (a.numpy() for a in out)
+    np.testing.assert_allclose(w2o, general, atol=1e-5)
+    np.testing.assert_allclose(np.einsum("nij,njk->nik", o2w, w2o), np.broadcast_to(np.eye(4), w2o.shape), atol=1e-5)
+    np.testing.assert_allclose(o2w[20][:3, 3], [0.5, 2.5, 0.0], atol=1e-6)  # the middle key, exactly at s = 0.5

@@ -77,6 +77,9 @@ class Geometry:
     inst_xf_count: wp.array(dtype=wp.int32)
     inst_w2o: wp.array(dtype=wp.mat44)  # world-to-object for still instances (xf_count == 1)
     inst_o2w: wp.array(dtype=wp.mat44)  # object-to-world for still instances
+    # 1: a moving instance whose keys differ only in translation: its matrices are inst_o2w / inst_w2o with the
+    # translation interpolated (no slerp, no 4x4 inverse per visit)
+    inst_translate_only: wp.array(dtype=wp.int32)
     inst_vis_from: wp.array(dtype=wp.float32)
     inst_vis_to: wp.array(dtype=wp.float32)
     keys: MotionKeys
@@ -180,9 +183,24 @@ def mesh_keys_at(geo: Geometry, m: int, s: float):
 
 
 @wp.func
+def instance_translation(geo: Geometry, inst: int, s: float):
+    """The translation of a moving instance's transform at time s (its keys' translations interpolated)."""
+    i, j, u = find_segment(geo.keys.times, geo.inst_xf_off[inst], geo.inst_xf_count[inst], s)
+    return wp.lerp(geo.keys.translation[i], geo.keys.translation[j], u)
+
+
+@wp.func
 def instance_world_to_object(geo: Geometry, inst: int, s: float):
     if geo.inst_xf_count[inst] == 1:
         return geo.inst_w2o[inst]
+    if geo.inst_translate_only[inst] != 0:  # [A | -A t(s)], A the constant inverse of the linear part
+        m = geo.inst_w2o[inst]
+        t = instance_translation(geo, inst, s)
+        return wp.mat44(
+            m[0, 0], m[0, 1], m[0, 2], -(m[0, 0] * t[0] + m[0, 1] * t[1] + m[0, 2] * t[2]),
+            m[1, 0], m[1, 1], m[1, 2], -(m[1, 0] * t[0] + m[1, 1] * t[1] + m[1, 2] * t[2]),
+            m[2, 0], m[2, 1], m[2, 2], -(m[2, 0] * t[0] + m[2, 1] * t[1] + m[2, 2] * t[2]),
+            0.0, 0.0, 0.0, 1.0)
     return wp.inverse(keys_matrix(geo.keys, geo.inst_xf_off[inst], geo.inst_xf_count[inst], s))
 
 
@@ -190,6 +208,11 @@ def instance_world_to_object(geo: Geometry, inst: int, s: float):
 def instance_object_to_world(geo: Geometry, inst: int, s: float):
     if geo.inst_xf_count[inst] == 1:
         return geo.inst_o2w[inst]
+    if geo.inst_translate_only[inst] != 0:
+        m = geo.inst_o2w[inst]
+        t = instance_translation(geo, inst, s)
+        return wp.mat44(m[0, 0], m[0, 1], m[0, 2], t[0], m[1, 0], m[1, 1], m[1, 2], t[1],
+                        m[2, 0], m[2, 1], m[2, 2], t[2], 0.0, 0.0, 0.0, 1.0)
     return keys_matrix(geo.keys, geo.inst_xf_off[inst], geo.inst_xf_count[inst], s)
 
 

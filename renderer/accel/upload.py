@@ -151,6 +151,11 @@ def upload_csg(g: Geometry, scene: Scene, device: str = "cpu") -> None:
     g.csg_members = _i32([i for m in members for i in m] or [0], device)
 
 
+def _translate_only(xf: MotionTransform) -> bool:
+    """A moving transform whose keys share one rotation and one scale (only the translation moves)."""
+    return xf.num_keys > 1 and bool(np.all(xf.rotation == xf.rotation[0]) and np.all(xf.scale == xf.scale[0]))
+
+
 def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, GeometryStats]:
     """Build both BVH levels of a scene and upload everything a ray needs."""
     import time
@@ -242,6 +247,7 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     o2w = [matrix_at(inst.transform, 0.0) for inst in scene.instances] or [np.eye(4)]
     g.inst_o2w = wp.array(np.array(o2w, np.float32), dtype=wp.mat44, device=device)
     g.inst_w2o = wp.array(np.array([np.linalg.inv(m) for m in o2w], np.float32), dtype=wp.mat44, device=device)
+    g.inst_translate_only = _i32([int(_translate_only(inst.transform)) for inst in scene.instances] or [0], device)
     g.inst_vis_from = _f32([inst.visible_from for inst in scene.instances] or [0.0], device)
     g.inst_vis_to = _f32([inst.visible_to for inst in scene.instances] or [1.0], device)
     upload_csg(g, scene, device)
