@@ -153,21 +153,25 @@ def sobol_dim1(index: wp.uint32) -> wp.uint32:
 
 
 @wp.func
-def sobol_dim2(index: wp.uint32) -> wp.uint32:
-    """Sobol's third dimension (32-bit fraction): primitive polynomial x^2 + x + 1, m = (1, 3), Joe & Kuo's
-    direction numbers: m_k = 2 m_(k-1) ^ 4 m_(k-2) ^ m_(k-2), v_k = m_k 2^(32-k). Branch-free like ``sobol_dim1``."""
-    r = wp.uint32(0)
-    m2 = wp.uint32(1)  # m_(k-2)
-    m1 = wp.uint32(3)  # m_(k-1)
-    r = r ^ (W_SOBOL_V1 & (wp.uint32(0) - (index & wp.uint32(1))))
-    r = r ^ (W_SOBOL2_V2 & (wp.uint32(0) - ((index >> wp.uint32(1)) & wp.uint32(1))))
-    for k in range(3, 33):
-        m = (m1 << wp.uint32(1)) ^ (m2 << wp.uint32(2)) ^ m2
-        v = m << wp.uint32(32 - k)
-        r = r ^ (v & (wp.uint32(0) - ((index >> wp.uint32(k - 1)) & wp.uint32(1))))
-        m2 = m1
-        m1 = m
-    return r
+def sobol_dims12(index: wp.uint32):
+    """Sobol's second and third dimensions (32-bit fractions) in one pass over the index's bits.
+
+    The third: primitive polynomial x^2 + x + 1, m = (1, 3) (Joe & Kuo); as 32-bit direction numbers
+    v_k = v_(k-1) ^ v_(k-2) ^ (v_(k-2) >> 2) from v_1 = 2^31, v_2 = 3 * 2^30. Branch-free like ``sobol_dim1``."""
+    r1 = wp.uint32(0)
+    r2 = wp.uint32(0)
+    v1 = W_SOBOL_V1  # second dimension's v_k
+    a = W_SOBOL_V1  # third dimension's v_k
+    b = W_SOBOL2_V2  # ... and v_(k+1)
+    for k in range(32):
+        mask = wp.uint32(0) - ((index >> wp.uint32(k)) & wp.uint32(1))
+        r1 = r1 ^ (v1 & mask)
+        r2 = r2 ^ (a & mask)
+        v1 = v1 ^ (v1 >> wp.uint32(1))
+        c = b ^ a ^ (a >> wp.uint32(2))
+        a = b
+        b = c
+    return r1, r2
 
 
 @wp.func
@@ -204,8 +208,9 @@ def sample_3d(seed: wp.uint32, pixel: wp.uint32, index: wp.uint32, dim: wp.uint3
     h = pattern_hash(seed, pixel, dim)
     i = owen_scramble(index, h)
     x = owen_scramble(reverse_bits32(i), mix32(h + wp.uint32(1)))
-    y = owen_scramble(sobol_dim1(i), mix32(h + wp.uint32(2)))
-    z = owen_scramble(sobol_dim2(i), mix32(h + wp.uint32(3)))
+    d1, d2 = sobol_dims12(i)
+    y = owen_scramble(d1, mix32(h + wp.uint32(2)))
+    z = owen_scramble(d2, mix32(h + wp.uint32(3)))
     return wp.vec3(u32_to_unit_float(x), u32_to_unit_float(y), u32_to_unit_float(z))
 
 
