@@ -105,3 +105,24 @@ def test_rect_light_texture_reads_unmirrored_from_behind_the_light(tmp_path):
     assert np.argmax(mean["top_right"]) == 1 and mean["top_right"][1] > 3 * mean["top_right"][[0, 2]].max()  # green
     assert np.argmax(mean["bottom_left"]) == 2 and mean["bottom_left"][2] > 3 * mean["bottom_left"][:2].max()
     assert mean["bottom_right"].min() > 0.8 * mean["bottom_right"].max()  # white
+
+
+@pytest.mark.parametrize("max_depth", [1, 3])
+def test_a_dome_a_sun_and_a_bulb_together_add_up(tmp_path, max_depth):
+    """Every infinite light is sampled at each vertex and one finite light is chosen by the cut: with a dome
+    (radiance 0.5: E = 0.5 pi), a sun (normalized, E = 2) and a bulb (E = L pi (r/h)^2 below it) over the white
+    floor, the floor reflects the sum / pi. The BSDF's rays that reach the dome or the sun's disk
+    are weighted by MIS against the light samples: the sum holds only if both sides use the same selection
+    probabilities (1 for the infinite lights)."""
+    h, r = 2.0, 0.05
+    stage = floor_stage(tmp_path / "all.usda")
+    stages.dome_light(stage, intensity=0.5)
+    stages.distant_light(stage, intensity=2.0, angle=20.0, normalize=True)
+    s = UsdLux.SphereLight.Define(stage, "/World/Bulb")
+    s.CreateIntensityAttr(100.0)
+    s.CreateRadiusAttr(r)
+    UsdGeom.Xformable(s).AddTranslateOp().Set(Gf.Vec3d(0, h, 0))
+    stage.Save()
+    rgb, _ = render_rgb(tmp_path / "all.usda", width=8, height=8, spp=64, max_depth=max_depth, unbiased=True)
+    E = 0.5 * math.pi + 2.0 + 100.0 * math.pi * (r / h) ** 2
+    np.testing.assert_allclose(rgb.reshape(-1, 3).mean(0), E / math.pi, rtol=0.01)
