@@ -81,7 +81,6 @@ W_O1 = wp.constant(wp.uint32(_O1))
 W_O2 = wp.constant(wp.uint32(_O2))
 W_O3 = wp.constant(wp.uint32(_O3))
 W_SOBOL_V1 = wp.constant(wp.uint32(_SOBOL_V1))
-W_SOBOL2_V2 = wp.constant(wp.uint32(0xC0000000))  # Sobol's third dimension: v_2 = m_2 2^30, m_2 = 3
 W_MASK1 = wp.constant(wp.uint32(0x55555555))
 W_MASK2 = wp.constant(wp.uint32(0x33333333))
 W_MASK4 = wp.constant(wp.uint32(0x0F0F0F0F))
@@ -92,6 +91,34 @@ W_TO_UNIT = wp.constant(2.0**-24)
 # ----------------------------------------------------------------------------------------------------------------
 # Warp
 # ----------------------------------------------------------------------------------------------------------------
+
+_ByteTable = wp.types.vector(length=1024, dtype=wp.uint32)
+
+
+def _byte_table(directions: list[int]) -> _ByteTable:
+    """[k * 256 + b]: XOR of the direction numbers of the set bits of byte value b in byte k of the index."""
+    t = []
+    for k in range(4):
+        for b in range(256):
+            r = 0
+            for j in range(8):
+                if (b >> j) & 1:
+                    r ^= directions[8 * k + j]
+            t.append(r)
+    return _ByteTable(*[wp.uint32(x) for x in t])
+
+
+def _directions(v1: int, v2: int | None) -> list[int]:
+    """32-bit direction numbers: Sobol's second dimension (v_k = v_(k-1) ^ (v_(k-1) >> 1)) when v2 is None,
+    else the third (v_k = v_(k-1) ^ v_(k-2) ^ (v_(k-2) >> 2), x^2 + x + 1)."""
+    v = [v1] if v2 is None else [v1, v2]
+    while len(v) < 32:
+        v.append(v[-1] ^ (v[-1] >> 1) if v2 is None else v[-1] ^ v[-2] ^ (v[-2] >> 2))
+    return v
+
+
+W_SOBOL1_TABLE = wp.constant(_byte_table(_directions(_SOBOL_V1, None)))
+W_SOBOL2_TABLE = wp.constant(_byte_table(_directions(_SOBOL_V1, 0xC0000000)))
 
 
 @wp.func
@@ -139,39 +166,24 @@ def owen_scramble(v: wp.uint32, seed: wp.uint32) -> wp.uint32:
 
 
 @wp.func
-def sobol_dim1(index: wp.uint32) -> wp.uint32:
-    """Sobol's second dimension (32-bit fraction); dimension 0 is ``reverse_bits32(index)``.
+def _byte_product(tab: _ByteTable, index: wp.uint32) -> wp.uint32:
+    """The GF(2) product of a Sobol generator matrix with the index's bits, one table row per byte of the index
+    (``_byte_table``): four look-ups instead of a 32-round loop (the scrambled index has random high bits)."""
+    return (tab[int(index & wp.uint32(255))] ^ tab[256 + int((index >> wp.uint32(8)) & wp.uint32(255))]
+            ^ tab[512 + int((index >> wp.uint32(16)) & wp.uint32(255))] ^ tab[768 + int(index >> wp.uint32(24))])
 
-    Branch-free over all 32 bits: the scrambled index has random high bits, so a loop stopping at the highest set
-    bit ran about 32 rounds anyway, with an unpredictable branch in each."""
-    r = wp.uint32(0)
-    v = W_SOBOL_V1
-    for k in range(32):
-        r = r ^ (v & (wp.uint32(0) - ((index >> wp.uint32(k)) & wp.uint32(1))))
-        v = v ^ (v >> wp.uint32(1))
-    return r
+
+@wp.func
+def sobol_dim1(index: wp.uint32) -> wp.uint32:
+    """Sobol's second dimension (32-bit fraction); dimension 0 is ``reverse_bits32(index)``."""
+    return _byte_product(W_SOBOL1_TABLE, index)
 
 
 @wp.func
 def sobol_dims12(index: wp.uint32):
-    """Sobol's second and third dimensions (32-bit fractions) in one pass over the index's bits.
-
-    The third: primitive polynomial x^2 + x + 1, m = (1, 3) (Joe & Kuo); as 32-bit direction numbers
-    v_k = v_(k-1) ^ v_(k-2) ^ (v_(k-2) >> 2) from v_1 = 2^31, v_2 = 3 * 2^30. Branch-free like ``sobol_dim1``."""
-    r1 = wp.uint32(0)
-    r2 = wp.uint32(0)
-    v1 = W_SOBOL_V1  # second dimension's v_k
-    a = W_SOBOL_V1  # third dimension's v_k
-    b = W_SOBOL2_V2  # ... and v_(k+1)
-    for k in range(32):
-        mask = wp.uint32(0) - ((index >> wp.uint32(k)) & wp.uint32(1))
-        r1 = r1 ^ (v1 & mask)
-        r2 = r2 ^ (a & mask)
-        v1 = v1 ^ (v1 >> wp.uint32(1))
-        c = b ^ a ^ (a >> wp.uint32(2))
-        a = b
-        b = c
-    return r1, r2
+    """Sobol's second and third dimensions (32-bit fractions). The third: primitive polynomial x^2 + x + 1,
+    m = (1, 3) (Joe & Kuo's direction numbers; ``np_sobol_dim2``)."""
+    return _byte_product(W_SOBOL1_TABLE, index), _byte_product(W_SOBOL2_TABLE, index)
 
 
 @wp.func
