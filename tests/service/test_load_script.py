@@ -16,6 +16,8 @@ def test_load_test_script_small():
     assert r.returncode == 0, r.stdout + r.stderr
     assert "4 submitted, 4 returned, 4 succeeded, 0 lost, 0 duplicated; 0 errors" in r.stdout
     assert "status latency over" in r.stdout and r.stdout.strip().endswith("OK")
+    probe = next(line for line in r.stdout.splitlines() if line.startswith("probe ("))
+    assert "status requests: p50" in probe and " over 0 " not in probe
 
 
 def test_load_test_refuses_other_hosts():
