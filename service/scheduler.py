@@ -429,8 +429,12 @@ class Scheduler:
         except FileNotFoundError:  # the job's files are gone: it was deleted
             self._drop(plan.job_id)
             return
+        self._record_tiles(plan, frame, tiles, result["seconds"])
+
+    def _record_tiles(self, plan: JobPlan, frame: FramePlan, tiles: tuple[int, ...], seconds: list[float]) -> None:
+        """Record finished tiles (progress, samples, seconds) in one transaction and in the plan."""
         recorded = self.store.tiles_done(plan.job_id, frame.idx, [
-            (t, plan.tile_samples(t), float(seconds)) for t, seconds in zip(tiles, result["seconds"], strict=True)])
+            (t, plan.tile_samples(t), float(sec)) for t, sec in zip(tiles, seconds, strict=True)])
         now = time.monotonic()
         for t in recorded:
             frame.done.add(t)
@@ -440,13 +444,7 @@ class Scheduler:
     def _whole_frame(self, plan: JobPlan, frame: FramePlan, tiles: tuple[int, ...], result: dict) -> None:
         """A frame rendered in one task: its tiles are recorded (progress, samples, seconds) and its EXR written."""
         frame.inflight.difference_update(tiles)
-        recorded = self.store.tiles_done(plan.job_id, frame.idx, [
-            (t, plan.tile_samples(t), float(seconds)) for t, seconds in zip(tiles, result["seconds"], strict=True)])
-        now = time.monotonic()
-        for t in recorded:
-            frame.done.add(t)
-            self.tiles_completed += 1
-            self._tile_times.append(now)
+        self._record_tiles(plan, frame, tiles, result["seconds"])
         if len(frame.done) != len(plan.boxes):
             return  # the job stopped running meanwhile (nothing recorded): it is being dropped
         self._frame_image(plan, frame, result)

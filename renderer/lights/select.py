@@ -134,13 +134,6 @@ def upload_selection(est: list[SelectEstimate], device: str, clusters: bool = Tr
     return s
 
 
-def cluster_weights_np(sel_host: dict, p: np.ndarray) -> np.ndarray:
-    """NumPy twin of ``cluster_weight`` for every cluster at point p (sel_host: the Selection's arrays)."""
-    d2 = np.sum((sel_host["centre"] - p) ** 2, axis=1)
-    fin = np.minimum(sel_host["power"] / np.maximum(d2, sel_host["radius2"]), sel_host["cap"])
-    return np.where(sel_host["kind"] == 1, sel_host["power"], fin)
-
-
 @wp.func
 def cluster_weight(sel: Selection, c: int, p: wp.vec3):
     if sel.kind[c] == 1:

@@ -311,34 +311,27 @@ def np_u32_to_unit_float(x) -> np.ndarray:
     return (_u32(x) >> _U(8)).astype(np.float32) * np.float32(2.0**-24)
 
 
-def np_sample_1d(seed, pixel, index, dim) -> np.ndarray:
-    """NumPy twin of ``sample_1d``: float32 array of the broadcast shape, bit-identical to Warp."""
+def _np_sample(seed, pixel, index, dim, n: int) -> np.ndarray:
+    """The first ``n`` (1-3) coordinates of the pattern at ``dim``: float32, the broadcast shape + (n,)."""
     with np.errstate(over="ignore"):
         seed, pixel, index, dim = np.broadcast_arrays(_u32(seed), _u32(pixel), _u32(index), _u32(dim))
         h = np_pattern_hash(seed, pixel, dim)
         i = np_owen_scramble(index, h)
-        x = np_owen_scramble(np_reverse_bits32(i), np_mix32(h + _U(1)))
-        return np_u32_to_unit_float(x)
+        gen = (np_reverse_bits32, np_sobol_dim1, np_sobol_dim2)[:n]
+        return np.stack([np_u32_to_unit_float(np_owen_scramble(g(i), np_mix32(h + _U(k + 1))))
+                         for k, g in enumerate(gen)], axis=-1)
+
+
+def np_sample_1d(seed, pixel, index, dim) -> np.ndarray:
+    """NumPy twin of ``sample_1d``: float32 array of the broadcast shape, bit-identical to Warp."""
+    return _np_sample(seed, pixel, index, dim, 1)[..., 0]
 
 
 def np_sample_2d(seed, pixel, index, dim) -> np.ndarray:
     """NumPy twin of ``sample_2d``: float32 array of the broadcast shape + (2,), bit-identical to Warp."""
-    with np.errstate(over="ignore"):
-        seed, pixel, index, dim = np.broadcast_arrays(_u32(seed), _u32(pixel), _u32(index), _u32(dim))
-        h = np_pattern_hash(seed, pixel, dim)
-        i = np_owen_scramble(index, h)
-        x = np_owen_scramble(np_reverse_bits32(i), np_mix32(h + _U(1)))
-        y = np_owen_scramble(np_sobol_dim1(i), np_mix32(h + _U(2)))
-        return np.stack([np_u32_to_unit_float(x), np_u32_to_unit_float(y)], axis=-1)
+    return _np_sample(seed, pixel, index, dim, 2)
 
 
 def np_sample_3d(seed, pixel, index, dim) -> np.ndarray:
     """NumPy twin of ``sample_3d``: float32 array of the broadcast shape + (3,), bit-identical to Warp."""
-    with np.errstate(over="ignore"):
-        seed, pixel, index, dim = np.broadcast_arrays(_u32(seed), _u32(pixel), _u32(index), _u32(dim))
-        h = np_pattern_hash(seed, pixel, dim)
-        i = np_owen_scramble(index, h)
-        x = np_owen_scramble(np_reverse_bits32(i), np_mix32(h + _U(1)))
-        y = np_owen_scramble(np_sobol_dim1(i), np_mix32(h + _U(2)))
-        z = np_owen_scramble(np_sobol_dim2(i), np_mix32(h + _U(3)))
-        return np.stack([np_u32_to_unit_float(x), np_u32_to_unit_float(y), np_u32_to_unit_float(z)], axis=-1)
+    return _np_sample(seed, pixel, index, dim, 3)
