@@ -39,8 +39,9 @@ def warp_samples(seed, pixel, index, dim):
 
 
 def test_dimension_constants():
-    assert (SM.DIM_FILM, SM.DIM_TIME, SM.DIM_LENS, SM.DIM_LIGHT_BASE, SM.DIMS_PER_BOUNCE) == (0, 2, 3, 5, 7)
-    assert SM.DIM_FILM + 2 <= SM.DIM_TIME < SM.DIM_LENS and SM.DIM_LENS + 2 <= SM.DIM_LIGHT_BASE
+    assert (SM.DIM_FILM, SM.DIM_LENS, SM.DIM_LIGHT_BASE, SM.DIMS_PER_BOUNCE) == (0, 3, 5, 7)
+    # film (x, y) and time are one 3D request; the lens a 2D one; then the bounces' requests
+    assert SM.DIM_FILM + 3 <= SM.DIM_LENS and SM.DIM_LENS + 2 <= SM.DIM_LIGHT_BASE
 
 
 def test_warp_matches_numpy_bit_for_bit():
@@ -137,18 +138,26 @@ def test_first_2_pow_m_samples_form_a_0m2_net(m):
         np.testing.assert_array_equal(np.sort(np.floor(x * 2**m)), np.arange(2**m))
 
 
+# The integrator's requests: (first dim, coordinates). Film x, y and time are one 3D request; the lens 2D; each
+# bounce's light (point, choice) and BSDF (direction, lobe) 3D.
+FILM_TIME = (SM.DIM_FILM, 3)
+LENS = (SM.DIM_LENS, 2)
+LIGHT_0 = (SM.DIM_LIGHT_BASE + SM.BOUNCE_LIGHT_CHOICE, 3)
+BSDF_0 = (SM.DIM_LIGHT_BASE + SM.BOUNCE_LOBE, 3)
+LIGHT_1 = (SM.DIM_LIGHT_BASE + SM.DIMS_PER_BOUNCE + SM.BOUNCE_LIGHT_CHOICE, 3)
+
+
 def test_dimensions_are_decorrelated():
-    """Pearson r between coordinates of different dimension requests over 4096 indices of one pixel."""
+    """Pearson r between coordinates of different requests over 4096 indices of one pixel."""
     n = 4096
     idx = np.arange(n)
-    pairs = [(SM.DIM_FILM, SM.DIM_LENS), (SM.DIM_FILM, SM.DIM_TIME), (SM.DIM_LENS, SM.DIM_LIGHT_BASE + 1),
-             (SM.DIM_TIME, SM.DIM_LIGHT_BASE), (SM.DIM_LIGHT_BASE, SM.DIM_LIGHT_BASE + SM.DIMS_PER_BOUNCE)]
+    pairs = [(FILM_TIME, LENS), (FILM_TIME, LIGHT_0), (LENS, LIGHT_0), (LIGHT_0, BSDF_0), (LIGHT_0, LIGHT_1)]
     rs = []
     for pixel in (0, 1, 640 * 480 - 1):
-        for da, db in pairs:
-            xa = SM.np_sample_2d(3, pixel, idx, da)
-            xb = SM.np_sample_2d(3, pixel, idx, db)
-            rs += [np.corrcoef(xa[:, i], xb[:, j])[0, 1] for i in range(2) for j in range(2)]
+        for (da, ka), (db, kb) in pairs:
+            xa = SM.np_sample_3d(3, pixel, idx, da)
+            xb = SM.np_sample_3d(3, pixel, idx, db)
+            rs += [np.corrcoef(xa[:, i], xb[:, j])[0, 1] for i in range(ka) for j in range(kb)]
     rs = np.array(rs)
     # Independent sequences give r ~ N(0, 1/n). The nested index shuffles tie the strata of two dimensions
     # hierarchically, which widens that a little (about 1.2x in sd); a real correlation would be far larger.
@@ -156,10 +165,13 @@ def test_dimensions_are_decorrelated():
     assert np.mean(rs**2) * n < 3.0, f"mean r^2 = {np.mean(rs**2):.2e} vs 1/n = {1 / n:.2e}"
 
 
-@pytest.mark.parametrize("da,db", [(SM.DIM_FILM, SM.DIM_LENS), (SM.DIM_TIME, SM.DIM_LIGHT_BASE),
-                                   (SM.DIM_LENS, SM.DIM_LIGHT_BASE + 1)])
-def test_cross_dimension_points_are_uniform(da, db):
-    """(dim da, dim db) over indices and pixels fills the square uniformly: no structure from shared strata.
+# (dim, coordinate) of two values from different requests: film x and lens u, time and a light point's x, lens v and
+# a light point's y
+@pytest.mark.parametrize("a,b", [((SM.DIM_FILM, 0), (SM.DIM_LENS, 0)), ((SM.DIM_FILM, 2), (SM.DIM_LIGHT_BASE, 0)),
+                                 ((SM.DIM_LENS, 1), (SM.DIM_LIGHT_BASE, 1))])
+def test_cross_dimension_points_are_uniform(a, b):
+    """Two values of different requests over indices and pixels fill the square uniformly: no structure from
+    shared strata.
 
     Pooled over 64 pixels of 1024 samples. Within ONE pixel the cell counts are not independent (a nested shuffle
     pairs cells, e.g. the 2x2 counts satisfy N00 = N11), which spreads the chi-square statistic wider than its
@@ -170,7 +182,8 @@ def test_cross_dimension_points_are_uniform(da, db):
 
     def sample(k):
         pixel, index = 1000 + k // per_pixel, k % per_pixel
-        return np.stack([SM.np_sample_1d(9, pixel, index, da), SM.np_sample_1d(9, pixel, index, db)], axis=1)
+        return np.stack([SM.np_sample_3d(9, pixel, index, a[0])[..., a[1]],
+                         SM.np_sample_3d(9, pixel, index, b[0])[..., b[1]]], axis=1)
 
     assert_chi2(sample, lambda p: np.ones(len(p)), Rectangle(res=(32, 32)),
                 uniforms=np.arange(per_pixel * pixels, dtype=np.uint32), n_tests=N_CHI2_TESTS)

@@ -36,8 +36,9 @@ Dimension allocation (the integrator follows this table; ``b`` is the bounce, 0 
 =================================================  ===========  ==========================================
 dims                                               request      use
 =================================================  ===========  ==========================================
-``DIM_FILM`` = 0, 1                                ``2d``       position on the film inside the pixel
-``DIM_TIME`` = 2                                   ``1d``       time within the shutter (box, or ``sample_tent``)
+``DIM_FILM`` = 0, 1, 2                             ``3d``       position on the film inside the pixel (x, y) and
+                                                                time within the shutter (z; box, or
+                                                                ``sample_tent``)
 ``DIM_LENS`` = 3, 4                                ``2d``       position on the lens (concentric disk)
 ``DIM_LIGHT_BASE + b * DIMS_PER_BOUNCE`` + 0..2    ``3d``       bounce ``b``'s lights: a point on each (x, y), the
                                                                 finite light the cut chooses (z)
@@ -57,7 +58,6 @@ import numpy as np
 import warp as wp
 
 DIM_FILM = 0
-DIM_TIME = 2
 DIM_LENS = 3
 DIM_LIGHT_BASE = 5  # first dimension of bounce 0
 DIMS_PER_BOUNCE = 7
