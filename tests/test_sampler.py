@@ -1,6 +1,8 @@
 """Tests of renderer/sampler.py: Warp == NumPy bit for bit, range, purity, (0,m,2)-nets, decorrelation, convergence."""
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 import warp as wp
@@ -39,9 +41,9 @@ def warp_samples(seed, pixel, index, dim):
 
 
 def test_dimension_constants():
-    assert (SM.DIM_FILM, SM.DIM_LENS, SM.DIM_LIGHT_BASE, SM.DIMS_PER_BOUNCE) == (0, 3, 5, 7)
-    # film (x, y) and time are one 3D request; the lens a 2D one; then the bounces' requests
-    assert SM.DIM_FILM + 3 <= SM.DIM_LENS and SM.DIM_LENS + 2 <= SM.DIM_LIGHT_BASE
+    assert (SM.DIM_FILM, SM.DIM_LIGHT_BASE, SM.DIMS_PER_BOUNCE) == (0, 7, 7)
+    # the camera's 7D request (film, time, lens, bounce 0's light point), then the bounces' requests
+    assert SM.DIM_FILM + 7 <= SM.DIM_LIGHT_BASE
 
 
 def test_warp_matches_numpy_bit_for_bit():
@@ -138,10 +140,9 @@ def test_first_2_pow_m_samples_form_a_0m2_net(m):
         np.testing.assert_array_equal(np.sort(np.floor(x * 2**m)), np.arange(2**m))
 
 
-# The integrator's requests: (first dim, coordinates). Film x, y and time are one 3D request; the lens 2D; each
-# bounce's light (point, choice) and BSDF (direction, lobe) 3D.
-FILM_TIME = (SM.DIM_FILM, 3)
-LENS = (SM.DIM_LENS, 2)
+# The integrator's requests: (first dim, coordinates). The camera's is 7D (film x, y, time, lens, bounce 0's light
+# point); each bounce's light (point, choice) and BSDF (direction, lobe) 3D.
+CAMERA = (SM.DIM_FILM, 7)
 LIGHT_0 = (SM.DIM_LIGHT_BASE + SM.BOUNCE_LIGHT_CHOICE, 3)
 BSDF_0 = (SM.DIM_LIGHT_BASE + SM.BOUNCE_LOBE, 3)
 LIGHT_1 = (SM.DIM_LIGHT_BASE + SM.DIMS_PER_BOUNCE + SM.BOUNCE_LIGHT_CHOICE, 3)
@@ -151,12 +152,12 @@ def test_dimensions_are_decorrelated():
     """Pearson r between coordinates of different requests over 4096 indices of one pixel."""
     n = 4096
     idx = np.arange(n)
-    pairs = [(FILM_TIME, LENS), (FILM_TIME, LIGHT_0), (LENS, LIGHT_0), (LIGHT_0, BSDF_0), (LIGHT_0, LIGHT_1)]
+    pairs = [(CAMERA, LIGHT_0), (CAMERA, BSDF_0), (CAMERA, LIGHT_1), (LIGHT_0, BSDF_0), (LIGHT_0, LIGHT_1)]
     rs = []
     for pixel in (0, 1, 640 * 480 - 1):
         for (da, ka), (db, kb) in pairs:
-            xa = SM.np_sample_3d(3, pixel, idx, da)
-            xb = SM.np_sample_3d(3, pixel, idx, db)
+            xa = SM.np_sample_7d(3, pixel, idx, da)
+            xb = SM.np_sample_7d(3, pixel, idx, db)
             rs += [np.corrcoef(xa[:, i], xb[:, j])[0, 1] for i in range(ka) for j in range(kb)]
     rs = np.array(rs)
     # Independent sequences give r ~ N(0, 1/n). The nested index shuffles tie the strata of two dimensions
@@ -165,10 +166,11 @@ def test_dimensions_are_decorrelated():
     assert np.mean(rs**2) * n < 3.0, f"mean r^2 = {np.mean(rs**2):.2e} vs 1/n = {1 / n:.2e}"
 
 
-# (dim, coordinate) of two values from different requests: film x and lens u, time and a light point's x, lens v and
-# a light point's y
-@pytest.mark.parametrize("a,b", [((SM.DIM_FILM, 0), (SM.DIM_LENS, 0)), ((SM.DIM_FILM, 2), (SM.DIM_LIGHT_BASE, 0)),
-                                 ((SM.DIM_LENS, 1), (SM.DIM_LIGHT_BASE, 1))])
+# (dim, coordinate) of two values from different requests: film x and the light choice, time and the BSDF
+# direction's x, bounce 0's light point and bounce 1's
+@pytest.mark.parametrize("a,b", [((SM.DIM_FILM, 0), (SM.DIM_LIGHT_BASE, 2)),
+                                 ((SM.DIM_FILM, 2), (SM.DIM_LIGHT_BASE + SM.BOUNCE_LOBE, 0)),
+                                 ((SM.DIM_FILM, 5), (SM.DIM_LIGHT_BASE + SM.DIMS_PER_BOUNCE, 1))])
 def test_cross_dimension_points_are_uniform(a, b):
     """Two values of different requests over indices and pixels fill the square uniformly: no structure from
     shared strata.
@@ -182,8 +184,8 @@ def test_cross_dimension_points_are_uniform(a, b):
 
     def sample(k):
         pixel, index = 1000 + k // per_pixel, k % per_pixel
-        return np.stack([SM.np_sample_3d(9, pixel, index, a[0])[..., a[1]],
-                         SM.np_sample_3d(9, pixel, index, b[0])[..., b[1]]], axis=1)
+        return np.stack([SM.np_sample_7d(9, pixel, index, a[0])[..., a[1]],
+                         SM.np_sample_7d(9, pixel, index, b[0])[..., b[1]]], axis=1)
 
     assert_chi2(sample, lambda p: np.ones(len(p)), Rectangle(res=(32, 32)),
                 uniforms=np.arange(per_pixel * pixels, dtype=np.uint32), n_tests=N_CHI2_TESTS)
@@ -210,7 +212,7 @@ def test_integration_converges_faster_than_monte_carlo():
     grid = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1)
     exact, var = f(grid).mean(), f(grid).var()
     n, pixels = 256, np.arange(64)
-    pts = SM.np_sample_2d(11, pixels[:, None], np.arange(n)[None, :], SM.DIM_LENS).astype(np.float64)
+    pts = SM.np_sample_2d(11, pixels[:, None], np.arange(n)[None, :], 3).astype(np.float64)
     estimates = f(pts).mean(axis=1)
     rmse = np.sqrt(np.mean((estimates - exact) ** 2))
     iid_rmse = np.sqrt(var / n)
@@ -238,15 +240,17 @@ def warp_samples_3d(seed: int, pixel, index, dim: int) -> np.ndarray:
     return out.numpy()
 
 
-def test_sobol_third_dimension_is_joe_kuo():
-    """Index order values, and the first 2^k points of the three unscrambled dimensions are scipy's Sobol points."""
+def test_sobol_dimensions_are_joe_kuo():
+    """Index order values, and the first 2^k points of the seven unscrambled dimensions are scipy's Sobol points."""
     from scipy.stats import qmc
 
     np.testing.assert_array_equal(SM.np_sobol_dim2(np.arange(8)) / 2.0**32,
                                   [0, 0.5, 0.75, 0.25, 0.375, 0.875, 0.625, 0.125])
     idx = np.arange(1024, dtype=np.uint32)
-    ours = np.stack([SM.np_reverse_bits32(idx), SM.np_sobol_dim1(idx), SM.np_sobol_dim2(idx)], -1) / 2.0**32
-    ref = qmc.Sobol(3, scramble=False).random(1024)  # Gray-code order: equal as sets over 2^k
+    np.testing.assert_array_equal(SM.np_sobol(idx, 1), SM.np_sobol_dim1(idx))
+    np.testing.assert_array_equal(SM.np_sobol(idx, 2), SM.np_sobol_dim2(idx))
+    ours = np.stack([SM.np_reverse_bits32(idx)] + [SM.np_sobol(idx, d) for d in range(1, 7)], -1) / 2.0**32
+    ref = qmc.Sobol(7, scramble=False).random(1024)  # Gray-code order: equal as sets over 2^k
     for k in (2, 5, 10):
         a, b = ours[: 2**k], ref[: 2**k]
         np.testing.assert_array_equal(a[np.lexsort(a.T[::-1])], b[np.lexsort(b.T[::-1])])
@@ -298,3 +302,57 @@ def test_3d_choice_keeps_its_points_spread_better_than_independent_dimensions():
         chosen = SM.np_sample_2d(1, pixel, np.arange(64), 5)[z < 1 / 3]
         spread_indep.append(np.var(elementary_counts(chosen, (2, 2))))
     assert np.mean(spread_3d) < 0.6 * np.mean(spread_indep)
+
+
+# ---------------------------------------------------------------------------------------------- the camera's 7D request
+
+
+@wp.kernel
+def k_camera_tail(seed: wp.uint32, pixel: wp.array(dtype=wp.uint32), index: wp.array(dtype=wp.uint32),
+                  dim: wp.uint32, out: wp.array(dtype=wp.vec4)):
+    i = wp.tid()
+    a = SM.sample_dims34(seed, pixel[i], index[i], dim)
+    b = SM.sample_dims56(seed, pixel[i], index[i], dim)
+    out[i] = wp.vec4(a[0], a[1], b[0], b[1])
+
+
+def test_7d_warp_matches_numpy_and_extends_3d():
+    rng = np.random.default_rng(6)
+    pixel = rng.integers(0, 2**32, 20_000, dtype=np.uint64).astype(np.uint32)
+    index = rng.integers(0, 2**32, 20_000, dtype=np.uint64).astype(np.uint32)
+    index[:4] = [0, 1, 2**31, 2**32 - 1]
+    for seed, dim in ((0, SM.DIM_FILM), (77, 2**31 + 3)):
+        out = wp.zeros(len(index), dtype=wp.vec4)
+        wp.launch(k_camera_tail, dim=len(index), inputs=[wp.uint32(seed), wp.array(pixel, dtype=wp.uint32),
+                                                          wp.array(index, dtype=wp.uint32), wp.uint32(dim), out],
+                  device="cpu")
+        n = SM.np_sample_7d(seed, pixel, index, dim)
+        np.testing.assert_array_equal(out.numpy().view(np.uint32), n[:, 3:].view(np.uint32))
+        np.testing.assert_array_equal(n[:, :3], SM.np_sample_3d(seed, pixel, index, dim))
+        assert n.min() >= 0.0 and n.max() < 1.0
+
+
+def net_t(points: np.ndarray, m: int) -> int:
+    """The smallest t for which the 2^m points are a (t, m, s)-net: every elementary box of volume 2^(t-m) holds
+    exactly 2^t of them."""
+    for t in range(m + 1):
+        boxes = (e for e in itertools.product(range(m - t + 1), repeat=points.shape[1]) if sum(e) == m - t)
+        if all((elementary_counts(points, e) == 2**t).all() for e in boxes):
+            return t
+    return m
+
+
+@pytest.mark.parametrize("m", [6, 8])
+def test_camera_request_stratifies_film_time_lens_and_light_jointly(m):
+    """The joint strata the integrator relies on, in every pixel's first 2^m samples: film and time a (1, m, 3)-net,
+    film and lens a (3, m, 4)-net, time and bounce 0's light point a (3, m, 3)-net (Sobol's t for those dimensions;
+    Owen scrambling keeps them). Independent requests give no such net at all (t = m)."""
+    for seed, pixel in [(0, 0), (3, 4321), (2**32 - 1, 99)]:
+        pts = SM.np_sample_7d(seed, pixel, np.arange(2**m), SM.DIM_FILM).astype(np.float64)
+        assert net_t(pts[:, [0, 1, 2]], m) <= 1
+        assert net_t(pts[:, [0, 1, 3, 4]], m) <= 3
+        assert net_t(pts[:, [2, 5, 6]], m) <= 3
+        assert net_t(pts[:, [0, 1, 5, 6]], m) <= 3
+    indep = np.concatenate([SM.np_sample_3d(0, 0, np.arange(2**m), SM.DIM_FILM)[:, 2:],
+                            SM.np_sample_2d(0, 0, np.arange(2**m), SM.DIM_LIGHT_BASE)], axis=1).astype(np.float64)
+    assert net_t(indep, m) > 3
