@@ -52,14 +52,16 @@ from renderer.sampling.sobol import (
     BOUNCE_LIGHT_CHOICE,
     BOUNCE_LOBE,
     BOUNCE_ROULETTE,
+    CAMERA_BSDF_1,
+    CAMERA_LENS,
+    CAMERA_LIGHT_0,
     DIM_FILM,
     DIM_LIGHT_BASE,
     DIMS_PER_BOUNCE,
     sample_1d,
     sample_2d,
     sample_3d,
-    sample_dims34,
-    sample_dims56,
+    sample_camera_pair,
 )
 from renderer.sampling.warps import sample_tent
 from renderer.scene.model import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_DOME, LIGHT_RECT, LIGHT_SPHERE
@@ -323,7 +325,7 @@ def trace_wave_kernel(
     film_t = sample_3d(seed, pixel, index, wp.uint32(DIM_FILM))
     film_u = wp.vec2(film_t[0], film_t[1])
     s = shutter_time(settings.time_filter, film_t[2], settings.frame_s)
-    lens_u = sample_dims34(seed, pixel, index, wp.uint32(DIM_FILM))
+    lens_u = sample_camera_pair(seed, pixel, index, wp.uint32(DIM_FILM), CAMERA_LENS)
     ro, rd, tmin, tmax, fwd = camera_ray(cam, wp.vec2(float(px) + film_u[0], float(py) + film_u[1]), lens_u, s)
     cam_origin = ro
     # ray cone (texture filtering, raycone): width at the current origin (scene units), spread (radians)
@@ -438,9 +440,12 @@ def trace_wave_kernel(
                 # the light and the point on it from one 3D sample, so that each light's share of the pixel's
                 # samples still spreads its points well (as Cycles' 3D light pattern)
                 u_light = sample_3d(seed, pixel, index, dim + wp.uint32(BOUNCE_LIGHT_CHOICE))
-                if bounce == 0:  # the first point on a light with the camera's sample (DIM_FILM's 7D request)
-                    first = sample_dims56(seed, pixel, index, wp.uint32(DIM_FILM))
-                    u_light = wp.vec3(first[0], first[1], u_light[2])
+                # the first bounce's point on a light with the camera's sample (sampling.sobol); with a pinhole the
+                # second's too, which pays along with the first bounce's direction
+                pinhole = cam.lens_radius <= 0.0
+                if bounce == 0 or (bounce == 1 and pinhole):
+                    on_light = sample_camera_pair(seed, pixel, index, wp.uint32(DIM_FILM), CAMERA_LIGHT_0 + bounce)
+                    u_light = wp.vec3(on_light[0], on_light[1], u_light[2])
                 origin_l = offset_origin(sp.p, sp.ng)
                 for pick in range(n_picks):
                     li = int(-1)
@@ -483,9 +488,14 @@ def trace_wave_kernel(
                 # --- the BSDF's own direction continues the path
                 # the lobe and the direction from one 3D sample, so that each lobe's share keeps spread directions
                 u_bsdf = sample_3d(seed, pixel, index, dim + wp.uint32(BOUNCE_LOBE))
-                if bounce == 0 and cam.lens_radius <= 0.0:  # a pinhole leaves its lens dims to the first direction
-                    first_dir = sample_dims34(seed, pixel, index, wp.uint32(DIM_FILM))
-                    u_bsdf = wp.vec3(first_dir[0], first_dir[1], u_bsdf[2])
+                # with a pinhole, the lens dims of the camera's sample give the first bounce's direction, and two
+                # more the second's
+                if pinhole and bounce < 2:
+                    pair = int(CAMERA_BSDF_1)
+                    if bounce == 0:
+                        pair = int(CAMERA_LENS)
+                    direction = sample_camera_pair(seed, pixel, index, wp.uint32(DIM_FILM), pair)
+                    u_bsdf = wp.vec3(direction[0], direction[1], u_bsdf[2])
                 wi, weight, pdf, flags = lobes_sample(lobes, u_bsdf[2], wp.vec2(u_bsdf[0], u_bsdf[1]))
                 if pdf <= 0.0 or not finite3(weight) or (weight[0] <= 0.0 and weight[1] <= 0.0 and weight[2] <= 0.0):
                     alive = 0

@@ -41,9 +41,11 @@ def warp_samples(seed, pixel, index, dim):
 
 
 def test_dimension_constants():
-    assert (SM.DIM_FILM, SM.DIM_LIGHT_BASE, SM.DIMS_PER_BOUNCE) == (0, 7, 7)
-    # the camera's 7D request (film, time, lens, bounce 0's light point), then the bounces' requests
-    assert SM.DIM_FILM + 7 <= SM.DIM_LIGHT_BASE
+    assert (SM.DIM_FILM, SM.DIM_LIGHT_BASE, SM.DIMS_PER_BOUNCE) == (0, 11, 7)
+    # the camera's 11D request (film, time, lens, bounces 0 and 1's light points, bounce 1's direction), then the
+    # bounces' requests
+    assert SM.DIM_FILM + 11 <= SM.DIM_LIGHT_BASE
+    assert (SM.CAMERA_LENS, SM.CAMERA_LIGHT_0, SM.CAMERA_LIGHT_1, SM.CAMERA_BSDF_1) == (0, 1, 2, 3)
 
 
 def test_warp_matches_numpy_bit_for_bit():
@@ -140,9 +142,9 @@ def test_first_2_pow_m_samples_form_a_0m2_net(m):
         np.testing.assert_array_equal(np.sort(np.floor(x * 2**m)), np.arange(2**m))
 
 
-# The integrator's requests: (first dim, coordinates). The camera's is 7D (film x, y, time, lens, bounce 0's light
-# point); each bounce's light (point, choice) and BSDF (direction, lobe) 3D.
-CAMERA = (SM.DIM_FILM, 7)
+# The integrator's requests: (first dim, coordinates). The camera's is 11D (film x, y, time, lens, bounce 0 and 1's
+# light points, bounce 1's direction); each bounce's light (point, choice) and BSDF (direction, lobe) 3D.
+CAMERA = (SM.DIM_FILM, 11)
 LIGHT_0 = (SM.DIM_LIGHT_BASE + SM.BOUNCE_LIGHT_CHOICE, 3)
 BSDF_0 = (SM.DIM_LIGHT_BASE + SM.BOUNCE_LOBE, 3)
 LIGHT_1 = (SM.DIM_LIGHT_BASE + SM.DIMS_PER_BOUNCE + SM.BOUNCE_LIGHT_CHOICE, 3)
@@ -156,8 +158,8 @@ def test_dimensions_are_decorrelated():
     rs = []
     for pixel in (0, 1, 640 * 480 - 1):
         for (da, ka), (db, kb) in pairs:
-            xa = SM.np_sample_7d(3, pixel, idx, da)
-            xb = SM.np_sample_7d(3, pixel, idx, db)
+            xa = SM.np_sample_11d(3, pixel, idx, da)
+            xb = SM.np_sample_11d(3, pixel, idx, db)
             rs += [np.corrcoef(xa[:, i], xb[:, j])[0, 1] for i in range(ka) for j in range(kb)]
     rs = np.array(rs)
     # Independent sequences give r ~ N(0, 1/n). The nested index shuffles tie the strata of two dimensions
@@ -184,8 +186,8 @@ def test_cross_dimension_points_are_uniform(a, b):
 
     def sample(k):
         pixel, index = 1000 + k // per_pixel, k % per_pixel
-        return np.stack([SM.np_sample_7d(9, pixel, index, a[0])[..., a[1]],
-                         SM.np_sample_7d(9, pixel, index, b[0])[..., b[1]]], axis=1)
+        return np.stack([SM.np_sample_11d(9, pixel, index, a[0])[..., a[1]],
+                         SM.np_sample_11d(9, pixel, index, b[0])[..., b[1]]], axis=1)
 
     assert_chi2(sample, lambda p: np.ones(len(p)), Rectangle(res=(32, 32)),
                 uniforms=np.arange(per_pixel * pixels, dtype=np.uint32), n_tests=N_CHI2_TESTS)
@@ -241,7 +243,7 @@ def warp_samples_3d(seed: int, pixel, index, dim: int) -> np.ndarray:
 
 
 def test_sobol_dimensions_are_joe_kuo():
-    """Index order values, and the first 2^k points of the seven unscrambled dimensions are scipy's Sobol points."""
+    """Index order values, and the first 2^k points of the eleven unscrambled dimensions are scipy's Sobol points."""
     from scipy.stats import qmc
 
     np.testing.assert_array_equal(SM.np_sobol_dim2(np.arange(8)) / 2.0**32,
@@ -249,8 +251,8 @@ def test_sobol_dimensions_are_joe_kuo():
     idx = np.arange(1024, dtype=np.uint32)
     np.testing.assert_array_equal(SM.np_sobol(idx, 1), SM.np_sobol_dim1(idx))
     np.testing.assert_array_equal(SM.np_sobol(idx, 2), SM.np_sobol_dim2(idx))
-    ours = np.stack([SM.np_reverse_bits32(idx)] + [SM.np_sobol(idx, d) for d in range(1, 7)], -1) / 2.0**32
-    ref = qmc.Sobol(7, scramble=False).random(1024)  # Gray-code order: equal as sets over 2^k
+    ours = np.stack([SM.np_reverse_bits32(idx)] + [SM.np_sobol(idx, d) for d in range(1, 11)], -1) / 2.0**32
+    ref = qmc.Sobol(11, scramble=False).random(1024)  # Gray-code order: equal as sets over 2^k
     for k in (2, 5, 10):
         a, b = ours[: 2**k], ref[: 2**k]
         np.testing.assert_array_equal(a[np.lexsort(a.T[::-1])], b[np.lexsort(b.T[::-1])])
@@ -304,30 +306,29 @@ def test_3d_choice_keeps_its_points_spread_better_than_independent_dimensions():
     assert np.mean(spread_3d) < 0.6 * np.mean(spread_indep)
 
 
-# ---------------------------------------------------------------------------------------------- the camera's 7D request
+# ---------------------------------------------------------------------------------------------- the camera's 11D request
 
 
 @wp.kernel
-def k_camera_tail(seed: wp.uint32, pixel: wp.array(dtype=wp.uint32), index: wp.array(dtype=wp.uint32),
-                  dim: wp.uint32, out: wp.array(dtype=wp.vec4)):
+def k_camera_pairs(seed: wp.uint32, pixel: wp.array(dtype=wp.uint32), index: wp.array(dtype=wp.uint32),
+                   dim: wp.uint32, out: wp.array2d(dtype=wp.vec2)):
     i = wp.tid()
-    a = SM.sample_dims34(seed, pixel[i], index[i], dim)
-    b = SM.sample_dims56(seed, pixel[i], index[i], dim)
-    out[i] = wp.vec4(a[0], a[1], b[0], b[1])
+    for pair in range(4):
+        out[i, pair] = SM.sample_camera_pair(seed, pixel[i], index[i], dim, pair)
 
 
-def test_7d_warp_matches_numpy_and_extends_3d():
+def test_11d_warp_matches_numpy_and_extends_3d():
     rng = np.random.default_rng(6)
     pixel = rng.integers(0, 2**32, 20_000, dtype=np.uint64).astype(np.uint32)
     index = rng.integers(0, 2**32, 20_000, dtype=np.uint64).astype(np.uint32)
     index[:4] = [0, 1, 2**31, 2**32 - 1]
     for seed, dim in ((0, SM.DIM_FILM), (77, 2**31 + 3)):
-        out = wp.zeros(len(index), dtype=wp.vec4)
-        wp.launch(k_camera_tail, dim=len(index), inputs=[wp.uint32(seed), wp.array(pixel, dtype=wp.uint32),
-                                                          wp.array(index, dtype=wp.uint32), wp.uint32(dim), out],
+        out = wp.zeros((len(index), 4), dtype=wp.vec2)
+        wp.launch(k_camera_pairs, dim=len(index), inputs=[wp.uint32(seed), wp.array(pixel, dtype=wp.uint32),
+                                                           wp.array(index, dtype=wp.uint32), wp.uint32(dim), out],
                   device="cpu")
-        n = SM.np_sample_7d(seed, pixel, index, dim)
-        np.testing.assert_array_equal(out.numpy().view(np.uint32), n[:, 3:].view(np.uint32))
+        n = SM.np_sample_11d(seed, pixel, index, dim)
+        np.testing.assert_array_equal(out.numpy().reshape(len(index), 8).view(np.uint32), n[:, 3:].view(np.uint32))
         np.testing.assert_array_equal(n[:, :3], SM.np_sample_3d(seed, pixel, index, dim))
         assert n.min() >= 0.0 and n.max() < 1.0
 
@@ -343,16 +344,19 @@ def net_t(points: np.ndarray, m: int) -> int:
 
 
 @pytest.mark.parametrize("m", [6, 8])
-def test_camera_request_stratifies_film_time_lens_and_light_jointly(m):
-    """The joint strata the integrator relies on, in every pixel's first 2^m samples: film and time a (1, m, 3)-net,
-    film and lens a (3, m, 4)-net, time and bounce 0's light point a (3, m, 3)-net (Sobol's t for those dimensions;
-    Owen scrambling keeps them). Independent requests give no such net at all (t = m)."""
+def test_camera_request_stratifies_film_time_lens_and_lights_jointly(m):
+    """The joint strata the integrator relies on, in every pixel's first 2^m samples (Sobol's t for those
+    dimensions, which Owen scrambling keeps): film and time a (1, m, 3)-net; film and lens (or, with a pinhole,
+    bounce 0's direction) a (3, m, 4)-net; time and bounce 0's light point a (3, m, 3)-net; bounce 0's direction and
+    bounce 1's light point, film and bounce 1's direction: (4, m, 4)-nets. Independent requests give none."""
     for seed, pixel in [(0, 0), (3, 4321), (2**32 - 1, 99)]:
-        pts = SM.np_sample_7d(seed, pixel, np.arange(2**m), SM.DIM_FILM).astype(np.float64)
+        pts = SM.np_sample_11d(seed, pixel, np.arange(2**m), SM.DIM_FILM).astype(np.float64)
         assert net_t(pts[:, [0, 1, 2]], m) <= 1
         assert net_t(pts[:, [0, 1, 3, 4]], m) <= 3
         assert net_t(pts[:, [2, 5, 6]], m) <= 3
         assert net_t(pts[:, [0, 1, 5, 6]], m) <= 3
+        assert net_t(pts[:, [3, 4, 7, 8]], m) <= 4
+        assert net_t(pts[:, [0, 1, 9, 10]], m) <= 4
     indep = np.concatenate([SM.np_sample_3d(0, 0, np.arange(2**m), SM.DIM_FILM)[:, 2:],
                             SM.np_sample_2d(0, 0, np.arange(2**m), SM.DIM_LIGHT_BASE)], axis=1).astype(np.float64)
     assert net_t(indep, m) > 3

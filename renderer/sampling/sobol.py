@@ -27,39 +27,45 @@ random per-wave permutation (measured while writing tests/test_sampler.py).
 
 ``sample_1d(.., dim)`` equals ``sample_2d(.., dim).x``, and ``sample_2d(.., dim)`` the first two coordinates of
 ``sample_3d(.., dim)``: a request uses one pattern with as many coordinates as it needs (Sobol's dimensions over
-one shuffled index; in 3D the first 2^m samples form a (1, m, 3)-net). The camera's request goes on to seven:
-``sample_dims34`` and ``sample_dims56`` are Sobol's dimensions 3-4 and 5-6 at the same index, so the lens and the
-first light point are stratified jointly with the pixel and the time (the pbrt ``SobolSampler`` idea, for the
-dimensions where it pays: a moving or defocused edge, a penumbra that moves). A k-D request at ``dim`` consumes
-dims ``dim`` .. ``dim + k - 1`` (its shuffle is keyed by ``dim``, the first); callers must not also request those
-on their own.
+one shuffled index; in 3D the first 2^m samples form a (1, m, 3)-net). The camera's request goes on to eleven:
+``sample_camera_pair`` gives Sobol's dimensions 3-4, 5-6, 7-8 or 9-10 at the same index, so the lens and the first
+bounce's light point (with a pinhole: the first bounce's direction and light point, the second's light point and
+direction) are stratified jointly with the pixel and the time: pbrt's global ``SobolSampler`` where it pays (a
+moving or defocused edge, a penumbra that moves, a glossy reflection of a lit wall), padded 2D/3D requests after
+that. A k-D request at ``dim`` consumes dims ``dim`` .. ``dim + k - 1`` (its shuffle is keyed by ``dim``, the
+first); callers must not also request those on their own.
 
 Dimension allocation (the integrator follows this table; ``b`` is the bounce, 0 for the camera ray's first hit):
 
 =================================================  ===========  ==========================================
 dims                                               request      use
 =================================================  ===========  ==========================================
-``DIM_FILM`` = 0 .. 6                              ``7d``       position on the film inside the pixel (0, 1),
+``DIM_FILM`` = 0 .. 10                             ``11d``      position on the film inside the pixel (0, 1),
                                                                 time within the shutter (2; box, or
                                                                 ``sample_tent``), position on the lens (3, 4;
                                                                 with a pinhole, bounce 0's BSDF direction),
-                                                                bounce 0's point on each light (5, 6)
+                                                                bounce 0's point on each light (5, 6); with a
+                                                                pinhole, bounce 1's (7, 8) and its BSDF direction
+                                                                (9, 10)
 ``DIM_LIGHT_BASE + b * DIMS_PER_BOUNCE`` + 0..2    ``3d``       bounce ``b``'s lights: a point on each (x, y; from
-                                                                the camera's request at bounce 0), the finite
-                                                                light the cut chooses (z)
-``DIM_LIGHT_BASE + b * DIMS_PER_BOUNCE`` + 3..5    ``3d``       the BSDF: a direction (x, y; gloss, translucency),
-                                                                the lobe (z)
+                                                                the camera's request as above), the finite light
+                                                                the cut chooses (z)
+``DIM_LIGHT_BASE + b * DIMS_PER_BOUNCE`` + 3..5    ``3d``       the BSDF: a direction (x, y; gloss, translucency;
+                                                                from the camera's request as above), the lobe (z)
 ``DIM_LIGHT_BASE + b * DIMS_PER_BOUNCE`` + 6       ``1d``       Russian roulette
 =================================================  ===========  ==========================================
 
 The per-bounce offsets are the ``BOUNCE_*`` constants. Any dims work: the hash keys on the full 32-bit ``dim``.
-Measured, 64 spp against 1024-spp references: the camera's 7D request lowered relMSE by 23 % on the demo (a moving
-ball's soft shadow, depth of field), 7 % on the dof and 6 % on the motion bench scenes, 1 % on the still ones;
-giving a pinhole's lens dims to bounce 0's BSDF direction, by 7 % more on cornell and motion. Sobol's dimensions
-7-8 for that direction raised it by 7-15 % (poor joint strata with 5-6): not used.
+Measured, 64 spp against 1024-spp references: the camera's request with the lens and bounce 0's light point
+lowered relMSE by 23 % on the demo (a moving ball's soft shadow, depth of field), 7 % on the dof and 6 % on the
+motion bench scenes, 1 % on the still ones; giving a pinhole's lens dims to bounce 0's BSDF direction, by 7 % more
+on cornell and motion; then bounce 1's light point and direction, by 4-6 % more on cornell and motion and 2 % on
+gloss, for 0.5-3 % more time (with a lens, whose dims keep bounce 0's direction out, they gained nothing: used with
+a pinhole only). Bounce 2 as well (dimensions 11-14) gained 0-1.4 %: not used. Sobol's dimensions 7-8 for
+bounce 0's BSDF direction next to its light point in 5-6 raised relMSE by 7-15 %: not used.
 
-Warp side: ``sample_1d``, ``sample_2d``, ``sample_3d``, ``sample_dims34``, ``sample_dims56`` (``@wp.func``,
-arguments ``wp.uint32``). NumPy side: ``np_sample_1d``, ``np_sample_2d``, ``np_sample_3d``, ``np_sample_7d``
+Warp side: ``sample_1d``, ``sample_2d``, ``sample_3d``, ``sample_camera_pair`` (``@wp.func``, arguments
+``wp.uint32``). NumPy side: ``np_sample_1d``, ``np_sample_2d``, ``np_sample_3d``, ``np_sample_11d``
 (vectorised, broadcasting, bit-identical float32 results; tests compare them).
 """
 from __future__ import annotations
@@ -67,8 +73,13 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-DIM_FILM = 0  # the camera's 7D request
-DIM_LIGHT_BASE = 7  # first dimension of bounce 0
+DIM_FILM = 0  # the camera's 11D request
+DIM_LIGHT_BASE = 11  # first dimension of bounce 0
+# the camera request's pairs after film and time (``sample_camera_pair``): Sobol's dimensions 3-4, 5-6, 7-8, 9-10
+CAMERA_LENS = wp.constant(0)  # the lens; with a pinhole, bounce 0's BSDF direction
+CAMERA_LIGHT_0 = wp.constant(1)  # bounce 0's point on each light
+CAMERA_LIGHT_1 = wp.constant(2)  # bounce 1's point on each light
+CAMERA_BSDF_1 = wp.constant(3)  # bounce 1's BSDF direction
 DIMS_PER_BOUNCE = 7
 BOUNCE_LIGHT_CHOICE = 0  # a 3D request: the point on the light and the choice of light together
 BOUNCE_LOBE = 3  # a 3D request: the BSDF direction and the choice of lobe together
@@ -131,9 +142,10 @@ def _joe_kuo(s: int, a: int, m: list[int]) -> list[int]:
     return v
 
 
-# Sobol's dimensions 1..6 (dimension 0 is the bit reversal of the index): (s, a, m) rows of Joe & Kuo's table.
+# Sobol's dimensions 1..10 (dimension 0 is the bit reversal of the index): (s, a, m) rows of Joe & Kuo's table.
 JOE_KUO = ((1, 0, [1]), (2, 1, [1, 3]), (3, 1, [1, 3, 1]), (3, 2, [1, 1, 1]), (4, 1, [1, 1, 3, 3]),
-           (4, 4, [1, 3, 5, 13]))
+           (4, 4, [1, 3, 5, 13]), (5, 2, [1, 1, 5, 5, 17]), (5, 4, [1, 1, 5, 5, 5]), (5, 7, [1, 1, 7, 11, 19]),
+           (5, 11, [1, 1, 5, 1, 1]))
 SOBOL_DIRECTIONS = [_joe_kuo(*row) for row in JOE_KUO]  # [d - 1]: dimension d's 32 direction numbers
 
 W_SOBOL1_TABLE = wp.constant(_byte_table(SOBOL_DIRECTIONS[0]))
@@ -142,6 +154,10 @@ W_SOBOL3_TABLE = wp.constant(_byte_table(SOBOL_DIRECTIONS[2]))
 W_SOBOL4_TABLE = wp.constant(_byte_table(SOBOL_DIRECTIONS[3]))
 W_SOBOL5_TABLE = wp.constant(_byte_table(SOBOL_DIRECTIONS[4]))
 W_SOBOL6_TABLE = wp.constant(_byte_table(SOBOL_DIRECTIONS[5]))
+W_SOBOL7_TABLE = wp.constant(_byte_table(SOBOL_DIRECTIONS[6]))
+W_SOBOL8_TABLE = wp.constant(_byte_table(SOBOL_DIRECTIONS[7]))
+W_SOBOL9_TABLE = wp.constant(_byte_table(SOBOL_DIRECTIONS[8]))
+W_SOBOL10_TABLE = wp.constant(_byte_table(SOBOL_DIRECTIONS[9]))
 
 
 @wp.func
@@ -250,23 +266,25 @@ def sample_3d(seed: wp.uint32, pixel: wp.uint32, index: wp.uint32, dim: wp.uint3
 
 
 @wp.func
-def sample_dims34(seed: wp.uint32, pixel: wp.uint32, index: wp.uint32, dim: wp.uint32) -> wp.vec2:
-    """Coordinates 3 and 4 of the 7D request at ``dim`` (``np_sample_7d``), whose first three are
-    ``sample_3d(.., dim)``: Sobol's dimensions 3 and 4 at the same shuffled index, so stratified jointly with them."""
+def sample_camera_pair(seed: wp.uint32, pixel: wp.uint32, index: wp.uint32, dim: wp.uint32, pair: int) -> wp.vec2:
+    """Coordinates ``3 + 2 pair`` and ``4 + 2 pair`` (``pair`` 0-3) of the 11D request at ``dim``
+    (``np_sample_11d``), whose first three are ``sample_3d(.., dim)``: Sobol's dimensions 3-10 at the same shuffled
+    index, so stratified jointly with the film position and the time."""
     h = pattern_hash(seed, pixel, dim)
     i = owen_scramble(index, h)
-    x = owen_scramble(_byte_product(W_SOBOL3_TABLE, i), mix32(h + wp.uint32(4)))
-    y = owen_scramble(_byte_product(W_SOBOL4_TABLE, i), mix32(h + wp.uint32(5)))
-    return wp.vec2(u32_to_unit_float(x), u32_to_unit_float(y))
-
-
-@wp.func
-def sample_dims56(seed: wp.uint32, pixel: wp.uint32, index: wp.uint32, dim: wp.uint32) -> wp.vec2:
-    """Coordinates 5 and 6 of the 7D request at ``dim`` (Sobol's dimensions 5 and 6 at the same shuffled index)."""
-    h = pattern_hash(seed, pixel, dim)
-    i = owen_scramble(index, h)
-    x = owen_scramble(_byte_product(W_SOBOL5_TABLE, i), mix32(h + wp.uint32(6)))
-    y = owen_scramble(_byte_product(W_SOBOL6_TABLE, i), mix32(h + wp.uint32(7)))
+    a = wp.uint32(0)
+    b = wp.uint32(0)
+    if pair == CAMERA_LENS:
+        a, b = _byte_product(W_SOBOL3_TABLE, i), _byte_product(W_SOBOL4_TABLE, i)
+    elif pair == CAMERA_LIGHT_0:
+        a, b = _byte_product(W_SOBOL5_TABLE, i), _byte_product(W_SOBOL6_TABLE, i)
+    elif pair == CAMERA_LIGHT_1:
+        a, b = _byte_product(W_SOBOL7_TABLE, i), _byte_product(W_SOBOL8_TABLE, i)
+    else:
+        a, b = _byte_product(W_SOBOL9_TABLE, i), _byte_product(W_SOBOL10_TABLE, i)
+    k = wp.uint32(4 + 2 * pair)
+    x = owen_scramble(a, mix32(h + k))
+    y = owen_scramble(b, mix32(h + k + wp.uint32(1)))
     return wp.vec2(u32_to_unit_float(x), u32_to_unit_float(y))
 
 
@@ -352,7 +370,7 @@ def np_sobol_dim2(index) -> np.ndarray:
 
 
 def np_sobol(index, d: int) -> np.ndarray:
-    """Sobol's dimension ``d`` (1-6) as 32-bit fractions, bit by bit from ``SOBOL_DIRECTIONS``."""
+    """Sobol's dimension ``d`` (1-10) as 32-bit fractions, bit by bit from ``SOBOL_DIRECTIONS``."""
     i = _u32(index)
     r = np.zeros_like(i)
     for b, v in enumerate(SOBOL_DIRECTIONS[d - 1]):
@@ -365,12 +383,12 @@ def np_u32_to_unit_float(x) -> np.ndarray:
 
 
 def _np_sample(seed, pixel, index, dim, n: int) -> np.ndarray:
-    """The first ``n`` (1-7) coordinates of the pattern at ``dim``: float32, the broadcast shape + (n,)."""
+    """The first ``n`` (1-11) coordinates of the pattern at ``dim``: float32, the broadcast shape + (n,)."""
     with np.errstate(over="ignore"):
         seed, pixel, index, dim = np.broadcast_arrays(_u32(seed), _u32(pixel), _u32(index), _u32(dim))
         h = np_pattern_hash(seed, pixel, dim)
         i = np_owen_scramble(index, h)
-        gen = (np_reverse_bits32, np_sobol_dim1, np_sobol_dim2, *(lambda x, d=d: np_sobol(x, d) for d in range(3, 7)))
+        gen = (np_reverse_bits32, np_sobol_dim1, np_sobol_dim2, *(lambda x, d=d: np_sobol(x, d) for d in range(3, 11)))
         gen = gen[:n]
         return np.stack([np_u32_to_unit_float(np_owen_scramble(g(i), np_mix32(h + _U(k + 1))))
                          for k, g in enumerate(gen)], axis=-1)
@@ -391,6 +409,6 @@ def np_sample_3d(seed, pixel, index, dim) -> np.ndarray:
     return _np_sample(seed, pixel, index, dim, 3)
 
 
-def np_sample_7d(seed, pixel, index, dim) -> np.ndarray:
-    """The 7D request at ``dim``: ``sample_3d``, ``sample_dims34``, ``sample_dims56`` side by side, bit-identical."""
-    return _np_sample(seed, pixel, index, dim, 7)
+def np_sample_11d(seed, pixel, index, dim) -> np.ndarray:
+    """The 11D request at ``dim``: ``sample_3d`` and ``sample_camera_pair`` 0-3 side by side, bit-identical."""
+    return _np_sample(seed, pixel, index, dim, 11)
