@@ -306,7 +306,7 @@ def test_3d_choice_keeps_its_points_spread_better_than_independent_dimensions():
     assert np.mean(spread_3d) < 0.6 * np.mean(spread_indep)
 
 
-# ---------------------------------------------------------------------------------------------- the camera's 11D request
+# ----------------------------------------------------------------------------------------- the camera's 11D request
 
 
 @wp.kernel

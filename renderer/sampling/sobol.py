@@ -100,7 +100,6 @@ W_GOLDEN = wp.constant(wp.uint32(_GOLDEN))
 W_O1 = wp.constant(wp.uint32(_O1))
 W_O2 = wp.constant(wp.uint32(_O2))
 W_O3 = wp.constant(wp.uint32(_O3))
-W_SOBOL_V1 = wp.constant(wp.uint32(_SOBOL_V1))
 W_MASK1 = wp.constant(wp.uint32(0x55555555))
 W_MASK2 = wp.constant(wp.uint32(0x33333333))
 W_MASK4 = wp.constant(wp.uint32(0x0F0F0F0F))
@@ -388,8 +387,8 @@ def _np_sample(seed, pixel, index, dim, n: int) -> np.ndarray:
         seed, pixel, index, dim = np.broadcast_arrays(_u32(seed), _u32(pixel), _u32(index), _u32(dim))
         h = np_pattern_hash(seed, pixel, dim)
         i = np_owen_scramble(index, h)
-        gen = (np_reverse_bits32, np_sobol_dim1, np_sobol_dim2, *(lambda x, d=d: np_sobol(x, d) for d in range(3, 11)))
-        gen = gen[:n]
+        gen = (np_reverse_bits32, np_sobol_dim1, np_sobol_dim2,
+               *(lambda x, d=d: np_sobol(x, d) for d in range(3, 11)))[:n]
         return np.stack([np_u32_to_unit_float(np_owen_scramble(g(i), np_mix32(h + _U(k + 1))))
                          for k, g in enumerate(gen)], axis=-1)
 
