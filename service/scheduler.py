@@ -432,7 +432,11 @@ class Scheduler:
         self._record_tiles(plan, frame, tiles, result["seconds"])
 
     def _record_tiles(self, plan: JobPlan, frame: FramePlan, tiles: tuple[int, ...], seconds: list[float]) -> None:
-        """Record finished tiles (progress, samples, seconds) in one transaction and in the plan."""
+        """Record finished tiles (progress, samples, seconds) in one transaction and in the plan.
+
+        The database records them only while the job is running. A job canceled and at once retried (before this
+        thread looked at the database again) keeps its plan, and a result that arrives meanwhile cannot be recorded:
+        its tiles go back to the frame's queue to be rendered again (a dropped plan never runs them)."""
         recorded = self.store.tiles_done(plan.job_id, frame.idx, [
             (t, plan.tile_samples(t), float(sec)) for t, sec in zip(tiles, seconds, strict=True)])
         now = time.monotonic()
@@ -440,13 +444,18 @@ class Scheduler:
             frame.done.add(t)
             self.tiles_completed += 1
             self._tile_times.append(now)
+        left = [t for t in tiles if t not in frame.done]
+        if left:
+            done = self.store.done_tiles(plan.job_id).get(frame.idx, set())  # e.g. a result that came twice
+            frame.done.update(t for t in left if t in done)
+            self._requeue(frame, tuple(t for t in left if t not in done))
 
     def _whole_frame(self, plan: JobPlan, frame: FramePlan, tiles: tuple[int, ...], result: dict) -> None:
         """A frame rendered in one task: its tiles are recorded (progress, samples, seconds) and its EXR written."""
         frame.inflight.difference_update(tiles)
         self._record_tiles(plan, frame, tiles, result["seconds"])
         if len(frame.done) != len(plan.boxes):
-            return  # the job stopped running meanwhile (nothing recorded): it is being dropped
+            return  # the job stopped running meanwhile (nothing recorded): dropped, or its tiles queued again
         self._frame_image(plan, frame, result)
 
     def _frame_written(self, plan: JobPlan, frame: FramePlan) -> None:

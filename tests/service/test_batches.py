@@ -165,3 +165,40 @@ def test_a_failed_batch_is_retried_tile_by_tile(make_client, card, monkeypatch, 
     (tmp_path / "got.exr").write_bytes(client.get(job["frames"][0]["exr_url"]).content)
     cli_render(card, tmp_path / "want.exr", "--width", 24, "--height", 16, "--spp", 2)
     assert_same_exr(tmp_path / "got.exr", tmp_path / "want.exr")
+
+
+_race: dict = {}
+
+
+def cancel_and_retry_meanwhile(task, scene):
+    """The first task's job is canceled and retried while it renders (both before the scheduler's next look at the
+    database): its result arrives for a job that is queued again, not running."""
+    from service import jobs as sm
+
+    _tasks.append(task.tiles)
+    result = worker.render_tile_task(task, scene)
+    if len(_tasks) == 1:
+        store = _race["store"]
+        (job_id,) = [row.id for row in store.active_jobs()]
+        store.transition(job_id, sm.CANCELED)
+        store.transition(job_id, sm.QUEUED)
+    return result
+
+
+@pytest.mark.parametrize("task_samples", [65536, 0], ids=["whole-frame", "tile-by-tile"])
+def test_a_result_for_a_job_canceled_and_retried_meanwhile_is_rendered_again(make_client, card, monkeypatch,
+                                                                            tmp_path, task_samples):
+    """Its tiles cannot be recorded (the job is not running), so they go back to the queue: lost, the job would wait
+    for them for ever (a CI run hung at 15 of 16 tiles after a quick cancel and retry; without the fix the
+    whole-frame case here hangs every time, the tile-by-tile one when the result beats the job's new claim)."""
+    import service.scheduler
+
+    monkeypatch.setattr(service.scheduler, "render_tile_task", cancel_and_retry_meanwhile)
+    _tasks.clear()
+    client = make_client(task_samples=task_samples)
+    _race["store"] = client.app.state.runtime.store
+    job = wait_job(client, submit(client, card, SMALL).json()["id"], timeout=60)
+    assert job["state"] == "succeeded" and job["tiles_done"] == job["tiles_total"] == 6, job
+    (tmp_path / "got.exr").write_bytes(client.get(job["frames"][0]["exr_url"]).content)
+    cli_render(card, tmp_path / "want.exr", "--width", 24, "--height", 16, "--spp", 2)
+    assert_same_exr(tmp_path / "got.exr", tmp_path / "want.exr")
