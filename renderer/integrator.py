@@ -59,7 +59,6 @@ from renderer.sampling.sobol import (
     DIM_LIGHT_BASE,
     DIMS_PER_BOUNCE,
     sample_1d,
-    sample_2d,
     sample_3d,
     sample_camera_pair,
 )
@@ -326,6 +325,7 @@ def trace_wave_kernel(
     film_u = wp.vec2(film_t[0], film_t[1])
     s = shutter_time(settings.time_filter, film_t[2], settings.frame_s)
     lens_u = sample_camera_pair(seed, pixel, index, wp.uint32(DIM_FILM), CAMERA_LENS)
+    pinhole = cam.lens_radius <= 0.0  # its lens dims are free for the first bounce's direction
     ro, rd, tmin, tmax, fwd = camera_ray(cam, wp.vec2(float(px) + film_u[0], float(py) + film_u[1]), lens_u, s)
     cam_origin = ro
     # ray cone (texture filtering, raycone): width at the current origin (scene units), spread (radians)
@@ -442,7 +442,6 @@ def trace_wave_kernel(
                 u_light = sample_3d(seed, pixel, index, dim + wp.uint32(BOUNCE_LIGHT_CHOICE))
                 # the first bounce's point on a light with the camera's sample (sampling.sobol); with a pinhole the
                 # second's too, which pays along with the first bounce's direction
-                pinhole = cam.lens_radius <= 0.0
                 if bounce == 0 or (bounce == 1 and pinhole):
                     on_light = sample_camera_pair(seed, pixel, index, wp.uint32(DIM_FILM), CAMERA_LIGHT_0 + bounce)
                     u_light = wp.vec3(on_light[0], on_light[1], u_light[2])

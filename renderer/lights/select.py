@@ -115,7 +115,7 @@ def upload_selection(est: list[SelectEstimate], device: str, clusters: bool = Tr
             r2.append(rad * rad)
             power.append(w.sum() / (4.0 * math.pi))
             cap.append(min(math.pi * max(x.cap for x in e), 3.0e38))
-        else:
+        else:  # an infinite light: always sampled, never weighed (its estimate fields are placeholders)
             kinds.append(1)
             centres.append(np.zeros(3))
             r2.append(1.0)
@@ -136,8 +136,7 @@ def upload_selection(est: list[SelectEstimate], device: str, clusters: bool = Tr
 
 @wp.func
 def cluster_weight(sel: Selection, c: int, p: wp.vec3):
-    if sel.kind[c] == 1:
-        return sel.power[c]
+    """A finite cluster's estimated irradiance at p (infinite lights are not chosen: each is always sampled)."""
     d = sel.centre[c] - p
     return wp.min(sel.power[c] / wp.max(wp.dot(d, d), sel.radius2[c]), sel.cap[c])
 

@@ -92,7 +92,6 @@ ONE_MINUS_EPSILON = float(np.float32(1.0) - np.float32(2.0**-24))
 _M1, _M2 = 0x7FEB352D, 0x846CA68B  # lowbias32 (C. Wellons) finaliser
 _GOLDEN = 0x9E3779B9
 _O1, _O2, _O3 = 0x3D20ADEA, 0x05526C56, 0x53A22864  # Owen scrambler (Vegdahl / pbrt-v4)
-_SOBOL_V1 = 0x80000000
 
 W_M1 = wp.constant(wp.uint32(_M1))
 W_M2 = wp.constant(wp.uint32(_M2))
@@ -220,7 +219,7 @@ def sobol_dim1(index: wp.uint32) -> wp.uint32:
 @wp.func
 def sobol_dims12(index: wp.uint32):
     """Sobol's second and third dimensions (32-bit fractions). The third: primitive polynomial x^2 + x + 1,
-    m = (1, 3) (Joe & Kuo's direction numbers; ``np_sobol_dim2``)."""
+    m = (1, 3) (Joe & Kuo's direction numbers; ``np_sobol``)."""
     return _byte_product(W_SOBOL1_TABLE, index), _byte_product(W_SOBOL2_TABLE, index)
 
 
@@ -344,30 +343,6 @@ def np_owen_scramble(v, seed) -> np.ndarray:
         return np_reverse_bits32(v)
 
 
-def np_sobol_dim1(index) -> np.ndarray:
-    i = _u32(index)
-    r = np.zeros_like(i)
-    v = _U(_SOBOL_V1)
-    for b in range(32):
-        r = r ^ np.where(((i >> _U(b)) & _U(1)) != 0, v, _U(0)).astype(np.uint32)
-        v = _U(v ^ (v >> _U(1)))
-    return r
-
-
-def np_sobol_dim2(index) -> np.ndarray:
-    i = _u32(index)
-    r = np.zeros_like(i)
-    m2, m1 = 1, 3
-    r = r ^ np.where((i & _U(1)) != 0, _U(0x80000000), _U(0)).astype(np.uint32)
-    r = r ^ np.where(((i >> _U(1)) & _U(1)) != 0, _U(0xC0000000), _U(0)).astype(np.uint32)
-    for k in range(3, 33):
-        m = ((m1 << 1) ^ (m2 << 2) ^ m2) & 0xFFFFFFFF
-        v = _U((m << (32 - k)) & 0xFFFFFFFF)
-        r = r ^ np.where(((i >> _U(k - 1)) & _U(1)) != 0, v, _U(0)).astype(np.uint32)
-        m2, m1 = m1, m
-    return r
-
-
 def np_sobol(index, d: int) -> np.ndarray:
     """Sobol's dimension ``d`` (1-10) as 32-bit fractions, bit by bit from ``SOBOL_DIRECTIONS``."""
     i = _u32(index)
@@ -387,8 +362,7 @@ def _np_sample(seed, pixel, index, dim, n: int) -> np.ndarray:
         seed, pixel, index, dim = np.broadcast_arrays(_u32(seed), _u32(pixel), _u32(index), _u32(dim))
         h = np_pattern_hash(seed, pixel, dim)
         i = np_owen_scramble(index, h)
-        gen = (np_reverse_bits32, np_sobol_dim1, np_sobol_dim2,
-               *(lambda x, d=d: np_sobol(x, d) for d in range(3, 11)))[:n]
+        gen = (np_reverse_bits32, *(lambda x, d=d: np_sobol(x, d) for d in range(1, 11)))[:n]
         return np.stack([np_u32_to_unit_float(np_owen_scramble(g(i), np_mix32(h + _U(k + 1))))
                          for k, g in enumerate(gen)], axis=-1)
 
