@@ -11,10 +11,11 @@ on however many threads. The service splits frames into tiles and calls it from 
 """
 from __future__ import annotations
 
+
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -128,6 +129,19 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> Prepar
     return PreparedScene(scene=scene, options=options, width=width, height=height, framing=framing,
                          geometry=geometry, materials=materials, textures=textures, lights=lights,
                          light_count=light_count, camera=cam, stats=stats, device=device, warnings=warnings)
+
+
+def with_options(prep: PreparedScene, options: RenderOptions) -> PreparedScene:
+    """``prep`` rendered with other sampling options (seed, spp, filters, AOVs, clamps, adaptive sampling,
+    denoising) at no cost: what ``prepare`` builds depends on the options' resolution and depth of field only,
+    which must be the same. A service renders many jobs of one scene that differ in nothing else."""
+    old = prep.options
+    if (options.width, options.height, options.dof) != (old.width, old.height, old.dof):
+        raise ValueError("with_options keeps the resolution and depth of field of the prepared scene")
+    options.validate()
+    if options.denoise:
+        denoise.require()
+    return replace(prep, options=options)
 
 
 def render_tile(prep: PreparedScene, tile: Tile,

@@ -177,7 +177,9 @@ def decode_cursor(cursor: str) -> int:
 
 
 class Store:
-    def __init__(self, path: Path):
+    def __init__(self, path: Path, clear_claims: bool = True):
+        """``clear_claims``: drop Idempotency-Key claims left by requests in flight when the service stopped; only
+        the API process may, at its start (the coordinator's process opens the store while requests run)."""
         path.parent.mkdir(parents=True, exist_ok=True)
         # One connection per busy thread: status requests run on up to 40 threads at once, and SQLAlchemy's default
         # pool of 5 (+10) made them queue for a connection rather than for the database (WAL: readers never wait).
@@ -208,9 +210,9 @@ class Store:
         self._raw = sqlite3.connect(path, check_same_thread=False, isolation_level=None, timeout=60)
         for pragma in ("synchronous=NORMAL", "foreign_keys=ON", "busy_timeout=60000"):
             self._raw.execute(f"PRAGMA {pragma}")
-        # Claims left by requests that were in flight when the service stopped can never complete.
-        with self._write() as s:
-            s.execute(delete(IdempotencyRow).where(IdempotencyRow.job_id.is_(None)))
+        if clear_claims:  # claims left by requests in flight when the service stopped can never complete
+            with self._write() as s:
+                s.execute(delete(IdempotencyRow).where(IdempotencyRow.job_id.is_(None)))
 
     def _migrate(self) -> None:
         """Columns added since a data directory was created (create_all only makes missing tables)."""

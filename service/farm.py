@@ -12,8 +12,8 @@ from collections import defaultdict
 
 from schemas import Farm, FarmTask, FarmWorker, FrameTiles, TileMap
 
+from .coordinator import FarmView, SchedulerStats
 from .db import JobNotFound, JobRow, Store
-from .engine import Engine
 from .settings import ServiceSettings
 
 _KEY = re.compile(r"^drt-(tile|frame)-([0-9A-Za-z]+)-(\d+)-(-?\d+(?:\.\d+)*)-[0-9A-Za-z]+$")
@@ -28,27 +28,16 @@ def parse_key(key) -> FarmTask | None:
     return FarmTask(kind=kind, job_id=job_id, frame_index=frame_idx, tile=tiles[0] if tiles else None, tiles=tiles)
 
 
-def processing(engine: Engine) -> dict[str, list]:
-    """{worker address: task keys it holds}; empty while the scheduler cannot be reached."""
-    try:
-        return {w: list(keys) for w, keys in engine.client.processing().items()}
-    except Exception:  # noqa: BLE001 - the cluster is away for the moment: the monitor shows no workers
-        return {}
-
-
-def dashboard_url(settings: ServiceSettings, engine: Engine, services: dict) -> str | None:
+def dashboard_url(settings: ServiceSettings, view: FarmView) -> str | None:
     """``DRT_DASHBOARD_URL`` if set; else the Dask dashboard's own link when one runs: an external scheduler's
     (``dask scheduler`` serves one on :8787), or the embedded cluster's when bokeh is installed (a loopback URL)."""
     if settings.dashboard_url:
         return settings.dashboard_url
-    if "dashboard" not in services:
+    if "dashboard" not in (view.info.get("services") or {}):
         return None
     if settings.scheduler_address is None and importlib.util.find_spec("bokeh") is None:
         return None  # the embedded scheduler's HTTP server has no /status page without bokeh
-    try:
-        return engine.client.dashboard_link
-    except Exception:  # noqa: BLE001
-        return None
+    return view.dashboard_link
 
 
 def _frame_times(store: Store, tasks: list[FarmTask]) -> None:
@@ -64,13 +53,8 @@ def _frame_times(store: Store, tasks: list[FarmTask]) -> None:
         t.frame = frames[t.frame_index] if t.frame_index < len(frames) else None
 
 
-def farm(settings: ServiceSettings, engine: Engine, store: Store, *, tiles_in_flight: int, tiles_pending: int,
-         tiles_per_second: float) -> Farm:
-    try:
-        info = engine.client.scheduler_info(n_workers=-1)
-    except Exception:  # noqa: BLE001 - the cluster is away: an empty farm, not an error page
-        info = {}
-    held = processing(engine) if info else {}
+def farm(settings: ServiceSettings, view: FarmView, store: Store, stats: SchedulerStats) -> Farm:
+    info, held = view.info, view.processing
     workers = []
     for address, w in sorted((info.get("workers") or {}).items()):
         tasks = [t for t in (parse_key(k) for k in held.get(address, ())) if t is not None]
@@ -81,16 +65,15 @@ def farm(settings: ServiceSettings, engine: Engine, store: Store, *, tiles_in_fl
             memory=metrics.get("memory"), cpu=metrics.get("cpu"), tasks=tasks,
             other_tasks=len(held.get(address, ())) - len(tasks)))
     _frame_times(store, [t for w in workers for t in w.tasks])
-    return Farm(scheduler=info.get("address"),
-                dashboard_url=dashboard_url(settings, engine, info.get("services") or {}), workers=workers,
-                tiles_in_flight=tiles_in_flight, tiles_pending=tiles_pending, tiles_per_second=tiles_per_second)
+    return Farm(scheduler=info.get("address"), dashboard_url=dashboard_url(settings, view), workers=workers,
+                tiles_in_flight=stats.in_flight, tiles_pending=stats.pending, tiles_per_second=stats.tiles_per_second)
 
 
-def tile_map(row: JobRow, store: Store, engine: Engine) -> TileMap:
+def tile_map(row: JobRow, store: Store, view: FarmView) -> TileMap:
     """Which tiles of each frame are checkpointed and which a worker holds now."""
     done = store.done_tiles(row.id)
     rendering: dict[int, set[int]] = defaultdict(set)
-    for keys in processing(engine).values():
+    for keys in view.processing.values():
         for t in (parse_key(k) for k in keys):
             if t is not None and t.job_id == row.id:
                 rendering[t.frame_index].update(t.tiles)

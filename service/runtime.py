@@ -4,10 +4,9 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 
+from .coordinator import Coordinator, CoordinatorProcess
 from .db import Store
-from .engine import Engine
 from .inspection import InspectionPool
-from .scheduler import Scheduler
 from .settings import ServiceSettings
 from .submission import Inspector, Submitter
 from .uploads import SceneStore
@@ -20,8 +19,7 @@ class Runtime:
     settings: ServiceSettings
     store: Store
     scenes: SceneStore
-    engine: Engine
-    scheduler: Scheduler
+    coordinator: Coordinator | CoordinatorProcess
     submitter: Submitter
     inspector: Inspector
 
@@ -31,24 +29,23 @@ class Runtime:
         store = Store(settings.db_path)
         scenes = SceneStore(settings.data_dir / "scenes", settings.max_upload_bytes)
         inspector = InspectionPool(settings.inspect_processes, settings.inspect_timeout)
-        engine = Engine(settings)
+        coordinator = (CoordinatorProcess(settings) if settings.scheduler_process
+                       else Coordinator(settings, store, scenes))
         try:
-            engine.start()
+            coordinator.start()
         except BaseException:
             inspector.close()
             store.close()
             raise
         inspector.wait_ready(120)  # its processes imported pxr and the renderer while the cluster started
-        scheduler = Scheduler(settings, store, engine, scenes)
-        submitter = Submitter(settings, store, scenes, on_created=scheduler.wake, cluster_available=engine.available)
-        scheduler.start()
+        submitter = Submitter(settings, store, scenes, on_created=coordinator.wake,
+                              cluster_available=coordinator.available)
         log.info("drt service ready (data in %s)", settings.data_dir)
-        return cls(settings=settings, store=store, scenes=scenes, engine=engine, scheduler=scheduler,
-                   submitter=submitter, inspector=inspector)
+        return cls(settings=settings, store=store, scenes=scenes, coordinator=coordinator, submitter=submitter,
+                   inspector=inspector)
 
     def close(self) -> None:
-        self.scheduler.stop()
-        self.engine.close()
+        self.coordinator.close()
         if isinstance(self.inspector, InspectionPool):
             self.inspector.close()
         self.store.close()

@@ -24,6 +24,9 @@ class ServiceSettings(BaseSettings):
     workers: int = Field(1, ge=1, le=256, description="LocalCluster worker processes")
     threads_per_worker: int = Field(0, ge=0, le=256, description="threads per LocalCluster worker (0: all cores)")
     processes: bool = Field(True, description="LocalCluster workers as processes (false: threads in the service)")
+    scheduler_process: bool = Field(
+        True, description="the job scheduler and the Dask client in a process of their own (false: threads of the "
+                          "API process)")
     api_token: SecretStr | None = Field(None, description="bearer token required by every endpoint but /healthz")
     max_upload_bytes: int = Field(256 * 2**20, ge=1, description="largest scene upload (413 above)")
     # A job's cost, refused with 422 before it is queued. Defaults for one 2-core machine, which renders about

@@ -16,6 +16,12 @@ from renderer.request import LensOverrides, RenderRequest
 from schemas import JobCreate
 
 
+# Settings that steer sampling and output only: one prepared scene serves every value of them
+# (``renderer.render.with_options``), so jobs that differ in them share the worker's cache entry.
+SAMPLING_FIELDS = ("spp", "seed", "filter", "time_filter", "aovs", "max_depth", "clamp", "unbiased", "noise_threshold",
+                   "min_spp", "time_limit", "denoise", "half")
+
+
 @dataclass(frozen=True)
 class RenderSpec:
     scene_path: str  # the scene file: the stored upload (inspection), or its name (tasks: workers use their copy)
@@ -56,10 +62,11 @@ class RenderSpec:
                    half=settings.half)
 
     def cache_key(self, frame: float | None) -> tuple:
-        """What a prepared scene depends on (not the file's path: the same content is the same scene)."""
+        """What a prepared scene depends on: not the file's path (the same content is the same scene), nor the
+        sampling settings."""
         d = dataclasses.asdict(self)
-        d.pop("scene_path")
-        d.pop("half")  # only changes how the EXR is stored
+        for name in ("scene_path", *SAMPLING_FIELDS):
+            d.pop(name)
         return (frame, tuple(sorted(d.items())))
 
     def options(self) -> RenderOptions:

@@ -137,22 +137,28 @@ def _one_line(e: BaseException) -> str:
 
 
 def prepared(spec: RenderSpec, frame: float, scene: ScenePackage, capacity: int = 2):
-    """The PreparedScene of one frame of a job, from this process's cache or freshly loaded and prepared."""
+    """The PreparedScene of one frame of a job, from this process's cache or freshly loaded and prepared; a
+    cached one prepared for a job that sampled differently (seed, spp, ...) takes this job's options."""
+    from renderer.render import with_options
+
     key = (spec.scene_sha256, spec.cache_key(frame))
+    options = spec.options()
     with _cache_lock:
-        if key in _cache:
+        prep = _cache.get(key)
+        if prep is not None:
             _cache.move_to_end(key)
-            return _cache[key]
+            return prep if prep.options == options else with_options(prep, options)
         lock = _key_locks.setdefault(key, threading.Lock())
     with lock:
         with _cache_lock:
-            if key in _cache:
-                return _cache[key]
+            prep = _cache.get(key)
+        if prep is not None:
+            return prep if prep.options == options else with_options(prep, options)
         from renderer.device import init_warp
         from renderer.render import prepare
 
         init_warp()
-        prep = prepare(local_scene(scene).load(spec, frame), spec.options())
+        prep = prepare(local_scene(scene).load(spec, frame), options)
         with _cache_lock:
             _cache[key] = prep
             _stats["prepared"] += 1

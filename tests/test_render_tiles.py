@@ -8,7 +8,7 @@ import warp as wp
 from renderer.film import film
 from renderer.motion.transform import make_transform
 from renderer.render import (RenderOptions, Tile, assemble, auto_tile_size, prepare, render_frame, render_tile,
-                             split_tiles)
+                             split_tiles, with_options)
 from renderer.scene.model import (LIGHT_RECT, LIGHT_SPHERE, Camera, Instance, Light, Material, Mesh, MotionTransform,
                             Scene)
 
@@ -90,6 +90,18 @@ def test_seed_changes_the_noise_not_the_mean(scene):
     assert not np.array_equal(a["rgba"], b["rgba"])
     ma, mb = a["rgba"][..., 0].sum() / a["weight"].sum(), b["rgba"][..., 0].sum() / b["weight"].sum()
     assert abs(ma - mb) < 0.05 * max(ma, mb)
+
+
+def test_a_prepared_scene_with_other_sampling_options_renders_as_if_prepared_with_them(scene):
+    """What a service worker does for jobs of one scene that differ in seed, spp, filter, depth or AOVs."""
+    base = prepare(scene, RenderOptions(width=24, height=16, spp=4, seed=1))
+    other = RenderOptions(width=24, height=16, spp=8, seed=2, filter="box", max_depth=2, aovs=("depth",))
+    a = render_frame(with_options(base, other), tile_size=16).sums
+    b = render_frame(prepare(scene, other), tile_size=16).sums
+    assert a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+    for changed in (RenderOptions(width=32, height=16), RenderOptions(width=24, height=16, dof=False)):
+        with pytest.raises(ValueError):
+            with_options(base, changed)
 
 
 def test_wave_schedule_depends_on_spp_only():

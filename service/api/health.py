@@ -17,8 +17,8 @@ router = APIRouter(tags=["health"])
 async def healthz(runtime: RuntimeDep):
     """200 while the service runs (it still answers status requests and downloads while the cluster is away);
     ``cluster`` says whether the Dask scheduler is reachable, ``workers``/``threads`` what it has. Answers from
-    facts the engine refreshes once a second: never waits on the scheduler."""
-    facts = runtime.engine.facts()
+    facts the coordinator refreshes once a second: never waits on the scheduler."""
+    facts = runtime.coordinator.facts()
     return Health(status="ok" if facts.reachable else "degraded",
                   cluster="reachable" if facts.reachable else "unreachable", workers=facts.workers,
                   threads=facts.threads)
@@ -30,11 +30,11 @@ async def healthz(runtime: RuntimeDep):
                              "description": "Prometheus text format 0.0.4"}, **UNAUTHORIZED_ANSWER})
 def get_metrics(runtime: RuntimeDep):
     """Jobs by state, queue depth, tiles in flight and pending, tiles/s, task failures, cluster size."""
-    sch = runtime.scheduler
-    facts = runtime.engine.facts()
-    text = metrics.render(runtime.store.counts_by_state(), tiles_completed=sch.tiles_completed,
-                          tiles_failed=sch.tiles_failed, tiles_per_second=sch.tiles_per_second(),
-                          tiles_in_flight=sch.in_flight(), tiles_pending=sch.pending_tiles(),
-                          workers=facts.workers, threads=facts.threads, tiles_lost=sch.tiles_lost,
+    stats = runtime.coordinator.stats()
+    facts = runtime.coordinator.facts()
+    text = metrics.render(runtime.store.counts_by_state(), tiles_completed=stats.tiles_completed,
+                          tiles_failed=stats.tiles_failed, tiles_per_second=stats.tiles_per_second,
+                          tiles_in_flight=stats.in_flight, tiles_pending=stats.pending,
+                          workers=facts.workers, threads=facts.threads, tiles_lost=stats.tiles_lost,
                           cluster_reachable=facts.reachable)
     return PlainTextResponse(text, media_type="text/plain; version=0.0.4; charset=utf-8")

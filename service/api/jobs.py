@@ -100,7 +100,7 @@ def cancel_job(runtime: RuntimeDep, job_id: str):
         raise ApiError(404, errors.JOB_NOT_FOUND) from None
     except sm.IllegalTransition as e:
         raise ApiError(409, errors.cannot_cancel(e.current.value)) from None
-    runtime.scheduler.wake()  # it cancels the job's tasks: running tiles stop at their next sample wave
+    runtime.coordinator.wake()  # it cancels the job's tasks: running tiles stop at their next sample wave
     return job_public(row)
 
 
@@ -117,7 +117,7 @@ def retry_job(runtime: RuntimeDep, job_id: str):
         raise ApiError(404, errors.JOB_NOT_FOUND) from None
     except sm.IllegalTransition as e:
         raise ApiError(409, errors.cannot_retry(e.current.value)) from None
-    runtime.scheduler.wake()
+    runtime.coordinator.wake()
     return job_public(row)
 
 
@@ -137,7 +137,7 @@ def delete_job(runtime: RuntimeDep, job_id: str):
         raise ApiError(404, errors.JOB_NOT_FOUND) from None
     except JobActive as e:  # cannot happen after the cancel above, unless a future state allows it
         raise ApiError(409, errors.cannot_delete(e.state.value)) from None
-    runtime.scheduler.wake()
+    runtime.coordinator.wake()
     JobFiles(runtime.settings.data_dir, job_id).remove()
     runtime.scenes.collect(row.scene_sha256, runtime.store.scene_in_use)
     return Response(status_code=204)

@@ -21,12 +21,11 @@ def job_tiles(runtime: RuntimeDep, job_id: str):
         row = runtime.store.get_job(job_id)
     except JobNotFound:
         raise ApiError(404, errors.JOB_NOT_FOUND) from None
-    return farm.tile_map(row, runtime.store, runtime.engine)
+    return farm.tile_map(row, runtime.store, runtime.coordinator.farm())
 
 
 @router.get("/farm", response_model=Farm)
 def get_farm(runtime: RuntimeDep):
     """The Dask workers (threads, memory, CPU) with the drt tasks each holds, and the Dask dashboard's link."""
-    sch = runtime.scheduler
-    return farm.farm(runtime.settings, runtime.engine, runtime.store, tiles_in_flight=sch.in_flight(),
-                     tiles_pending=sch.pending_tiles(), tiles_per_second=sch.tiles_per_second())
+    coordinator = runtime.coordinator
+    return farm.farm(runtime.settings, coordinator.farm(), runtime.store, coordinator.stats())

@@ -31,8 +31,9 @@ def write_card(path: Path, *, fstop: float = 2.0, extra: str | None = None) -> P
 def service_settings(data_dir: Path, **overrides):
     from service.settings import ServiceSettings
 
-    base = dict(data_dir=data_dir, processes=False, workers=1, threads_per_worker=2, poll_interval=0.05,
-                inspect_timeout=60, inspect_processes=1)
+    # The coordinator as threads of the test's process: tests patch the worker functions it submits.
+    base = dict(data_dir=data_dir, processes=False, scheduler_process=False, workers=1, threads_per_worker=2,
+                poll_interval=0.05, inspect_timeout=60, inspect_processes=1)
     base.update(overrides)
     return ServiceSettings(**base)
 

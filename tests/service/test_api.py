@@ -12,7 +12,7 @@ from PIL import Image
 from renderer.film.exr import read_exr
 from service import inspection, worker
 from service.api.deps import get_settings, get_store
-from service.db import StoreBusy
+from service.db import Store, StoreBusy
 
 from service_helpers import (CONTRACT_LIMITS, assert_same_exr, cli_render, http_contract, service_settings, submit,
                              wait_job, write_card)
@@ -321,6 +321,27 @@ def test_each_frame_is_prepared_once_per_worker(client, card):
     assert worker.stats()["prepared"] - before == 2
 
 
+def test_jobs_that_sample_differently_share_a_prepared_scene_and_each_equals_drt_render(client, card, tmp_path):
+    """The worker's cache is keyed by what shapes the prepared scene, not by seed, spp, filters or AOVs (the load
+    test's jobs differ only in seed: each was loaded and prepared anew). Each job still renders as its own."""
+    worker.clear_cache()
+    before = worker.stats()["prepared"]
+    first = {"width": 24, "height": 16, "spp": 4, "seed": 1}
+    second = {"width": 24, "height": 16, "spp": 8, "seed": 2, "filter": "box", "aovs": ["depth"], "max_depth": 2}
+    for i, settings in enumerate((first, second)):
+        job = wait_job(client, submit(client, card, settings).json()["id"])
+        assert job["state"] == "succeeded", job
+        (tmp_path / f"svc{i}.exr").write_bytes(client.get(job["frames"][0]["exr_url"]).content)
+    assert worker.stats()["prepared"] - before == 1
+    cli_render(card, tmp_path / "cli0.exr", "--width", 24, "--height", 16, "--spp", 4, "--seed", 1)
+    cli_render(card, tmp_path / "cli1.exr", "--width", 24, "--height", 16, "--spp", 8, "--seed", 2, "--filter", "box",
+               "--aov", "depth", "--max-depth", 2)
+    assert_same_exr(tmp_path / "svc0.exr", tmp_path / "cli0.exr")
+    assert_same_exr(tmp_path / "svc1.exr", tmp_path / "cli1.exr")
+    job = wait_job(client, submit(client, card, {**first, "width": 16}).json()["id"])  # a new resolution
+    assert job["state"] == "succeeded" and worker.stats()["prepared"] - before == 2
+
+
 # -- failures inside the cluster -----------------------------------------------------------------------------------
 
 _calls: dict = {}
@@ -381,6 +402,15 @@ def test_a_renderer_error_fails_the_job_at_once(make_client, card, monkeypatch):
     assert "drt_task_failures_total 0" in client.get("/metrics").text  # not retried: it would say the same
 
 
+def stopped_job(tmp_path, job_id: str):
+    """The job as a stopped service left it in the database (a restarted one resumes it before any request)."""
+    store = Store(tmp_path / "data" / "drt.sqlite3")
+    try:
+        return store.get_job(job_id)
+    finally:
+        store.close()
+
+
 def test_a_stopped_service_resumes_from_its_checkpoints(make_client, card, tmp_path):
     client = make_client(threads_per_worker=1, max_in_flight=1)
     settings = {**SLOW, "spp": 128}
@@ -390,13 +420,13 @@ def test_a_stopped_service_resumes_from_its_checkpoints(make_client, card, tmp_p
         assert time.monotonic() < deadline
         time.sleep(0.02)
     make_client.stop(client)  # the service stops mid-job
-    client2 = make_client(threads_per_worker=2)
-    job = client2.get(f"/v1/jobs/{job_id}").json()
-    assert job["state"] == "running" and 10 <= job["tiles_done"] < job["tiles_total"]
-    done_before = job["tiles_done"]
+    stopped = stopped_job(tmp_path, job_id)
+    assert stopped.state == "running" and 10 <= stopped.tiles_done < stopped.tiles_total
+    done_before = stopped.tiles_done
+    client2 = make_client(threads_per_worker=2)  # it resumes the job at once, maybe before its first request
     job = wait_job(client2, job_id)
     assert job["state"] == "succeeded"
-    rendered_after = client2.app.state.runtime.scheduler.tiles_completed
+    rendered_after = client2.app.state.runtime.coordinator.scheduler.tiles_completed
     assert rendered_after == job["tiles_total"] - done_before  # checkpointed tiles were not rendered again
     (tmp_path / "got.exr").write_bytes(client2.get(job["frames"][0]["exr_url"]).content)
     cli_render(card, tmp_path / "want.exr", "--width", 64, "--height", 64, "--spp", 128)
@@ -417,11 +447,11 @@ def test_an_unreadable_checkpoint_is_rendered_again(make_client, card, tmp_path)
     tiles[0].write_bytes(b"not a checkpoint")  # exists, so the resumed plan trusts it until it is read
     with np.load(tiles[1]) as z:  # the layout before border partials: readable, but cannot be assembled
         np.savez(tiles[1], **{k: z[k] for k in z.files if not k.startswith("band.")})
+    done_before = stopped_job(tmp_path, job_id).tiles_done
     client2 = make_client(threads_per_worker=2)
-    done_before = client2.get(f"/v1/jobs/{job_id}").json()["tiles_done"]
     job = wait_job(client2, job_id)
     assert job["state"] == "succeeded" and job["error"] is None, job
-    assert client2.app.state.runtime.scheduler.tiles_completed == job["tiles_total"] - done_before + 2
+    assert client2.app.state.runtime.coordinator.scheduler.tiles_completed == job["tiles_total"] - done_before + 2
     assert "drt_task_failures_total 0" in client2.get("/metrics").text
     (tmp_path / "got.exr").write_bytes(client2.get(job["frames"][0]["exr_url"]).content)
     cli_render(card, tmp_path / "want.exr", "--width", 64, "--height", 64, "--spp", 64)

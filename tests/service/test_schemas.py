@@ -85,9 +85,12 @@ def test_spec_maps_settings_like_drt_render():
     o = spec.options()
     assert (o.spp, o.seed, o.time_filter, o.dof, o.aovs) == (8, 3, "strobe", False, ("depth",))
     assert spec.shutter == (-0.25, 0.25)
-    # half changes only the file: the same prepared scene serves both
-    halved = RenderSpec.from_settings(s.model_copy(update={"half": True}), "/y", "abc")
-    assert spec.cache_key(1.0) == halved.cache_key(1.0)
+    # sampling and output settings leave the prepared scene as it is: one serves them all
+    for change in ({"half": True}, {"seed": 9, "spp": 64, "aovs": ["normal"], "max_depth": 2, "unbiased": True}):
+        other = RenderSpec.from_settings(s.model_copy(update=change), "/y", "abc")
+        assert spec.cache_key(1.0) == other.cache_key(1.0)
+    for change in ({"width": 64}, {"dof": True}, {"camera": "/Cam"}, {"focal_length": 35.0}, {"shutter": (0, 1)}):
+        assert spec.cache_key(1.0) != RenderSpec.from_settings(s.model_copy(update=change), "/y", "abc").cache_key(1.0)
     assert spec.cache_key(1.0) != spec.cache_key(2.0)
 
 

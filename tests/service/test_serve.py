@@ -180,6 +180,58 @@ def test_a_killed_service_resumes_its_running_job(servers, card, tmp_path):
     assert_same_exr(tmp_path / "svc.exr", tmp_path / "cli.exr")
 
 
+def _coordinator(server: Server) -> psutil.Process:
+    """The child process that runs the job scheduler and the Dask client (``service.coordinator``)."""
+    (proc,) = [p for p in psutil.Process(server.proc.pid).children()
+               if any("spawn_main" in a for a in p.cmdline())]
+    return proc
+
+
+def test_a_killed_coordinator_is_started_again_and_its_job_finishes_the_same(servers, card, tmp_path):
+    """The scheduler's process dies mid-job: the API keeps answering, says the cluster is unreachable and refuses
+    submissions with 503 until a new coordinator has resumed the job from its checkpoints; the old one's workers
+    do not outlive it."""
+    server = servers()
+    settings = {"width": 128, "height": 128, "spp": 256, "tile": 16}  # 64 tiles, a few seconds
+    job_id = submit(server.http, card, settings).json()["id"]
+    deadline = time.monotonic() + 120
+    while server.http.get(f"/v1/jobs/{job_id}").json()["tiles_done"] < 8:
+        assert time.monotonic() < deadline
+        time.sleep(0.02)
+    old = _coordinator(server)
+    old_workers = old.children(recursive=True)
+    old.kill()
+    deadline = time.monotonic() + 10
+    while (health := server.http.get("/healthz")).json()["cluster"] != "unreachable":
+        assert time.monotonic() < deadline, "the API never noticed its coordinator died"
+        time.sleep(0.02)
+    assert health.status_code == 200 and health.elapsed.total_seconds() < 1
+    r = submit(server.http, card, settings)
+    assert (r.status_code, r.headers["retry-after"]) == (503, "5")
+    job = wait_job(server.http, job_id)
+    assert job["state"] == "succeeded", job
+    assert _coordinator(server).pid != old.pid
+    _, alive = psutil.wait_procs(old_workers, timeout=30)
+    assert not alive, f"the dead coordinator's workers live on: {alive}"
+    (tmp_path / "svc.exr").write_bytes(server.http.get(job["frames"][0]["exr_url"]).content)
+    cli_render(card, tmp_path / "cli.exr", "--width", 128, "--height", 128, "--spp", 256)
+    assert_same_exr(tmp_path / "svc.exr", tmp_path / "cli.exr")
+
+
+def test_a_killed_api_process_takes_its_coordinator_and_workers_with_it(servers, card):
+    """Never two schedulers on one database: the coordinator leaves when the API process dies, even by SIGKILL."""
+    server = servers()
+    job = wait_job(server.http, submit(server.http, card, {"width": 16, "height": 16, "spp": 1}).json()["id"])
+    assert job["state"] == "succeeded"
+    family = server.family()
+    assert _coordinator(server) in family and len(_coordinator(server).children()) >= 1  # a LocalCluster worker
+    server.http.close()
+    os.kill(server.proc.pid, signal.SIGKILL)
+    server.proc.wait(timeout=30)
+    _, alive = psutil.wait_procs(family[1:], timeout=30)
+    assert not alive, f"left behind by the killed API process: {alive}"
+
+
 def test_a_killed_worker_process_still_yields_the_same_image(card, tmp_path):
     from fastapi.testclient import TestClient
 
@@ -193,12 +245,12 @@ def test_a_killed_worker_process_still_yields_the_same_image(card, tmp_path):
         while client.get(f"/v1/jobs/{job_id}").json()["tiles_done"] < 2:
             assert time.monotonic() < deadline
             time.sleep(0.02)
-        assert runtime.scheduler.in_flight() > 0  # tiles are running on the worker right now
-        (pid,) = runtime.engine.worker_pids().values()
+        assert runtime.coordinator.scheduler.in_flight() > 0  # tiles are running on the worker right now
+        (pid,) = runtime.coordinator.engine.worker_pids().values()
         os.kill(pid, signal.SIGKILL)
         job = wait_job(client, job_id, timeout=180)
         assert job["state"] == "succeeded", job
-        (new_pid,) = runtime.engine.worker_pids().values()
+        (new_pid,) = runtime.coordinator.engine.worker_pids().values()
         assert new_pid != pid  # the nanny started a new worker process
         (tmp_path / "svc.exr").write_bytes(client.get(job["frames"][0]["exr_url"]).content)
     cli_render(card, tmp_path / "cli.exr", "--width", 64, "--height", 64, "--spp", 2048)
