@@ -207,6 +207,28 @@ def test_a_stopping_service_ends_its_event_streams(tmp_path):
 # -- tiles and farm -----------------------------------------------------------------------------------------------
 
 def test_tile_map_and_farm_show_the_tiles_workers_hold(server, card):
+    check_tile_map_and_farm(server, card)
+
+
+def test_tile_map_and_farm_from_a_coordinator_process(tmp_path, card):
+    """The same answers when the job scheduler and the Dask client run in ``drt serve``'s child process."""
+    s = LiveServer(tmp_path / "data", threads_per_worker=1, scheduler_process=True)
+    try:
+        assert s.http.get("/healthz").json() == {"status": "ok", "cluster": "reachable", "workers": 1, "threads": 1}
+        check_tile_map_and_farm(s, card)
+        deadline = time.monotonic() + 5  # the counters reach the API four times a second
+        while metric(s.http.get("/metrics").text, "drt_tiles_completed_total") < 6:  # the small job's tiles at least
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+    finally:
+        s.stop()
+
+
+def metric(text: str, name: str) -> float:
+    return float(next(line.split()[1] for line in text.splitlines() if line.startswith(name + " ")))
+
+
+def check_tile_map_and_farm(server, card):
     job_id = submit(server.http, card, SLOW).json()["id"]
     deadline = time.monotonic() + 60
     while True:
