@@ -11,7 +11,6 @@ on however many threads. The service splits frames into tiles and calls it from 
 """
 from __future__ import annotations
 
-
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -133,8 +132,10 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> Prepar
 
 def with_options(prep: PreparedScene, options: RenderOptions) -> PreparedScene:
     """``prep`` rendered with other sampling options (seed, spp, filters, AOVs, clamps, adaptive sampling,
-    denoising) at no cost: what ``prepare`` builds depends on the options' resolution and depth of field only,
-    which must be the same. A service renders many jobs of one scene that differ in nothing else."""
+    denoising) at no cost, as ``prepare(prep.scene, options)`` would: what ``prepare`` builds depends on the
+    options' resolution and depth of field only, which must be the same. (The scene itself may depend on more:
+    ``RenderRequest.load`` drops motion keys for a strobe time filter.) A service renders many jobs of one scene
+    that differ in nothing else."""
     old = prep.options
     if (options.width, options.height, options.dof) != (old.width, old.height, old.dof):
         raise ValueError("with_options keeps the resolution and depth of field of the prepared scene")

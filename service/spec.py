@@ -17,9 +17,10 @@ from schemas import JobCreate
 
 
 # Settings that steer sampling and output only: one prepared scene serves every value of them
-# (``renderer.render.with_options``), so jobs that differ in them share the worker's cache entry.
-SAMPLING_FIELDS = ("spp", "seed", "filter", "time_filter", "aovs", "max_depth", "clamp", "unbiased", "noise_threshold",
-                   "min_spp", "time_limit", "denoise", "half")
+# (``renderer.render.with_options``), so jobs that differ in them share the worker's cache entry. Not the time
+# filter: a strobe shutter loads the frame without its motion keys.
+SAMPLING_FIELDS = ("spp", "seed", "filter", "aovs", "max_depth", "clamp", "unbiased", "noise_threshold", "min_spp",
+                   "time_limit", "denoise", "half")
 
 
 @dataclass(frozen=True)

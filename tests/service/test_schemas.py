@@ -89,7 +89,8 @@ def test_spec_maps_settings_like_drt_render():
     for change in ({"half": True}, {"seed": 9, "spp": 64, "aovs": ["normal"], "max_depth": 2, "unbiased": True}):
         other = RenderSpec.from_settings(s.model_copy(update=change), "/y", "abc")
         assert spec.cache_key(1.0) == other.cache_key(1.0)
-    for change in ({"width": 64}, {"dof": True}, {"camera": "/Cam"}, {"focal_length": 35.0}, {"shutter": (0, 1)}):
+    for change in ({"width": 64}, {"dof": True}, {"camera": "/Cam"}, {"focal_length": 35.0}, {"shutter": (0, 1)},
+                   {"time_filter": "box"}, {"motion_blur": False}):
         assert spec.cache_key(1.0) != RenderSpec.from_settings(s.model_copy(update=change), "/y", "abc").cache_key(1.0)
     assert spec.cache_key(1.0) != spec.cache_key(2.0)
 
