@@ -147,25 +147,25 @@ def prepared(spec: RenderSpec, frame: float, scene: ScenePackage, capacity: int 
         prep = _cache.get(key)
         if prep is not None:
             _cache.move_to_end(key)
-            return prep if prep.options == options else with_options(prep, options)
-        lock = _key_locks.setdefault(key, threading.Lock())
-    with lock:
-        with _cache_lock:
-            prep = _cache.get(key)
-        if prep is not None:
-            return prep if prep.options == options else with_options(prep, options)
-        from renderer.device import init_warp
-        from renderer.render import prepare
+        else:
+            lock = _key_locks.setdefault(key, threading.Lock())
+    if prep is None:
+        with lock:
+            with _cache_lock:
+                prep = _cache.get(key)
+            if prep is None:
+                from renderer.device import init_warp
+                from renderer.render import prepare
 
-        init_warp()
-        prep = prepare(local_scene(scene).load(spec, frame), options)
-        with _cache_lock:
-            _cache[key] = prep
-            _stats["prepared"] += 1
-            while len(_cache) > max(1, capacity):
-                _cache.popitem(last=False)
-            _key_locks.pop(key, None)
-    return prep
+                init_warp()
+                prep = prepare(local_scene(scene).load(spec, frame), options)
+                with _cache_lock:
+                    _cache[key] = prep
+                    _stats["prepared"] += 1
+                    while len(_cache) > max(1, capacity):
+                        _cache.popitem(last=False)
+                    _key_locks.pop(key, None)
+    return prep if prep.options == options else with_options(prep, options)
 
 
 def stats() -> dict:
