@@ -11,7 +11,7 @@ machine): 40 jobs/s instead of 30-38 as threads, submit p50 97-143 ms instead of
 The two processes share only the database (all job state; both open it, WAL mode) and one pipe:
 - API -> child: ``b"wake"`` (a job was created, canceled, retried or deleted), ``b"farm"`` (the monitor wants the
   workers and their tasks), ``b"stop"``; plain bytes, since a wake-up per submission must cost next to nothing.
-- child -> API: ``("ready", pid)`` once the cluster is up, then ``("state", facts, stats, farm)`` every
+- child -> API: ``("ready",)`` once the cluster is up, then ``("state", facts, stats, farm)`` every
   ``PUBLISH_EVERY`` seconds (``farm`` only for a while after it was asked for: it costs the Dask scheduler a look
   at every worker). The API answers ``/healthz``, ``/metrics`` and 503s from the last state: never waits on it.
 - The child exits when the pipe closes, so a dead API (even SIGKILLed) never leaves a second scheduler on its
@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import logging
 import multiprocessing
-import os
 import signal
 import threading
 import time
@@ -134,8 +133,6 @@ class CoordinatorProcess:
         self._ready = threading.Event()
         self._stopping = threading.Event()
         self._reader: threading.Thread | None = None
-        self.restarts = 0
-        self.pid: int | None = None
 
     # -- lifecycle -------------------------------------------------------------------------------------------
     def start(self, timeout: float = 300.0) -> "CoordinatorProcess":
@@ -181,12 +178,10 @@ class CoordinatorProcess:
                 if self._stopping.wait(backoff):
                     return
                 backoff = min(2 * backoff, RESTART_MAX)
-                self.restarts += 1
                 self._spawn()
                 continue
             kind = message[0]
             if kind == "ready":
-                self.pid = message[1]
                 self._ready.set()
                 backoff = RESTART_FIRST
             elif kind == "state":
@@ -257,7 +252,7 @@ def child_main(settings: ServiceSettings, conn, log_level: int) -> None:
     coordinator = Coordinator(settings, store, scenes)
     try:
         coordinator.start()
-        conn.send(("ready", os.getpid()))
+        conn.send(("ready",))
         farm_until = [0.0]
         farm_now = threading.Event()
 

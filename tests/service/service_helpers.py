@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import time
@@ -53,6 +54,12 @@ def wait_job(client, job_id: str, timeout: float = 300.0, until=("succeeded", "f
         if time.monotonic() > deadline:
             raise AssertionError(f"job {job_id} still {job['state']} after {timeout} s: {job}")
         time.sleep(0.05)
+
+
+def metric(http, name: str) -> float:
+    """One value of the service's ``/metrics`` (Prometheus text), read through ``http`` (a client of the service)."""
+    text = http.get("/metrics").text
+    return float(re.search(rf"^{name} (\S+)$", text, re.M).group(1))
 
 
 def cli_env() -> dict:

@@ -17,7 +17,7 @@ from service import jobs as sm
 from service.db import Store
 
 from live_server import LiveServer
-from service_helpers import assert_same_exr, cli_env, cli_render, submit, wait_job
+from service_helpers import assert_same_exr, cli_env, cli_render, metric, submit, wait_job
 
 SMALL = {"width": 24, "height": 16, "spp": 2, "tile": 8}
 SLOW = {"width": 64, "height": 64, "spp": 1024, "tile": 8}  # 64 tiles, seconds on one thread
@@ -217,15 +217,11 @@ def test_tile_map_and_farm_from_a_coordinator_process(tmp_path, card):
         assert s.http.get("/healthz").json() == {"status": "ok", "cluster": "reachable", "workers": 1, "threads": 1}
         check_tile_map_and_farm(s, card)
         deadline = time.monotonic() + 5  # the counters reach the API four times a second
-        while metric(s.http.get("/metrics").text, "drt_tiles_completed_total") < 6:  # the small job's tiles at least
+        while metric(s.http, "drt_tiles_completed_total") < 6:  # the small job's tiles at least
             assert time.monotonic() < deadline
             time.sleep(0.05)
     finally:
         s.stop()
-
-
-def metric(text: str, name: str) -> float:
-    return float(next(line.split()[1] for line in text.splitlines() if line.startswith(name + " ")))
 
 
 def check_tile_map_and_farm(server, card):

@@ -16,8 +16,8 @@ import httpx
 import psutil
 import pytest
 
-from service_helpers import (CONTRACT_LIMITS, assert_same_exr, cli_env, cli_render, http_contract, service_settings,
-                             submit, wait_job)
+from service_helpers import (CONTRACT_LIMITS, assert_same_exr, cli_env, cli_render, http_contract, metric,
+                             service_settings, submit, wait_job)
 
 
 def free_port() -> int:
@@ -171,9 +171,7 @@ def test_a_killed_service_resumes_its_running_job(servers, card, tmp_path):
     server = servers()  # the same data directory
     job = wait_job(server.http, job_id)
     assert job["state"] == "succeeded", job
-    metrics = server.http.get("/metrics").text
-    rendered_again = int(next(line.split()[1] for line in metrics.splitlines()
-                              if line.startswith("drt_tiles_completed_total")))
+    rendered_again = metric(server.http, "drt_tiles_completed_total")
     assert rendered_again <= job["tiles_total"] - seen["tiles_done"]  # checkpointed tiles were kept
     (tmp_path / "svc.exr").write_bytes(server.http.get(job["frames"][0]["exr_url"]).content)
     cli_render(card, tmp_path / "cli.exr", "--width", 128, "--height", 128, "--spp", 256)
