@@ -103,12 +103,41 @@ class _LocalScene:
 _scene_root: Path | None = None
 _scenes: OrderedDict = OrderedDict()  # sha -> _LocalScene
 _scenes_lock = threading.Lock()
+ROOT_PREFIX = "drt-worker-"  # + pid + "-" + random: the scene files of one worker process
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process
+        return True
+    return True
+
+
+def remove_orphaned_roots(tmp: Path) -> int:
+    """Remove the scene directories of worker processes that no longer run (a worker stopped by a signal, as
+    Dask's nanny and a farm's scheduler stop them, never runs its atexit clean-up); returns how many. Only this
+    user's directories; a pid that is alive, possibly reused, keeps its directory."""
+    removed = 0
+    for d in tmp.glob(ROOT_PREFIX + "*-*"):
+        pid = d.name[len(ROOT_PREFIX):].split("-", 1)[0]
+        try:
+            if not pid.isdigit() or _alive(int(pid)) or d.stat().st_uid != os.getuid():
+                continue
+        except OSError:  # gone meanwhile
+            continue
+        shutil.rmtree(d, ignore_errors=True)
+        removed += 1
+    return removed
 
 
 def _root() -> Path:
     global _scene_root
     if _scene_root is None:
-        _scene_root = Path(tempfile.mkdtemp(prefix=f"drt-worker-{os.getpid()}-"))
+        remove_orphaned_roots(Path(tempfile.gettempdir()))
+        _scene_root = Path(tempfile.mkdtemp(prefix=f"{ROOT_PREFIX}{os.getpid()}-"))
         atexit.register(shutil.rmtree, _scene_root, True)
     return _scene_root
 
