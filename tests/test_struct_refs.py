@@ -65,3 +65,40 @@ def test_a_struct_argument_is_still_read_right_through_the_reference():
     out = wp.zeros(3, dtype=wp.int32, device="cpu")
     wp.launch(read_geometry, dim=3, inputs=[geo, out], device="cpu")
     assert out.numpy().tolist() == [8, 9, 10]
+
+
+def test_the_traversal_stacks_are_not_zeroed_per_walk(integrator_source):
+    """Warp zero-initialises local vectors; the 160-entry traversal stacks are scratch (``struct_refs.scratch``):
+    declared as raw storage, with no zeroing constructor left for them."""
+    for ctype in ("wp::vec_t<160, wp::int32>", "wp::vec_t<160, wp::float32>"):
+        assert re.search(rf"unsigned char var_\w+_raw\[sizeof\({re.escape(ctype)}\)\]", integrator_source)
+        assert not re.search(rf"^\s*{re.escape(ctype)} var_\w+;$", integrator_source, re.M)
+        assert f"= {ctype}();" not in integrator_source
+
+
+def test_a_scratch_stack_walk_finds_what_a_zeroed_one_does():
+    """A kernel that pushes and pops through a scratch stack, in a loop whose earlier iterations leave
+    garbage above the top, computes the same sums as plain Python."""
+    init_warp()
+    from renderer.accel.wide import wide_stack_t
+
+    @wp.kernel
+    def stack_sums(n: wp.array(dtype=wp.int32), out: wp.array(dtype=wp.int32)):
+        i = wp.tid()
+        total = int(0)
+        for rep in range(3):
+            stack = wide_stack_t()
+            sp = int(0)
+            for k in range(n[i] + rep):
+                stack[sp] = k * (rep + 1)
+                sp += 1
+            while sp > 0:
+                sp -= 1
+                total += stack[sp]
+        out[i] = total
+
+    n = wp.array([0, 1, 5, 100], dtype=wp.int32)
+    out = wp.zeros(4, dtype=wp.int32)
+    wp.launch(stack_sums, dim=4, inputs=[n, out])
+    expect = [sum(k * (rep + 1) for rep in range(3) for k in range(m + rep)) for m in (0, 1, 5, 100)]
+    assert out.numpy().tolist() == expect

@@ -64,7 +64,7 @@ def mesh_next_hit(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmin: float, 
     boff = geo.mesh_bound_off[m]
     poff = geo.mesh_prim_off[m]
     inv_d = safe_inverse(rd)
-    stack = wide_stack_t()
+    stack = wide_stack_t()  # scratch: not zeroed, read below sp only
     stack[0] = 0  # the root
     sp = int(1)
     t_best = tmax
@@ -104,7 +104,7 @@ def mesh_crossings(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, s: float):
     boff = geo.mesh_bound_off[m]
     poff = geo.mesh_prim_off[m]
     inv_d = safe_inverse(rd)
-    stack = wide_stack_t()
+    stack = wide_stack_t()  # scratch: not zeroed, read below sp only
     stack[0] = 0  # the root
     sp = int(1)
     crossed = int(0)

@@ -226,7 +226,7 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float, s
     boff = geo.mesh_bound_off[m]
     poff = geo.mesh_prim_off[m]
     inv_d = safe_inverse(rd)
-    stack = wide_stack_t()
+    stack = wide_stack_t()  # scratch: not zeroed, read below sp only
     dist = dist_stack_t()
     stack[0] = 0  # the root, entered at distance 0
     dist[0] = 0.0
@@ -283,7 +283,7 @@ def intersect_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, tmax: float, s: f
     k0, k1, u = tlas_keys_at(geo, s)
     nk = geo.tlas_nkeys
     inv_d = safe_inverse(rd)
-    stack = wide_stack_t()
+    stack = wide_stack_t()  # scratch: not zeroed, read below sp only
     dist = dist_stack_t()
     stack[0] = 0  # the root, entered at distance 0
     dist[0] = 0.0

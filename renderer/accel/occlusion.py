@@ -43,7 +43,7 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
     boff = geo.mesh_bound_off[m]
     poff = geo.mesh_prim_off[m]
     inv_d = safe_inverse(rd)
-    stack = wide_stack_t()
+    stack = wide_stack_t()  # scratch: not zeroed, read below sp only
     stack[0] = 0  # the root
     sp = int(1)
     tr = trans
@@ -75,7 +75,7 @@ def transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd
     k0, k1, u = tlas_keys_at(geo, s)
     nk = geo.tlas_nkeys
     inv_d = safe_inverse(rd)
-    stack = wide_stack_t()
+    stack = wide_stack_t()  # scratch: not zeroed, read below sp only
     stack[0] = 0  # the root
     sp = int(1)
     tr = float(1.0)

@@ -25,6 +25,7 @@ import numpy as np
 import warp as wp
 
 from renderer.accel.build import Bvh
+from renderer.struct_refs import scratch
 
 wp.set_module_options({"enable_backward": False})
 
@@ -35,8 +36,8 @@ MAX_FIRST = (1 << (31 - LEAF_BITS)) - 1
 # (build.MAX_DEPTH = 48), 3 * 48 + 4 entries never overflow. Each walk pushes inline (four lines): a @wp.func
 # would receive the stack by value, a copy of 640 bytes per node visited.
 STACK_SIZE = 160
-wide_stack_t = wp.types.vector(length=STACK_SIZE, dtype=wp.int32)
-dist_stack_t = wp.types.vector(length=STACK_SIZE, dtype=wp.float32)
+wide_stack_t = scratch(wp.types.vector(length=STACK_SIZE, dtype=wp.int32))  # read below the top only
+dist_stack_t = scratch(wp.types.vector(length=STACK_SIZE, dtype=wp.float32))
 BIG = 3.4e38
 
 

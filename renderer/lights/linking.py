@@ -101,7 +101,7 @@ def caster_transmittance(geo: Geometry, mats: Materials, tex: Textures, links: L
     k0, k1, u = tlas_keys_at(geo, s)
     nk = geo.tlas_nkeys
     inv_d = safe_inverse(rd)
-    stack = wide_stack_t()
+    stack = wide_stack_t()  # scratch: not zeroed, read below sp only
     stack[0] = 0  # the root
     sp = int(1)
     tr = float(1.0)
