@@ -72,6 +72,9 @@ class Geometry:
     tlas_child: wp.array(dtype=wp.vec4i)
     tlas_prim: wp.array(dtype=wp.int32)  # instance index per leaf slot
     tlas_nkeys: int
+    # where the top-level walks start: the root (0), or with a single instance (a still scene, flattened into one
+    # mesh) the root's only child, the leaf holding it, so that its box is not tested twice
+    tlas_start: int
     inst_mesh: wp.array(dtype=wp.int32)
     inst_xf_off: wp.array(dtype=wp.int32)
     inst_xf_count: wp.array(dtype=wp.int32)
@@ -285,7 +288,7 @@ def intersect_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, tmax: float, s: f
     inv_d = safe_inverse(rd)
     stack = wide_stack_t()  # scratch: not zeroed, read below sp only
     dist = dist_stack_t()
-    stack[0] = 0  # the root, entered at distance 0
+    stack[0] = geo.tlas_start  # the root, entered at distance 0
     dist[0] = 0.0
     sp = int(1)
     while sp > 0:

@@ -238,6 +238,7 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     g.tlas_child = wp.array(tlas.child, dtype=wp.vec4i, device=device)
     g.tlas_prim = _i32(tlas.prim_order if len(tlas.prim_order) else [0], device)
     g.tlas_nkeys = nk
+    g.tlas_start = int(tlas.child[0, 0]) if ninst == 1 else 0  # collapse: one instance is a root leaf's only child
 
     keys, offs, counts = upload_keys([inst.transform for inst in scene.instances], device)
     g.keys = keys
