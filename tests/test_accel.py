@@ -185,19 +185,21 @@ def test_translate_only_motion_takes_the_short_path_and_agrees_with_the_general_
     np.testing.assert_allclose(o2w[20][:3, 3], [0.5, 2.5, 0.0], atol=1e-6)  # the middle key, exactly at s = 0.5
 
 
-def test_a_single_instance_is_walked_from_its_leaf_and_finds_what_the_root_walk_finds():
-    """One still instance (every still scene, flattened): the top-level walks start at the leaf holding it,
-    skipping the root's box test; hits, triangles, distances and transmittance are those of the walk from the
-    root, bit for bit, and those of brute force."""
+def test_a_single_still_instance_is_walked_without_the_top_level_and_finds_what_the_top_level_walk_finds():
+    """One still instance (every still scene, flattened): closest hits and shadows go straight to its mesh;
+    hits, triangles, distances and transmittance are those of the walk through the top level, bit for bit, and
+    those of brute force, outside and inside its visibility interval."""
     rng = np.random.default_rng(11)
     scene = make_scene(rng)
-    scene.instances = [Instance(0, MotionTransform.static(rot_y(30, (0.5, 0, -1))))]
+    scene.instances = [Instance(0, MotionTransform.static(rot_y(30, (0.5, 0, -1))), visible_from=0.0,
+                                visible_to=0.6)]
     geo, _ = upload_geometry(scene)
-    assert geo.tlas_start < 0  # a leaf reference
+    assert geo.single_inst == 0
     n = 400
     ro = np.tile([0.0, 0.3, 8.0], (n, 1)) + rng.normal(0, 0.5, (n, 3))
     rd = rng.uniform([-2, -1.5, -4], [2, 1.5, 1], (n, 3)) - ro
     rd /= np.linalg.norm(rd, axis=1, keepdims=True)
+    times = np.where(np.arange(n) % 4 == 0, 0.8, 0.3).astype(np.float32)  # a quarter after it disappears
     mats = upload_materials(scene.materials)
     tex = upload_material_textures(scene.materials)
 
@@ -205,16 +207,25 @@ def test_a_single_instance_is_walked_from_its_leaf_and_finds_what_the_root_walk_
         outs = [wp.zeros(n, dtype=wp.float32), wp.zeros(n, dtype=wp.int32), wp.zeros(n, dtype=wp.int32),
                 wp.zeros(n, dtype=wp.float32)]
         wp.launch(probe_kernel, dim=n, inputs=[geo, mats, tex, wp.array(ro, dtype=wp.vec3),
-                                               wp.array(rd, dtype=wp.vec3), wp.zeros(n, dtype=wp.float32)] + outs)
+                                               wp.array(rd, dtype=wp.vec3), wp.array(times)] + outs)
         return [o.numpy() for o in outs]
 
-    from_leaf = probe()
-    geo.tlas_start = 0
-    from_root = probe()
-    for a, b in zip(from_leaf, from_root):
+    direct = probe()
+    geo.single_inst = -1
+    through_top = probe()
+    for a, b in zip(direct, through_top):
         np.testing.assert_array_equal(a, b)
-    t, inst, tri, _ = from_leaf
-    assert (inst >= 0).sum() > n // 4
+    t, inst, tri, tr = direct
+    assert (inst >= 0).sum() > n // 4 and np.all(inst[::4] < 0) and np.all(tr[::4] == 1.0)
     for i in range(0, n, 7):
-        bt, bi, btri = brute_force(scene, ro[i], rd[i], 0.0)
+        bt, bi, btri = brute_force(scene, ro[i], rd[i], float(times[i]))
         assert inst[i] == bi and (bi < 0 or tri[i] == btri), i
+
+
+def test_only_a_lone_still_instance_outside_csg_skips_the_top_level():
+    rng = np.random.default_rng(3)
+    scene = make_scene(rng)
+    geo, _ = upload_geometry(scene)
+    assert geo.single_inst == -1  # several instances
+    scene.instances = [scene.instances[1]]  # one, moving
+    assert upload_geometry(scene)[0].single_inst == -1

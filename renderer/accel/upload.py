@@ -238,7 +238,9 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     g.tlas_child = wp.array(tlas.child, dtype=wp.vec4i, device=device)
     g.tlas_prim = _i32(tlas.prim_order if len(tlas.prim_order) else [0], device)
     g.tlas_nkeys = nk
-    g.tlas_start = int(tlas.child[0, 0]) if ninst == 1 else 0  # collapse: one instance is a root leaf's only child
+    still_alone = (ninst == 1 and scene.instances[0].transform.num_keys == 1 and scene.instances[0].csg_group < 0
+                   and not scene.csg_operations)
+    g.single_inst = 0 if still_alone else -1
 
     keys, offs, counts = upload_keys([inst.transform for inst in scene.instances], device)
     g.keys = keys

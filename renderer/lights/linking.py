@@ -102,7 +102,7 @@ def caster_transmittance(geo: Geometry, mats: Materials, tex: Textures, links: L
     nk = geo.tlas_nkeys
     inv_d = safe_inverse(rd)
     stack = wide_stack_t()  # scratch: not zeroed, read below sp only
-    stack[0] = geo.tlas_start  # the root
+    stack[0] = 0  # the root
     sp = int(1)
     tr = float(1.0)
     while sp > 0 and tr > 0.0:
