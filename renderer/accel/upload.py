@@ -233,7 +233,9 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
         mesh = scene.meshes[inst.mesh]
         klo, khi = instance_key_bounds(inst, blas[inst.mesh], mesh.point_times.astype(np.float64), nk)
         lo[:, i], hi[:, i] = klo, khi
-    tlas = collapse(build_bvh(lo, hi), device)
+    # one instance per leaf: visiting an instance (its transform, its mesh's root) costs far more than a box test,
+    # so each gets its own box in its parent (demo scene 4 % faster, production and motion within noise)
+    tlas = collapse(build_bvh(lo, hi, max_leaf=1), device)
     g.tlas_box = wp.array(tlas.box, dtype=wp.vec4, device=device)
     g.tlas_child = wp.array(tlas.child, dtype=wp.vec4i, device=device)
     g.tlas_prim = _i32(tlas.prim_order if len(tlas.prim_order) else [0], device)
