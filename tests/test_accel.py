@@ -185,47 +185,83 @@ def test_translate_only_motion_takes_the_short_path_and_agrees_with_the_general_
     np.testing.assert_allclose(o2w[20][:3, 3], [0.5, 2.5, 0.0], atol=1e-6)  # the middle key, exactly at s = 0.5
 
 
-def test_a_single_still_instance_is_walked_without_the_top_level_and_finds_what_the_top_level_walk_finds():
-    """One still instance (every still scene, flattened): closest hits and shadows go straight to its mesh;
-    hits, triangles, distances and transmittance are those of the walk through the top level, bit for bit, and
-    those of brute force, outside and inside its visibility interval."""
-    rng = np.random.default_rng(11)
-    scene = make_scene(rng)
-    scene.instances = [Instance(0, MotionTransform.static(rot_y(30, (0.5, 0, -1))), visible_from=0.0,
-                                visible_to=0.6)]
-    geo, _ = upload_geometry(scene)
-    assert geo.single_inst == 0
-    n = 400
+def _probe(geo, scene, ro, rd, times):
+    n = len(ro)
+    outs = [wp.zeros(n, dtype=wp.float32), wp.zeros(n, dtype=wp.int32), wp.zeros(n, dtype=wp.int32),
+            wp.zeros(n, dtype=wp.float32)]
+    wp.launch(probe_kernel, dim=n, inputs=[geo, upload_materials(scene.materials),
+                                           upload_material_textures(scene.materials), wp.array(ro, dtype=wp.vec3),
+                                           wp.array(rd, dtype=wp.vec3), wp.array(times, dtype=wp.float32)] + outs)
+    return [o.numpy() for o in outs]
+
+
+def _rays(rng, n):
     ro = np.tile([0.0, 0.3, 8.0], (n, 1)) + rng.normal(0, 0.5, (n, 3))
-    rd = rng.uniform([-2, -1.5, -4], [2, 1.5, 1], (n, 3)) - ro
-    rd /= np.linalg.norm(rd, axis=1, keepdims=True)
-    times = np.where(np.arange(n) % 4 == 0, 0.8, 0.3).astype(np.float32)  # a quarter after it disappears
-    mats = upload_materials(scene.materials)
-    tex = upload_material_textures(scene.materials)
+    rd = rng.uniform([-4, -1.5, -4], [4, 1.5, 1], (n, 3)) - ro
+    return ro, rd / np.linalg.norm(rd, axis=1, keepdims=True)
 
-    def probe():
-        outs = [wp.zeros(n, dtype=wp.float32), wp.zeros(n, dtype=wp.int32), wp.zeros(n, dtype=wp.int32),
-                wp.zeros(n, dtype=wp.float32)]
-        wp.launch(probe_kernel, dim=n, inputs=[geo, mats, tex, wp.array(ro, dtype=wp.vec3),
-                                               wp.array(rd, dtype=wp.vec3), wp.array(times)] + outs)
-        return [o.numpy() for o in outs]
 
-    direct = probe()
-    geo.single_inst = -1
-    through_top = probe()
+def _equals_top_level_walk_and_brute_force(scene, ro, rd, times):
+    """Probe with the direct instance the upload chose, then with every instance in the top level: the same hits,
+    triangles, distances and transmittance, bit for bit, and brute force's hits."""
+    geo, _ = upload_geometry(scene)
+    direct = _probe(geo, scene, ro, rd, times)
+    from renderer.accel import upload
+    chooser = upload.direct_instance
+    upload.direct_instance = lambda *a: -1
+    try:
+        through_top = _probe(upload_geometry(scene)[0], scene, ro, rd, times)
+    finally:
+        upload.direct_instance = chooser
     for a, b in zip(direct, through_top):
         np.testing.assert_array_equal(a, b)
     t, inst, tri, tr = direct
-    assert (inst >= 0).sum() > n // 4 and np.all(inst[::4] < 0) and np.all(tr[::4] == 1.0)
-    for i in range(0, n, 7):
+    assert (inst >= 0).sum() > len(ro) // 4
+    for i in range(0, len(ro), 5):
         bt, bi, btri = brute_force(scene, ro[i], rd[i], float(times[i]))
         assert inst[i] == bi and (bi < 0 or tri[i] == btri), i
+    return geo, direct
 
 
-def test_only_a_lone_still_instance_outside_csg_skips_the_top_level():
+def test_a_lone_still_instance_is_walked_without_the_top_level_and_finds_what_the_top_level_walk_finds():
+    """One still instance (every still scene, flattened): closest hits and shadows go straight to its mesh and the
+    top level is not walked."""
+    rng = np.random.default_rng(11)
+    scene = make_scene(rng)
+    scene.instances = [Instance(0, MotionTransform.static(rot_y(30, (0.5, 0, -1))))]
+    ro, rd = _rays(rng, 400)
+    geo, _ = _equals_top_level_walk_and_brute_force(scene, ro, rd, np.full(400, 0.3, np.float32))
+    assert (geo.direct_inst, geo.tlas_others) == (0, 0)
+
+
+def test_a_dominant_still_instance_is_walked_first_and_the_movers_through_the_top_level():
+    """A large still instance (a floor and walls, merged) beside moving and time-limited ones: it is walked
+    directly and left out of the top level, which holds the others; the same hits and shadows as with all of
+    them in the top level, and as brute force, at random times."""
+    rng = np.random.default_rng(5)
+    scene = make_scene(rng)
+    big = rot_y(0, (0, 0, -2))
+    big[:3, :3] *= 6.0  # six times the others' size: its box outweighs all of theirs
+    scene.instances = [scene.instances[1], scene.instances[3], Instance(0, MotionTransform.static(big)),
+                       scene.instances[2]]
+    ro, rd = _rays(rng, 600)
+    geo, (_, inst, _, _) = _equals_top_level_walk_and_brute_force(scene, ro, rd,
+                                                                  rng.uniform(0, 1, 600).astype(np.float32))
+    assert (geo.direct_inst, geo.tlas_others) == (2, 3)
+    assert sorted(set(geo.tlas_prim.numpy().tolist())) == [0, 1, 3]
+    assert {0, 2, 3} <= set(inst.tolist())  # movers in front of it are found too
+
+
+def test_no_instance_is_walked_directly_when_none_dominates_the_only_one_moves_or_lights_are_linked():
     rng = np.random.default_rng(3)
     scene = make_scene(rng)
-    geo, _ = upload_geometry(scene)
-    assert geo.single_inst == -1  # several instances
+    assert upload_geometry(scene)[0].direct_inst == -1  # five of similar size
+    alone = Scene(scene.meshes, [scene.instances[0]], scene.materials, [], scene.camera, 0, 0, 1)
+    assert upload_geometry(alone)[0].direct_inst == 0
+    from renderer.scene.model import LIGHT_SPHERE, Light
+    linked = Light(LIGHT_SPHERE, "key", (1.0, 1.0, 1.0), MotionTransform.static(np.eye(4)),
+                   illuminates=np.array([True]))
+    alone.lights = [linked]
+    assert upload_geometry(alone)[0].direct_inst == -1  # the linked shadow walk goes through the top level only
     scene.instances = [scene.instances[1]]  # one, moving
-    assert upload_geometry(scene)[0].single_inst == -1
+    assert upload_geometry(scene)[0].direct_inst == -1

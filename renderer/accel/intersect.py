@@ -72,11 +72,13 @@ class Geometry:
     tlas_child: wp.array(dtype=wp.vec4i)
     tlas_prim: wp.array(dtype=wp.int32)  # instance index per leaf slot
     tlas_nkeys: int
-    # the scene's only instance when it has one, still and outside CSG (every still scene: flattened into one mesh),
-    # else -1. Walks then go straight to its mesh, without the top level's loop, root box test and instance checks
-    # (a traversal-only kernel: closest hits 30-40 % faster on gloss). Walking a dominant still instance this way
-    # and the others through the top level gained nothing on the motion and demo scenes: not done.
-    single_inst: int
+    # The instance walked outside the top level, or -1 (``upload.direct_instance``): a still one, outside CSG, whose
+    # world box has at least the area of all the others' together: every still scene (one instance after
+    # flattening), or its merged still geometry beside a few movers. Walks visit its mesh first, without the top
+    # level's loop, root box test and instance checks (a traversal-only kernel: closest hits 30-40 % faster on
+    # gloss), then the top level, which holds the other ``tlas_others`` instances (none: not walked).
+    direct_inst: int
+    tlas_others: int
     inst_mesh: wp.array(dtype=wp.int32)
     inst_xf_off: wp.array(dtype=wp.int32)
     inst_xf_count: wp.array(dtype=wp.int32)
@@ -285,13 +287,14 @@ def intersect_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, tmax: float, s: f
     best.t = tmax
     best.inst = -1
     best.tri = -1
-    if geo.single_inst >= 0:
-        inst = geo.single_inst
-        if instance_visible(geo, inst, s):
-            w2o = geo.inst_w2o[inst]
-            best = blas_closest(geo, geo.inst_mesh[inst], wp.transform_point(w2o, ro), wp.transform_vector(w2o, rd),
-                                tmax, s, best, inst)
-        return best
+    direct = geo.direct_inst
+    if direct >= 0:
+        if instance_visible(geo, direct, s):
+            w2o = geo.inst_w2o[direct]
+            best = blas_closest(geo, geo.inst_mesh[direct], wp.transform_point(w2o, ro), wp.transform_vector(w2o, rd),
+                                tmax, s, best, direct)
+        if geo.tlas_others == 0:
+            return best
     k0, k1, u = tlas_keys_at(geo, s)
     nk = geo.tlas_nkeys
     inv_d = safe_inverse(rd)

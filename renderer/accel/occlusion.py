@@ -72,20 +72,21 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
 def transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd: wp.vec3, tmax: float,
                   s: float):
     """Fraction of light passing along the segment ro + t rd, t in (0, tmax), at time s."""
-    if geo.single_inst >= 0:  # one still instance, no CSG (``Geometry.single_inst``)
-        inst = geo.single_inst
-        if instance_visible(geo, inst, s):
-            w2o = geo.inst_w2o[inst]
-            return blas_transmittance(geo, mats, tex, geo.inst_mesh[inst], wp.transform_point(w2o, ro),
-                                      wp.transform_vector(w2o, rd), tmax, s, 1.0)
-        return 1.0
+    tr = float(1.0)
+    direct = geo.direct_inst  # walked first, outside the top level (``Geometry.direct_inst``)
+    if direct >= 0:
+        if instance_visible(geo, direct, s):
+            w2o = geo.inst_w2o[direct]
+            tr = blas_transmittance(geo, mats, tex, geo.inst_mesh[direct], wp.transform_point(w2o, ro),
+                                    wp.transform_vector(w2o, rd), tmax, s, tr)
+        if geo.tlas_others == 0:
+            return tr
     k0, k1, u = tlas_keys_at(geo, s)
     nk = geo.tlas_nkeys
     inv_d = safe_inverse(rd)
     stack = wide_stack_t()  # scratch: not zeroed, read below sp only
     stack[0] = 0  # the root
     sp = int(1)
-    tr = float(1.0)
     while sp > 0 and tr > 0.0:
         sp -= 1
         ref = stack[sp]

@@ -156,6 +156,25 @@ def _translate_only(xf: MotionTransform) -> bool:
     return xf.num_keys > 1 and bool(np.all(xf.rotation == xf.rotation[0]) and np.all(xf.scale == xf.scale[0]))
 
 
+def direct_instance(scene: Scene, lo: np.ndarray, hi: np.ndarray) -> int:
+    """The instance the walks visit outside the top level (``Geometry.direct_inst``), or -1: the still one, outside
+    CSG and visible all the shutter, with the largest world box, if that box has at least the surface area of all
+    the others' together (``lo, hi``: (N, 3) world boxes at the shutter's start). None in a scene with light
+    linking, whose shadow walk goes through the top level alone (``lights.linking``)."""
+    if any(lt.illuminates is not None or lt.casts_shadow is not None for lt in scene.lights):
+        return -1
+    d = np.maximum(hi.astype(np.float64) - lo, 0.0)
+    area = d[:, 0] * d[:, 1] + d[:, 1] * d[:, 2] + d[:, 2] * d[:, 0]
+    best, best_area = -1, -1.0
+    for i, inst in enumerate(scene.instances):
+        if (inst.transform.num_keys == 1 and inst.csg_group < 0 and inst.visible_from <= 0.0
+                and inst.visible_to >= 1.0 and area[i] > best_area):
+            best, best_area = i, area[i]
+    if best < 0 or best_area < area.sum() - best_area:
+        return -1
+    return best
+
+
 def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, GeometryStats]:
     """Build both BVH levels of a scene and upload everything a ray needs."""
     import time
@@ -235,14 +254,15 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
         lo[:, i], hi[:, i] = klo, khi
     # one instance per leaf: visiting an instance (its transform, its mesh's root) costs far more than a box test,
     # so each gets its own box in its parent (demo scene 4 % faster, production and motion within noise)
-    tlas = collapse(build_bvh(lo, hi, max_leaf=1), device)
+    direct = direct_instance(scene, lo[0], hi[0])
+    others = np.array([i for i in range(ninst) if i != direct], np.int64)
+    tlas = collapse(build_bvh(lo[:, others], hi[:, others], max_leaf=1), device)
     g.tlas_box = wp.array(tlas.box, dtype=wp.vec4, device=device)
     g.tlas_child = wp.array(tlas.child, dtype=wp.vec4i, device=device)
-    g.tlas_prim = _i32(tlas.prim_order if len(tlas.prim_order) else [0], device)
+    g.tlas_prim = _i32(others[tlas.prim_order] if len(tlas.prim_order) else [0], device)  # instance indices
     g.tlas_nkeys = nk
-    still_alone = (ninst == 1 and scene.instances[0].transform.num_keys == 1 and scene.instances[0].csg_group < 0
-                   and not scene.csg_operations)
-    g.single_inst = 0 if still_alone else -1
+    g.direct_inst = direct
+    g.tlas_others = len(others)
 
     keys, offs, counts = upload_keys([inst.transform for inst in scene.instances], device)
     g.keys = keys
