@@ -104,29 +104,43 @@ _scene_root: Path | None = None
 _scenes: OrderedDict = OrderedDict()  # sha -> _LocalScene
 _scenes_lock = threading.Lock()
 ROOT_PREFIX = "drt-worker-"  # + pid + "-" + random: the scene files of one worker process
+ROOT_LOCK = ".owner"  # a file in it, locked (flock) by the process for as long as it lives
+_root_lock = None  # that file, open: the kernel releases the lock when the process ends, however it ends
+
+try:
+    import fcntl
+except ImportError:  # not POSIX: no sweeping, the atexit clean-up only
+    fcntl = None
 
 
-def _alive(pid: int) -> bool:
+def _owner_gone(d: Path) -> bool:
+    """Whether the process that made worker directory ``d`` has ended: its lock file can be locked. A lock, unlike
+    a pid, holds across PID namespaces sharing one temporary directory and cannot be confused by a reused pid."""
     try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
+        fd = os.open(d / ROOT_LOCK, os.O_RDWR)
+    except FileNotFoundError:  # made by a process that died before locking it, or never will: leave it
         return False
-    except PermissionError:  # someone else's process
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         return True
-    return True
+    except OSError:
+        return False
+    finally:
+        os.close(fd)
 
 
 def remove_orphaned_roots(tmp: Path) -> int:
-    """Remove the scene directories of worker processes that no longer run (a worker stopped by a signal, as
-    Dask's nanny and a farm's scheduler stop them, never runs its atexit clean-up); returns how many. Only this
-    user's directories; a pid that is alive, possibly reused, keeps its directory."""
+    """Remove the scene directories of worker processes that no longer run; returns how many. A worker stopped by a
+    signal (as Dask's nanny and a farm's scheduler stop them) never runs its atexit clean-up, so each new worker
+    process sweeps what ended ones left: only this user's directories, only those whose owner's lock is free."""
+    if fcntl is None:
+        return 0
     removed = 0
-    for d in tmp.glob(ROOT_PREFIX + "*-*"):
-        pid = d.name[len(ROOT_PREFIX):].split("-", 1)[0]
+    for d in tmp.glob(ROOT_PREFIX + "*"):
         try:
-            if not pid.isdigit() or _alive(int(pid)) or d.stat().st_uid != os.getuid():
+            if d.stat().st_uid != os.getuid() or not _owner_gone(d):
                 continue
-        except OSError:  # gone meanwhile
+        except OSError:  # gone meanwhile, or not ours to read
             continue
         shutil.rmtree(d, ignore_errors=True)
         removed += 1
@@ -134,10 +148,14 @@ def remove_orphaned_roots(tmp: Path) -> int:
 
 
 def _root() -> Path:
-    global _scene_root
+    global _scene_root, _root_lock
     if _scene_root is None:
-        remove_orphaned_roots(Path(tempfile.gettempdir()))
-        _scene_root = Path(tempfile.mkdtemp(prefix=f"{ROOT_PREFIX}{os.getpid()}-"))
+        root = Path(tempfile.mkdtemp(prefix=f"{ROOT_PREFIX}{os.getpid()}-"))
+        if fcntl is not None:
+            _root_lock = open(root / ROOT_LOCK, "w")
+            fcntl.flock(_root_lock.fileno(), fcntl.LOCK_EX)
+            remove_orphaned_roots(root.parent)  # after locking its own, so it never takes itself for dead
+        _scene_root = root
         atexit.register(shutil.rmtree, _scene_root, True)
     return _scene_root
 

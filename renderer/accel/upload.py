@@ -252,10 +252,10 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
         mesh = scene.meshes[inst.mesh]
         klo, khi = instance_key_bounds(inst, blas[inst.mesh], mesh.point_times.astype(np.float64), nk)
         lo[:, i], hi[:, i] = klo, khi
+    direct = direct_instance(scene, lo[0], hi[0])  # walked outside the top level
+    others = np.array([i for i in range(ninst) if i != direct], np.int64)
     # one instance per leaf: visiting an instance (its transform, its mesh's root) costs far more than a box test,
     # so each gets its own box in its parent (demo scene 4 % faster, production and motion within noise)
-    direct = direct_instance(scene, lo[0], hi[0])
-    others = np.array([i for i in range(ninst) if i != direct], np.int64)
     tlas = collapse(build_bvh(lo[:, others], hi[:, others], max_leaf=1), device)
     g.tlas_box = wp.array(tlas.box, dtype=wp.vec4, device=device)
     g.tlas_child = wp.array(tlas.child, dtype=wp.vec4i, device=device)

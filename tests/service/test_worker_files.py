@@ -2,30 +2,47 @@
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
+import time
 
 from service import worker
 
+# A worker process: makes its scene directory (locked for as long as it lives), prints it, and waits.
+WORKER = """
+import sys, time, tempfile
+tempfile.tempdir = sys.argv[1]
+from service import worker
+print(worker._root(), flush=True)
+time.sleep(60)
+"""
 
-def _dead_pid() -> int:
-    p = subprocess.Popen([sys.executable, "-c", "pass"])
-    p.wait()
-    return p.pid
+
+def _start_worker(tmp_path) -> tuple[subprocess.Popen, str]:
+    p = subprocess.Popen([sys.executable, "-c", WORKER, str(tmp_path)], stdout=subprocess.PIPE, text=True,
+                         cwd=os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+    return p, p.stdout.readline().strip()
 
 
-def test_the_scene_directories_of_dead_workers_are_removed_and_live_ones_kept(tmp_path):
-    dead = tmp_path / f"drt-worker-{_dead_pid()}-abc123"
-    (dead / ("f" * 64)).mkdir(parents=True)
-    (dead / ("f" * 64) / "scene.usda").write_text("#usda 1.0\n")
-    live = tmp_path / f"drt-worker-{os.getpid()}-def456"  # this process: alive
-    live.mkdir()
-    other = tmp_path / "drt-worker-notapid-x"
-    other.mkdir()
-    unrelated = tmp_path / "something-else"
-    unrelated.mkdir()
+def test_a_killed_workers_directory_is_removed_by_the_next_worker_and_a_live_ones_kept(tmp_path):
+    killed, killed_dir = _start_worker(tmp_path)
+    live, live_dir = _start_worker(tmp_path)  # its start sweeps too: the first one still runs, so it stays
+    try:
+        assert os.path.isdir(killed_dir) and os.path.isdir(live_dir)
+        (tmp_path / "something-else").mkdir()
+        old_style = tmp_path / "drt-worker-123-abc"  # no lock file: left alone
+        old_style.mkdir()
+        os.kill(killed.pid, signal.SIGKILL)  # no atexit clean-up
+        killed.wait()
+        assert os.path.isdir(killed_dir)
 
-    assert worker.remove_orphaned_roots(tmp_path) == 1
-    assert not dead.exists()
-    assert live.exists() and other.exists() and unrelated.exists()
-    assert worker.remove_orphaned_roots(tmp_path) == 0
+        assert worker.remove_orphaned_roots(tmp_path) == 1
+        assert not os.path.exists(killed_dir)
+        assert os.path.isdir(live_dir) and old_style.exists() and (tmp_path / "something-else").exists()
+        assert worker.remove_orphaned_roots(tmp_path) == 0
+    finally:
+        live.kill()
+        live.wait()
+    time.sleep(0.1)
+    assert worker.remove_orphaned_roots(tmp_path) == 1  # the second, now ended too
