@@ -1,4 +1,5 @@
-"""The scene's big structs pass by reference in Warp's generated C++ (a guarded patch of its code generator).
+"""The scene's big structs pass by reference in Warp's generated C++, and traversal stacks go unzeroed (a
+guarded patch of its code generator).
 
 Warp hands a ``@wp.struct`` to a ``@wp.func`` by value and copies every struct argument of a kernel into a local
 for each thread. The scene structs are large (``Geometry`` 2.8 KB, ``Lights`` 3.3 KB, ``Materials`` 1.3 KB: an
@@ -12,6 +13,10 @@ reference is exact. The rewrite touches only lines of the exact shape Warp 1.x e
 ``    Geometry_<hash> var_geo,`` becomes ``Geometry_<hash> &var_geo,``, a kernel's
 ``Geometry_<hash> var_geo = _wp_args->geo;`` binds a reference. On any other shape it changes nothing (the
 kernels are then slower, never wrong); ``tests/test_struct_refs.py`` checks that it still applies.
+
+The same pass leaves **scratch vectors** uninitialised (``scratch``): Warp zero-fills every local vector, which
+for the 160-entry traversal stacks was 17 % of a closest-hit ray. Only the exact declaration and constructor lines
+of a registered type are rewritten, and only types whose elements are written before they are read qualify.
 """
 from __future__ import annotations
 
