@@ -1,4 +1,5 @@
-"""``drt``: the command line. ``drt render SCENE -o OUT.exr [...]`` renders one frame.
+"""``drt``: the command line. ``drt render SCENE -o OUT.exr [...]`` renders one frame; ``drt warmup`` compiles the
+render kernels tuned for this machine's CPU (``renderer.kernel_cache``).
 
 Bad input (missing file, malformed USD, unknown camera, bad numbers) ends with a one-line error on stderr and
 a non-zero exit code, never a traceback and never a partial output file (EXR writes are atomic).
@@ -121,7 +122,15 @@ def new_parser() -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
 def build_parser() -> argparse.ArgumentParser:
     parser, sub = new_parser()
     add_render_command(sub)
+    add_warmup_command(sub)
     return parser
+
+
+def add_warmup_command(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    return sub.add_parser(
+        "warmup", help="compile the render kernels for this machine's CPU into Warp's kernel cache, once per "
+                       "machine (~20 s): later renders use them, 2-5 %% faster than the portable kernels shipped "
+                       "with the package")
 
 
 def add_render_command(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -219,21 +228,35 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_warmup(args: argparse.Namespace) -> int:
+    import warp as wp
+
+    from renderer.kernel_cache import warm_native
+    from renderer.render import RENDER_MODULES
+
+    t = time.perf_counter()
+    objects = warm_native(RENDER_MODULES)
+    print(f"{len(objects)} render kernel modules for this CPU in {wp.config.kernel_cache_dir} "
+          f"({time.perf_counter() - t:.1f} s); later renders on this machine load them")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    if args.command != "render":
+    if args.command not in ("render", "warmup"):
         parser.error(f"unknown command {args.command}")
     return render_main(args)
 
 
 def render_main(args: argparse.Namespace) -> int:
-    """Run ``drt render`` with parsed arguments under the CLI's error contract; returns the exit code."""
+    """Run ``drt render`` or ``drt warmup`` with parsed arguments under the CLI's error contract; returns the
+    exit code."""
     try:
         from renderer.device import init_warp
 
         init_warp()
-        return cmd_render(args)
+        return cmd_warmup(args) if args.command == "warmup" else cmd_render(args)
     except KeyboardInterrupt:
         sys.stderr.write("drt: interrupted\n")
         return 130

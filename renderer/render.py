@@ -20,7 +20,8 @@ from typing import Callable
 import numpy as np
 import warp as wp
 
-from renderer import integrator
+from renderer import integrator, kernel_cache
+from renderer.accel import build_kernels, triangle_kernels, wide
 from renderer.accel.upload import GeometryStats, upload_geometry
 from renderer.camera import CameraSetup, ndc_matrix, setup_camera
 from renderer.device import init_warp
@@ -93,15 +94,16 @@ def resolve_resolution(scene: Scene, options: RenderOptions) -> tuple[int, int]:
     return f.width, f.height
 
 
-_compile_lock = threading.Lock()
+# every Warp module a render launches kernels of (hierarchy build, integrator, film)
+RENDER_MODULES = (build_kernels, triangle_kernels, wide, integrator, film)
 
 
-def load_kernels(device: str = "cpu") -> None:
-    """Compile (or fetch from the kernel cache) the render kernels once, before threads race to do it."""
+def load_kernels(device: str = "cpu") -> dict[str, str]:
+    """Load the render kernels once, before threads race to: the host-tuned build if Warp's cache holds it, else
+    the portable build shipped in the package, else compiled now (``kernel_cache``). Returns how each module
+    was loaded."""
     init_warp()
-    with _compile_lock:
-        wp.load_module(integrator, device=device)
-        wp.load_module(film, device=device)
+    return kernel_cache.load_modules(RENDER_MODULES, device)
 
 
 def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> PreparedScene:

@@ -1,4 +1,4 @@
-"""``drt``: ``render`` (the renderer's own command, unchanged), ``serve``, ``submit``, ``status``, ``fetch``,
+"""``drt``: ``render`` and ``warmup`` (the renderer's own commands, unchanged), ``serve``, ``submit``, ``status``, ``fetch``,
 ``cancel``, ``retry``, ``delete``.
 
 Heavy imports (FastAPI, uvicorn, Dask, httpx) happen inside the commands that need them, so ``drt render`` starts
@@ -19,6 +19,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser, sub = rcli.new_parser()
     rcli.add_render_command(sub)
+    rcli.add_warmup_command(sub)
     s = sub.add_parser("serve", help="run the render service (HTTP API, job queue, Dask workers)")
     s.add_argument("--host", default="127.0.0.1", help="interface to listen on (default 127.0.0.1)")
     s.add_argument("--port", type=int, default=8000, help="TCP port (default 8000)")
@@ -65,7 +66,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    if args.command == "render":
+    if args.command in ("render", "warmup"):
         from renderer.cli import render_main
 
         return render_main(args)
