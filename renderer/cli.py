@@ -127,10 +127,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def add_warmup_command(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    return sub.add_parser(
+    w = sub.add_parser(
         "warmup", help="compile the render kernels for this machine's CPU into Warp's kernel cache, once per "
                        "machine (~20 s): later renders use them, 2-5 %% faster than the portable kernels shipped "
                        "with the package")
+    w.add_argument("--prebuilt", action="store_true",
+                   help="instead, rebuild the portable kernels shipped in renderer/prebuilt (for maintainers, after "
+                        "a change to kernel code)")
+    return w
 
 
 def add_render_command(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -231,10 +235,15 @@ def cmd_render(args: argparse.Namespace) -> int:
 def cmd_warmup(args: argparse.Namespace) -> int:
     import warp as wp
 
-    from renderer.kernel_cache import warm_native
+    from renderer.kernel_cache import PREBUILT_ROOT, warm_native, write_prebuilt
     from renderer.render import RENDER_MODULES
 
     t = time.perf_counter()
+    if args.prebuilt:
+        for path in write_prebuilt(RENDER_MODULES):
+            print(f"{path.relative_to(PREBUILT_ROOT.parent)}  {path.stat().st_size / 1e3:.0f} kB")
+        print(f"portable render kernels in {PREBUILT_ROOT} ({time.perf_counter() - t:.1f} s): commit them")
+        return 0
     objects = warm_native(RENDER_MODULES)
     print(f"{len(objects)} render kernel modules for this CPU in {wp.config.kernel_cache_dir} "
           f"({time.perf_counter() - t:.1f} s); later renders on this machine load them")

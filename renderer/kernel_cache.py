@@ -15,7 +15,7 @@ For each module, ``load_modules`` takes the first that applies:
 2. the **shipped portable** build, when it was built from this source by this Warp and the CPU has x86-64-v3;
 3. otherwise a host-tuned **compile**, as Warp does by default (a stale prebuilt, another Warp, another CPU).
 
-``python -m renderer.kernel_cache`` rebuilds ``renderer/prebuilt`` after a change to kernel code;
+``drt warmup --prebuilt`` rebuilds ``renderer/prebuilt`` after a change to kernel code;
 ``tests/test_kernel_cache.py`` fails while the shipped build does not match the source.
 """
 from __future__ import annotations
@@ -147,19 +147,24 @@ def warm_native(modules, device: str = "cpu") -> list[pathlib.Path]:
 
 def write_prebuilt(modules, root: pathlib.Path = PREBUILT_ROOT) -> list[pathlib.Path]:
     """Compile ``modules`` for the portable target into ``root/<Warp version>/`` (objects and metadata only),
-    replacing what was there: run in a process of its own, since it points Warp's cache at a scratch directory."""
+    replacing what was there. Compiles in a scratch cache, so that nothing stale is copied; run it in a process of
+    its own (the modules stay loaded with the portable flags)."""
     dest = prebuilt_dir(root)
+    saved = wp.config.kernel_cache_dir
     with tempfile.TemporaryDirectory(prefix="drt-prebuilt-") as scratch:
         wp.config.kernel_cache_dir = scratch
         written = []
-        for m in modules:
-            mod = _module(m)
-            _set_flags(mod, PORTABLE_FLAGS)
-            wp.load_module(mod, device="cpu")
-            obj = _cpu_object(mod)
-            if obj is None or not obj.exists():
-                raise RuntimeError(f"Warp did not leave a CPU object for {mod.name} where expected")
-            written.append(obj)
+        try:
+            for m in modules:
+                mod = _module(m)
+                _set_flags(mod, PORTABLE_FLAGS)
+                wp.load_module(mod, device="cpu")
+                obj = _cpu_object(mod)
+                if obj is None or not obj.exists():
+                    raise RuntimeError(f"Warp did not leave a CPU object for {mod.name} where expected")
+                written.append(obj)
+        finally:
+            wp.config.kernel_cache_dir = saved
         if root.is_dir():
             shutil.rmtree(root)
         for obj in written:
@@ -169,11 +174,3 @@ def write_prebuilt(modules, root: pathlib.Path = PREBUILT_ROOT) -> list[pathlib.
                     shutil.copy2(f, dest / obj.parent.name / f.name)
     return [dest / o.parent.name / o.name for o in written]
 
-
-if __name__ == "__main__":
-    from renderer.device import init_warp
-    from renderer.render import RENDER_MODULES
-
-    init_warp()
-    for path in write_prebuilt(RENDER_MODULES):
-        print(f"{path.relative_to(PREBUILT_ROOT.parent.parent)}  {path.stat().st_size / 1e3:.0f} kB")

@@ -91,7 +91,7 @@ def _needs_v3():
 
 
 def test_a_fresh_cache_renders_with_the_shipped_kernels_without_compiling(tmp_path):
-    """The build in renderer/prebuilt matches the source: run ``python -m renderer.kernel_cache`` after changing
+    """The build in renderer/prebuilt matches the source: run ``drt warmup --prebuilt`` after changing
     kernel code, or the first render of every fresh install compiles for ~20 s."""
     import warp as wp
 
@@ -106,7 +106,7 @@ def test_a_fresh_cache_renders_with_the_shipped_kernels_without_compiling(tmp_pa
         if "compiled although" not in str(e):
             raise
         raise AssertionError("the kernels in renderer/prebuilt do not match the source: run "
-                             "`python -m renderer.kernel_cache` and commit renderer/prebuilt\n" + str(e)) from None
+                             "`drt warmup --prebuilt` and commit renderer/prebuilt\n" + str(e)) from None
     assert set(out["loaded"].values()) == {"prebuilt"}, out
     assert out["mean"] > 0.0
 
