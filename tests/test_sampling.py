@@ -471,3 +471,20 @@ def test_degenerate_light_queries_return_zero_pdf():
     assert S.np_sphere_light_pdf([0, 0, 0], [0, 1.0, 0], [3.0, 0, 0], 1.0) == 0.0  # outside the cone
     ws, _, _ = run_light("rect", in_plane, RECT, np.array([[0.3, 0.6]]))
     assert ws.pdf[0] == 0.0
+
+
+@wp.kernel
+def _acos_kernel(x: wp.array(dtype=float), y: wp.array(dtype=float)):
+    i = wp.tid()
+    y[i] = S._safe_acos(x[i])
+
+
+def test_the_polynomial_acos_of_spherical_rectangles_is_within_5e7_rad_and_clamps():
+    x = np.concatenate([np.linspace(-1.25, 1.25, 400_001), [-1.0, -0.0, 0.0, 1.0, np.nextafter(1.0, 0.0)]])
+    x = x.astype(np.float32)
+    y = wp.zeros(len(x), dtype=float)
+    wp.launch(_acos_kernel, len(x), [wp.array(x, dtype=float), y])
+    want = np.arccos(np.clip(x.astype(np.float64), -1.0, 1.0))
+    err = np.abs(y.numpy() - want)
+    assert err.max() <= 5e-7, (x[err.argmax()], err.max())
+    assert y.numpy()[x >= 1.0].max() == 0.0 and np.all(np.isfinite(y.numpy()))
