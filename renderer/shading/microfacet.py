@@ -26,6 +26,8 @@ import math
 import numpy as np
 import warp as wp
 
+from renderer.sampling.warps import sin_cos
+
 ALPHA_MIN = 1.0e-4  # smallest GGX alpha used (roughness 0.01)
 ALPHA_DELTA = 1.0e-3  # alpha below this is a delta lobe (roughness < ~0.0316)
 W_ALPHA_MIN = wp.constant(ALPHA_MIN)
@@ -92,10 +94,10 @@ def ggx_sample_visible(w: wp.vec3, alpha: float, u: wp.vec2) -> wp.vec3:
     # warp to the hemisphere configuration (alpha = 1)
     wh = wp.normalize(wp.vec3(alpha * w[0], alpha * w[1], w[2]))
     # sample a spherical cap in (-wh.z, 1]
-    phi = _TWO_PI * u[0]
+    sp, cp = sin_cos(_TWO_PI * u[0])
     z = (1.0 - u[1]) * (1.0 + wh[2]) - wh[2]
     sin_t = wp.sqrt(wp.clamp(1.0 - z * z, 0.0, 1.0))
-    h = wp.vec3(sin_t * wp.cos(phi), sin_t * wp.sin(phi), z) + wh
+    h = wp.vec3(sin_t * cp, sin_t * sp, z) + wh
     # warp back to the ellipsoid configuration
     m = wp.vec3(alpha * h[0], alpha * h[1], wp.max(h[2], 0.0))
     lm = wp.length(m)
