@@ -40,3 +40,26 @@ def test_a_large_closed_mesh_far_from_the_origin():
     pts = np.stack([(2 + np.cos(w)) * np.cos(u), (2 + np.cos(w)) * np.sin(u), np.sin(w)], -1) + 1e6
     assert is_closed(tris, pts)
     assert not is_closed(tris[1:], pts)
+
+
+def test_the_parity_hash_is_zero_exactly_when_every_key_occurs_an_even_number_of_times():
+    from renderer.scene.mesh_facts import _odd_count_hash
+
+    rng = np.random.default_rng(7)
+    keys = rng.integers(0, 2**62, 50_000)
+    even = rng.permutation(np.concatenate([keys, keys, keys[:100], keys[:100]]))
+    assert _odd_count_hash(even) == 0
+    for extra in (keys[:1], keys[:3], np.array([12345])):  # a key once or three times: caught
+        assert _odd_count_hash(np.concatenate([even, extra])) != 0
+
+
+def test_the_edge_parity_hash_welds_by_key_and_ignores_edge_direction():
+    from renderer.scene.mesh_facts import _odd_edge_hash
+
+    keys = np.arange(4)
+    assert _odd_edge_hash(keys, TET) == 0 and _odd_edge_hash(keys, TET[:, ::-1]) == 0
+    assert _odd_edge_hash(keys, TET[:3]) != 0
+    seam = np.array([0, 1, 2, 3, 0])  # vertex 4 carries vertex 0's key: welded
+    tet = TET.copy()
+    tet[3] = [2, 3, 4]
+    assert _odd_edge_hash(seam, tet) == 0 and _odd_edge_hash(np.arange(5), tet) != 0
