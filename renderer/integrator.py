@@ -32,7 +32,9 @@ from renderer.accel.intersect import (
     instance_world_to_object,
     intersect_closest,
     mesh_keys_at,
+    normal_corner,
     triangle_points,
+    uv_corner,
 )
 from renderer.accel.occlusion import hit_uv, transmittance
 from renderer.camera import CameraParams, camera_ray
@@ -148,8 +150,9 @@ def surface_at(geo: Geometry, inst: int, tri: int, b1: float, b2: float, ro: wp.
     ng = wp.normalize(wp.transform_vector(w2o_t, wp.cross(p1 - p0, p2 - p0)))
     b0 = 1.0 - b1 - b2
     ns = ng
-    if geo.mesh_has_normals[m] != 0:
-        n = geo.normals[3 * tri] * b0 + geo.normals[3 * tri + 1] * b1 + geo.normals[3 * tri + 2] * b2
+    nc = normal_corner(geo, m, tri)
+    if nc >= 0:
+        n = geo.normals[nc] * b0 + geo.normals[nc + 1] * b1 + geo.normals[nc + 2] * b2
         nw = wp.transform_vector(w2o_t, n)
         if wp.length(nw) > 0.0:
             ns = wp.normalize(nw)
@@ -159,13 +162,14 @@ def surface_at(geo: Geometry, inst: int, tri: int, b1: float, b2: float, ro: wp.
     sp.uv = hit_uv(geo, m, tri, b1, b2)
     sp.tangent = wp.vec4(0.0)
     sp.uv_density = 0.0
-    if geo.mesh_has_uvs[m] != 0:
+    uc = uv_corner(geo, m, tri)
+    if uc >= 0:
         # from world-space corners, so a mirroring transform is accounted for in the handedness
         w0 = wp.transform_point(o2w, p0)
         w1 = wp.transform_point(o2w, p1)
         w2 = wp.transform_point(o2w, p2)
-        sp.tangent = triangle_tangent(w0, w1, w2, geo.uvs[3 * tri], geo.uvs[3 * tri + 1], geo.uvs[3 * tri + 2])
-        sp.uv_density = uv_density(w0, w1, w2, geo.uvs[3 * tri], geo.uvs[3 * tri + 1], geo.uvs[3 * tri + 2])
+        sp.tangent = triangle_tangent(w0, w1, w2, geo.uvs[uc], geo.uvs[uc + 1], geo.uvs[uc + 2])
+        sp.uv_density = uv_density(w0, w1, w2, geo.uvs[uc], geo.uvs[uc + 1], geo.uvs[uc + 2])
     sp.front = 1
     if wp.dot(ng, rd) > 0.0:  # hit from behind: both normals face the viewer, and we are leaving
         ng = -ng

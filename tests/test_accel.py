@@ -7,7 +7,7 @@ import warp as wp
 from renderer.accel.intersect import Geometry, instance_object_to_world, instance_world_to_object, intersect_closest
 from renderer.motion.kernels import keys_matrix
 from renderer.shading.materials import Materials, upload_material_textures, upload_materials
-from renderer.accel.occlusion import transmittance
+from renderer.accel.occlusion import hit_uv, transmittance
 from renderer.shading.textures import Textures
 from renderer.accel.build import build_bvh
 from renderer.accel.upload import instance_key_bounds, upload_geometry
@@ -204,6 +204,35 @@ def test_moving_transforms_agree_with_numpy_slerp_and_inverse():
         want = np.array([matrix_at(scene.instances[inst].transform, float(x)) for x in s])
         np.testing.assert_allclose(o2w, want, atol=2e-5, err_msg=f"instance {inst}")
         np.testing.assert_allclose(w2o, np.linalg.inv(want), atol=2e-5, err_msg=f"instance {inst}")
+
+
+@wp.kernel
+def _corner_lookups(geo: Geometry, mesh: wp.array(dtype=int), tri: wp.array(dtype=int), uv: wp.array(dtype=wp.vec2)):
+    i = wp.tid()
+    uv[i] = hit_uv(geo, mesh[i], tri[i], 0.25, 0.5)
+
+
+def test_only_meshes_with_uvs_or_normals_hold_them_and_each_finds_its_own():
+    rng = np.random.default_rng(11)
+    meshes = [random_mesh(rng, 5, 1, "bare"), random_mesh(rng, 4, 1, "uv"), random_mesh(rng, 3, 1, "both")]
+    meshes[1].uvs = rng.random((4, 3, 2)).astype(np.float32)
+    meshes[2].uvs = rng.random((3, 3, 2)).astype(np.float32)
+    meshes[2].normals = rng.normal(size=(3, 3, 3)).astype(np.float32)
+    scene = Scene(meshes, [Instance(i, MotionTransform.static(np.eye(4))) for i in range(3)], [Material("m")], [],
+                  Camera("cam", MotionTransform.static(np.eye(4))), 0, 0, 1)
+    geo, _ = upload_geometry(scene)
+    assert geo.mesh_uv_off.numpy().tolist() == [-1, 0, 12] and geo.uvs.shape[0] == 21
+    assert geo.mesh_normal_off.numpy().tolist() == [-1, -1, 0] and geo.normals.shape[0] == 9
+    np.testing.assert_array_equal(geo.normals.numpy(), meshes[2].normals.reshape(-1, 3))
+    mesh = np.array([0, 1, 1, 2, 2], np.int32)
+    tri = np.array([2, 5, 8, 9, 11], np.int32)  # global triangle indices (mesh offsets 0, 5, 9)
+    uv = wp.zeros(len(mesh), dtype=wp.vec2)
+    wp.launch(_corner_lookups, len(mesh), [geo, wp.array(mesh, dtype=int), wp.array(tri, dtype=int), uv])
+    uv = uv.numpy()
+    assert np.isnan(uv[0]).all()
+    w = np.array([0.25, 0.25, 0.5])  # barycentrics (1 - b1 - b2, b1, b2)
+    for i, (m, local) in enumerate([(1, 0), (1, 3), (2, 0), (2, 2)], start=1):
+        np.testing.assert_allclose(uv[i], w @ meshes[m].uvs[local], rtol=1e-6)
 
 
 def _probe(geo, scene, ro, rd, times):

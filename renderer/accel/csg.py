@@ -32,6 +32,7 @@ from renderer.accel.intersect import (
     leaf_hit,
     mesh_keys_at,
     safe_inverse,
+    uv_corner,
 )
 from renderer.accel.wide import entries, leaf_range, wide_stack_t
 from renderer.shading.materials import Materials, eval_opacity
@@ -198,9 +199,10 @@ def csg_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, s: float, best: Hit):
 
 @wp.func
 def _hit_uv(geo: Geometry, inst: int, tri: int, b1: float, b2: float):
-    if geo.mesh_has_uvs[geo.inst_mesh[inst]] == 0:
+    c = uv_corner(geo, geo.inst_mesh[inst], tri)
+    if c < 0:
         return wp.vec2(wp.nan, wp.nan)
-    return geo.uvs[3 * tri] * (1.0 - b1 - b2) + geo.uvs[3 * tri + 1] * b1 + geo.uvs[3 * tri + 2] * b2
+    return geo.uvs[c] * (1.0 - b1 - b2) + geo.uvs[c + 1] * b1 + geo.uvs[c + 2] * b2
 
 
 @wp.func(inline=True)  # one call site: no copy of the Geometry struct

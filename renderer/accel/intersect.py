@@ -38,7 +38,12 @@ class Geometry:
     point_times: wp.array(dtype=wp.float32)  # mesh m's key times at mesh_key_off[m] .. + mesh_nkeys[m]
     tri_vidx: wp.array(dtype=wp.vec3i)  # global triangle -> local vertex indices
     tri_material: wp.array(dtype=wp.int32)  # global triangle -> material index
-    normals: wp.array(dtype=wp.vec3)  # 3 per global triangle (object space) when mesh_has_normals
+    # per-corner normals (object space) and uvs of the meshes that have them: triangle t (local) of mesh m, corner c
+    # at mesh_normal_off[m] + 3 t + c (mesh_uv_off); -1: the mesh has none (``normal_corner``, ``uv_corner``)
+    normals: wp.array(dtype=wp.vec3)
+    mesh_normal_off: wp.array(dtype=wp.int32)
+    uvs: wp.array(dtype=wp.vec2)
+    mesh_uv_off: wp.array(dtype=wp.int32)
     # four-wide node boxes (``wide``): node n of mesh m, key k, coordinate c at mesh_bound_off[m] + (n * K + k) * 6
     # + c; its child references at blas_child[mesh_node_off[m] + n]
     blas_box: wp.array(dtype=wp.vec4)
@@ -57,9 +62,6 @@ class Geometry:
     mesh_nverts: wp.array(dtype=wp.int32)
     mesh_key_off: wp.array(dtype=wp.int32)
     mesh_nkeys: wp.array(dtype=wp.int32)
-    mesh_has_normals: wp.array(dtype=wp.int32)
-    uvs: wp.array(dtype=wp.vec2)  # 3 per global triangle when mesh_has_uvs
-    mesh_has_uvs: wp.array(dtype=wp.int32)
     # per-corner displayColor of the meshes whose displayColor varies: triangle t (local) of mesh m, corner c at
     # mesh_color_off[m] + 3 t + c; -1: the mesh has none (its materials hold the colour)
     colors: wp.array(dtype=wp.vec3)
@@ -179,6 +181,24 @@ def leaf_hit(geo: Geometry, m: int, slot: int, nkeys: int, k0: int, k1: int, u: 
     v0, e1, e2 = leaf_triangle(geo, m, slot, lt, nkeys, k0, k1, u)
     t, b1, b2 = triangle_hit_edges(v0, e1, e2, ro, rd, tmax)
     return t, b1, b2, lt
+
+
+@wp.func
+def normal_corner(geo: Geometry, m: int, tri: int):
+    """Index in ``geo.normals`` of the first corner of global triangle tri of mesh m, or -1 if m has no normals."""
+    off = geo.mesh_normal_off[m]
+    if off < 0:
+        return -1
+    return off + 3 * (tri - geo.mesh_tri_off[m])
+
+
+@wp.func
+def uv_corner(geo: Geometry, m: int, tri: int):
+    """Index in ``geo.uvs`` of the first corner of global triangle tri of mesh m, or -1 if m has no uvs."""
+    off = geo.mesh_uv_off[m]
+    if off < 0:
+        return -1
+    return off + 3 * (tri - geo.mesh_tri_off[m])
 
 
 @wp.func

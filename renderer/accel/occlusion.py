@@ -19,6 +19,7 @@ from renderer.accel.intersect import (
     mesh_keys_at,
     safe_inverse,
     tlas_keys_at,
+    uv_corner,
 )
 from renderer.accel.wide import entries, leaf_range, wide_stack_t
 from renderer.shading.materials import Materials, eval_opacity
@@ -28,9 +29,10 @@ from renderer.shading.textures import Textures
 @wp.func
 def hit_uv(geo: Geometry, m: int, tri: int, b1: float, b2: float):
     """Interpolated st of a hit, or NaN where the mesh has none (primvar readers then use their fallback)."""
-    if geo.mesh_has_uvs[m] == 0:
+    c = uv_corner(geo, m, tri)
+    if c < 0:
         return wp.vec2(wp.nan, wp.nan)
-    return geo.uvs[3 * tri] * (1.0 - b1 - b2) + geo.uvs[3 * tri + 1] * b1 + geo.uvs[3 * tri + 2] * b2
+    return geo.uvs[c] * (1.0 - b1 - b2) + geo.uvs[c + 1] * b1 + geo.uvs[c + 2] * b2
 
 
 @wp.func(inline=True)  # one call site: no copy of the Geometry struct

@@ -120,19 +120,39 @@ def _tlas_key_count(scene: Scene) -> int:
     return int(min(MAX_TLAS_KEYS, max(3, max(moving))))
 
 
+def _wp(a: np.ndarray, dtype, device):
+    """A Warp array of ``a``: on the CPU the same memory (no copy; the Warp array keeps ``a`` alive), elsewhere a
+    copy. Every array passed here is the upload's own (concatenated or computed), never the Scene's. At 10M
+    triangles the copies cost 2 s and doubled the peak memory of the upload."""
+    return wp.array(np.ascontiguousarray(a), dtype=dtype, device=device, copy=wp.get_device(device).is_cuda)
+
+
 def _i32(a, device):
-    return wp.array(np.ascontiguousarray(np.asarray(a, np.int32)), dtype=wp.int32, device=device)
+    return _wp(np.asarray(a, np.int32), wp.int32, device)
 
 
 def _f32(a, device):
-    return wp.array(np.ascontiguousarray(np.asarray(a, np.float32)), dtype=wp.float32, device=device)
+    return _wp(np.asarray(a, np.float32), wp.float32, device)
 
 
 def _v3(a, device):
-    a = np.ascontiguousarray(np.asarray(a, np.float32).reshape(-1, 3))
+    a = np.asarray(a, np.float32).reshape(-1, 3)
     if len(a) == 0:
         a = np.zeros((1, 3), np.float32)
-    return wp.array(a, dtype=wp.vec3, device=device)
+    return _wp(a, wp.vec3, device)
+
+
+def _corner_table(per_mesh: list, width: int, dtype, device):
+    """Per-corner values (3 per triangle) of the meshes that have them, concatenated, and per mesh the index of its
+    first corner, -1 for a mesh without (``Geometry.normals`` / ``uvs``)."""
+    off, parts, n = [], [], 0
+    for values in per_mesh:
+        off.append(n if values is not None else -1)
+        if values is not None:
+            parts.append(np.asarray(values, np.float32).reshape(-1, width))
+            n += len(parts[-1])
+    table = np.concatenate(parts) if parts else np.zeros((1, width), np.float32)
+    return _wp(table, dtype, device), _i32(off or [-1], device)
 
 
 def upload_csg(g: Geometry, scene: Scene, device: str = "cpu") -> None:
@@ -194,17 +214,18 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     n_verts = np.cumsum([0] + [m.points.shape[0] * m.points.shape[1] for m in scene.meshes])
     n_keys = np.cumsum([0] + [len(m.point_times) for m in scene.meshes])
 
-    cat = lambda xs, shape, dt: np.concatenate(xs).astype(dt) if xs else np.zeros(shape, dt)  # noqa: E731
+    def cat(xs, shape, dt):
+        return np.concatenate(xs).astype(dt, copy=False) if xs else np.zeros(shape, dt)
+
     g.points = _v3(cat([m.points.reshape(-1, 3) for m in scene.meshes], (1, 3), np.float32), device)
     g.point_times = _f32(cat([m.point_times for m in scene.meshes], (1,), np.float32), device)
-    g.tri_vidx = wp.array(cat([m.triangles for m in scene.meshes], (1, 3), np.int32), dtype=wp.vec3i,
-                          device=device)
+    g.tri_vidx = _wp(cat([m.triangles for m in scene.meshes], (1, 3), np.int32), wp.vec3i, device)
     g.tri_material = _i32(cat([m.material_ids for m in scene.meshes], (1,), np.int32), device)
-    normals = [m.normals.reshape(-1, 3) if m.normals is not None else np.zeros((len(m.triangles) * 3, 3))
-               for m in scene.meshes]
-    g.normals = _v3(cat(normals, (1, 3), np.float32), device)
-    g.blas_box = wp.array(cat([w.box for w in wide], (1, 4), np.float32), dtype=wp.vec4, device=device)
-    g.blas_child = wp.array(cat([w.child for w in wide], (1, 4), np.int32), dtype=wp.vec4i, device=device)
+    # per-corner normals and uvs of the meshes that have them (others take no memory: 60 bytes per triangle)
+    g.normals, g.mesh_normal_off = _corner_table([m.normals for m in scene.meshes], 3, wp.vec3, device)
+    g.uvs, g.mesh_uv_off = _corner_table([m.uvs for m in scene.meshes], 2, wp.vec2, device)
+    g.blas_box = _wp(cat([w.box for w in wide], (1, 4), np.float32), wp.vec4, device)
+    g.blas_child = _wp(cat([w.child for w in wide], (1, 4), np.int32), wp.vec4i, device)
     g.blas_prim = _i32(cat([b.prim_order for b in blas], (1,), np.int32), device)
     v0, e1, e2 = [], [], []
     for mesh, b in zip(scene.meshes, blas):
@@ -226,11 +247,6 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     g.mesh_nverts = _i32([m.points.shape[1] for m in scene.meshes] or [0], device)
     g.mesh_key_off = _i32(n_keys[:-1], device)
     g.mesh_nkeys = _i32([len(m.point_times) for m in scene.meshes] or [1], device)
-    g.mesh_has_normals = _i32([int(m.normals is not None) for m in scene.meshes] or [0], device)
-    uvs = [m.uvs.reshape(-1, 2) if m.uvs is not None else np.zeros((len(m.triangles) * 3, 2)) for m in scene.meshes]
-    uv_cat = cat(uvs, (1, 2), np.float32)
-    g.uvs = wp.array(uv_cat if len(uv_cat) else np.zeros((1, 2), np.float32), dtype=wp.vec2, device=device)
-    g.mesh_has_uvs = _i32([int(m.uvs is not None) for m in scene.meshes] or [0], device)
     color_off, colors, n = [], [], 0  # only meshes that have colours take memory
     for m in scene.meshes:
         color_off.append(n if m.colors is not None else -1)
