@@ -10,8 +10,8 @@ loads them in a fraction of a second.
 For each module, ``load_modules`` takes the first that applies:
 
 1. the **host-tuned** build (Warp's default flags, ``-march=native``) when Warp's cache already holds it: ``drt
-   warmup`` compiles it once per machine; it renders 2-5 % faster, with the same pixels bit for bit (both builds
-   keep the same IEEE operations in the same order; the compilers differ only in instruction choice);
+   warmup`` compiles it once per machine; it renders 2-5 % faster, with the same pixels (bit-identical on the eight
+   scenes compared: without fast-math the compiler may choose other instructions, not other arithmetic);
 2. the **shipped portable** build, when it was built from this source by this Warp and the CPU has x86-64-v3;
 3. otherwise a host-tuned **compile**, as Warp does by default (a stale prebuilt, another Warp, another CPU).
 

@@ -52,7 +52,7 @@ def is_closed(triangles: np.ndarray, points: np.ndarray | None = None) -> bool:
     else:
         vertex_keys = np.arange(int(t.max()) + 1, dtype=np.int64)
     # An open mesh has border edges, which occur once: rejected in one pass over the welded edges, without
-    # welding's sort or the edges' (10M triangles: 1 s instead of 4 s). A mesh that passes is checked exactly.
+    # welding's sort or the edges' (a 10M-triangle terrain: 1.4 s instead of 4.7 s). A mesh that passes is checked exactly.
     if _odd_edge_hash(vertex_keys, t) != 0:
         return False
     if points is not None:

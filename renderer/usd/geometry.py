@@ -52,7 +52,7 @@ def _newell(x: np.ndarray, y: np.ndarray, z: np.ndarray, nxt: np.ndarray):
 def _convex(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(convex (F,) bool, Newell normals (F, 3)) of polygons with corners x, y, z (F, n) float64: no corner turns
     against the normal beyond a 1e-9 relative tolerance. One plane of coordinates at a time, without the (F, n, 3)
-    temporaries of np.roll and np.cross: 10M triangles' worth of quads in ~1.5 s instead of ~8 s."""
+    temporaries of np.roll and np.cross: a 10M-triangle terrain's quads in 2.8-4.4 s instead of 11 s."""
     n = x.shape[1]
     nxt, prv = np.r_[1:n, 0], np.r_[n - 1, 0:n - 1]
     nx, ny, nz = _newell(x, y, z, nxt)
