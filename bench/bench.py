@@ -289,9 +289,9 @@ def main() -> None:
     if "cornell" in results:
         one = render(scenes / "cornell.usda", spp=spp, threads=1, repeats=args.repeats)
         print(f"scaling cornell 1 -> 2 threads: {results['cornell']['sps'] / one['sps']:.2f}x (target >= 1.95x)")
-    if "motion" in results:
-        from renderer.usd.importer import load_scene
+    from renderer.usd.importer import load_scene
 
+    if "motion" in results:
         blurred = load_scene(scenes / "motion.usda")
         t = paired_seconds({"still": (load_scene(scenes / "motion.usda", motion_blur=False), True),
                             "slow": (blurred, True), "fast": (faster_motion(blurred, 10.0), True)}, spp=spp)
@@ -299,8 +299,6 @@ def main() -> None:
               f"{(t['slow'] / t['still'] - 1) * 100:+.1f} % (target <= +5 %); 10x faster motion vs the scene's own: "
               f"{(t['fast'] / t['slow'] - 1) * 100:+.1f} % (target <= +5 %)")
     if "dof" in results:
-        from renderer.usd.importer import load_scene
-
         dof_scene = load_scene(scenes / "dof.usda")
         t = paired_seconds({"lens": (dof_scene, True), "pinhole": (dof_scene, False)}, spp=spp)
         cost = t["lens"] / t["pinhole"] - 1

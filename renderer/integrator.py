@@ -28,13 +28,12 @@ from renderer.accel.csg import csg_closest
 from renderer.accel.intersect import (
     BIG,
     Geometry,
+    corner_index,
     instance_object_to_world,
     instance_world_to_object,
     intersect_closest,
     mesh_keys_at,
-    normal_corner,
     triangle_points,
-    uv_corner,
 )
 from renderer.accel.occlusion import hit_uv, transmittance
 from renderer.camera import CameraParams, camera_ray
@@ -150,7 +149,7 @@ def surface_at(geo: Geometry, inst: int, tri: int, b1: float, b2: float, ro: wp.
     ng = wp.normalize(wp.transform_vector(w2o_t, wp.cross(p1 - p0, p2 - p0)))
     b0 = 1.0 - b1 - b2
     ns = ng
-    nc = normal_corner(geo, m, tri)
+    nc = corner_index(geo, geo.mesh_normal_off, m, tri)
     if nc >= 0:
         n = geo.normals[nc] * b0 + geo.normals[nc + 1] * b1 + geo.normals[nc + 2] * b2
         nw = wp.transform_vector(w2o_t, n)
@@ -162,7 +161,7 @@ def surface_at(geo: Geometry, inst: int, tri: int, b1: float, b2: float, ro: wp.
     sp.uv = hit_uv(geo, m, tri, b1, b2)
     sp.tangent = wp.vec4(0.0)
     sp.uv_density = 0.0
-    uc = uv_corner(geo, m, tri)
+    uc = corner_index(geo, geo.mesh_uv_off, m, tri)
     if uc >= 0:
         # from world-space corners, so a mirroring transform is accounted for in the handedness
         w0 = wp.transform_point(o2w, p0)
@@ -191,10 +190,9 @@ def display_diffuse(geo: Geometry, mats: Materials, mat_id: int, inst: int, tri:
     if ds[3] == 0.0:
         return diffuse
     m = geo.inst_mesh[inst]
-    off = geo.mesh_color_off[m]
-    if off < 0:
+    c = corner_index(geo, geo.mesh_color_off, m, tri)
+    if c < 0:
         return diffuse
-    c = off + 3 * (tri - geo.mesh_tri_off[m])
     col = geo.colors[c] * (1.0 - b1 - b2) + geo.colors[c + 1] * b1 + geo.colors[c + 2] * b2
     out = wp.cw_mul(col, wp.vec3(ds[0], ds[1], ds[2]))
     return wp.vec3(wp.clamp(out[0], 0.0, 1.0), wp.clamp(out[1], 0.0, 1.0), wp.clamp(out[2], 0.0, 1.0))

@@ -42,15 +42,16 @@ def test_a_large_closed_mesh_far_from_the_origin():
     assert not is_closed(tris[1:], pts)
 
 
-def test_the_parity_hash_is_zero_exactly_when_every_key_occurs_an_even_number_of_times():
-    from renderer.scene.mesh_facts import _odd_count_hash
+def test_the_edge_parity_hash_is_zero_exactly_when_every_edge_occurs_an_even_number_of_times():
+    from renderer.scene.mesh_facts import _odd_edge_hash
 
     rng = np.random.default_rng(7)
-    keys = rng.integers(0, 2**62, 50_000)
-    even = rng.permutation(np.concatenate([keys, keys, keys[:100], keys[:100]]))
-    assert _odd_count_hash(even) == 0
-    for extra in (keys[:1], keys[:3], np.array([12345])):  # a key once or three times: caught
-        assert _odd_count_hash(np.concatenate([even, extra])) != 0
+    keys = rng.integers(0, 2**51, 20_000)
+    tris = rng.integers(0, len(keys), (30_000, 3))
+    even = rng.permutation(np.concatenate([tris, tris, tris[:100, ::-1], tris[:100]]))
+    assert _odd_edge_hash(keys, even) == 0
+    for extra in (tris[:1], tris[:3], tris[5:6, [1, 0, 2]]):  # edges once or three times: caught
+        assert _odd_edge_hash(keys, np.concatenate([even, extra])) != 0
 
 
 def test_the_edge_parity_hash_welds_by_key_and_ignores_edge_direction():

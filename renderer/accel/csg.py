@@ -27,12 +27,12 @@ from renderer.accel.intersect import (
     BIG,
     Geometry,
     Hit,
+    corner_index,
     instance_visible,
     instance_world_to_object,
     leaf_hit,
     mesh_keys_at,
     safe_inverse,
-    uv_corner,
 )
 from renderer.accel.wide import entries, leaf_range, wide_stack_t
 from renderer.shading.materials import Materials, eval_opacity
@@ -199,7 +199,7 @@ def csg_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, s: float, best: Hit):
 
 @wp.func
 def _hit_uv(geo: Geometry, inst: int, tri: int, b1: float, b2: float):
-    c = uv_corner(geo, geo.inst_mesh[inst], tri)
+    c = corner_index(geo, geo.mesh_uv_off, geo.inst_mesh[inst], tri)
     if c < 0:
         return wp.vec2(wp.nan, wp.nan)
     return geo.uvs[c] * (1.0 - b1 - b2) + geo.uvs[c + 1] * b1 + geo.uvs[c + 2] * b2

@@ -39,7 +39,7 @@ class Geometry:
     tri_vidx: wp.array(dtype=wp.vec3i)  # global triangle -> local vertex indices
     tri_material: wp.array(dtype=wp.int32)  # global triangle -> material index
     # per-corner normals (object space) and uvs of the meshes that have them: triangle t (local) of mesh m, corner c
-    # at mesh_normal_off[m] + 3 t + c (mesh_uv_off); -1: the mesh has none (``normal_corner``, ``uv_corner``)
+    # at mesh_normal_off[m] + 3 t + c (mesh_uv_off); -1: the mesh has none (``corner_index``)
     normals: wp.array(dtype=wp.vec3)
     mesh_normal_off: wp.array(dtype=wp.int32)
     uvs: wp.array(dtype=wp.vec2)
@@ -62,8 +62,8 @@ class Geometry:
     mesh_nverts: wp.array(dtype=wp.int32)
     mesh_key_off: wp.array(dtype=wp.int32)
     mesh_nkeys: wp.array(dtype=wp.int32)
-    # per-corner displayColor of the meshes whose displayColor varies: triangle t (local) of mesh m, corner c at
-    # mesh_color_off[m] + 3 t + c; -1: the mesh has none (its materials hold the colour)
+    # per-corner displayColor of the meshes whose displayColor varies, laid out as the normals; -1: the mesh has
+    # none (its materials hold the colour)
     colors: wp.array(dtype=wp.vec3)
     mesh_color_off: wp.array(dtype=wp.int32)
     tri_solid: wp.array(dtype=wp.int32)  # per global triangle, 1: part of a closed surface (refracts, absorbs)
@@ -191,18 +191,10 @@ def leaf_hit(geo: Geometry, m: int, slot: int, nkeys: int, k0: int, k1: int, u: 
 
 
 @wp.func
-def normal_corner(geo: Geometry, m: int, tri: int):
-    """Index in ``geo.normals`` of the first corner of global triangle tri of mesh m, or -1 if m has no normals."""
-    off = geo.mesh_normal_off[m]
-    if off < 0:
-        return -1
-    return off + 3 * (tri - geo.mesh_tri_off[m])
-
-
-@wp.func
-def uv_corner(geo: Geometry, m: int, tri: int):
-    """Index in ``geo.uvs`` of the first corner of global triangle tri of mesh m, or -1 if m has no uvs."""
-    off = geo.mesh_uv_off[m]
+def corner_index(geo: Geometry, first_corner: wp.array(dtype=wp.int32), m: int, tri: int):
+    """Index of global triangle tri's first corner in a per-corner table (normals, uvs, colours) where mesh m's
+    corners start at first_corner[m]; -1 when mesh m has none there."""
+    off = first_corner[m]
     if off < 0:
         return -1
     return off + 3 * (tri - geo.mesh_tri_off[m])

@@ -13,13 +13,13 @@ from renderer.accel.csg import csg_transmittance
 from renderer.accel.intersect import (
     BIG,
     Geometry,
+    corner_index,
     instance_visible,
     instance_world_to_object,
     leaf_hit,
     mesh_keys_at,
     safe_inverse,
     tlas_keys_at,
-    uv_corner,
 )
 from renderer.accel.wide import entries, leaf_range, wide_stack_t
 from renderer.shading.materials import Materials, eval_opacity
@@ -29,7 +29,7 @@ from renderer.shading.textures import Textures
 @wp.func
 def hit_uv(geo: Geometry, m: int, tri: int, b1: float, b2: float):
     """Interpolated st of a hit, or NaN where the mesh has none (primvar readers then use their fallback)."""
-    c = uv_corner(geo, m, tri)
+    c = corner_index(geo, geo.mesh_uv_off, m, tri)
     if c < 0:
         return wp.vec2(wp.nan, wp.nan)
     return geo.uvs[c] * (1.0 - b1 - b2) + geo.uvs[c + 1] * b1 + geo.uvs[c + 2] * b2

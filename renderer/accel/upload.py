@@ -221,9 +221,11 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     g.point_times = _f32(cat([m.point_times for m in scene.meshes], (1,), np.float32), device)
     g.tri_vidx = _wp(cat([m.triangles for m in scene.meshes], (1, 3), np.int32), wp.vec3i, device)
     g.tri_material = _i32(cat([m.material_ids for m in scene.meshes], (1,), np.int32), device)
-    # per-corner normals and uvs of the meshes that have them (others take no memory: 60 bytes per triangle)
+    # per-corner normals and uvs of the meshes that have them (others take no memory: 60 bytes per triangle), and
+    # the colours of the meshes whose displayColor varies
     g.normals, g.mesh_normal_off = _corner_table([m.normals for m in scene.meshes], 3, wp.vec3, device)
     g.uvs, g.mesh_uv_off = _corner_table([m.uvs for m in scene.meshes], 2, wp.vec2, device)
+    g.colors, g.mesh_color_off = _corner_table([m.colors for m in scene.meshes], 3, wp.vec3, device)
     g.blas_box = _wp(cat([w.box for w in wide], (1, 4), np.float32), wp.vec4, device)
     g.blas_child = _wp(cat([w.child for w in wide], (1, 4), np.int32), wp.vec4i, device)
     g.blas_prim = _i32(cat([b.prim_order for b in blas], (1,), np.int32), device)
@@ -247,14 +249,6 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     g.mesh_nverts = _i32([m.points.shape[1] for m in scene.meshes] or [0], device)
     g.mesh_key_off = _i32(n_keys[:-1], device)
     g.mesh_nkeys = _i32([len(m.point_times) for m in scene.meshes] or [1], device)
-    color_off, colors, n = [], [], 0  # only meshes that have colours take memory
-    for m in scene.meshes:
-        color_off.append(n if m.colors is not None else -1)
-        if m.colors is not None:
-            colors.append(np.asarray(m.colors, np.float32).reshape(-1, 3))
-            n += len(colors[-1])
-    g.colors = _v3(cat(colors, (1, 3), np.float32), device)
-    g.mesh_color_off = _i32(color_off or [-1], device)
     solid = [m.solid if m.solid is not None else np.full(len(m.triangles), is_closed(m.triangles, m.points[0]))
              for m in scene.meshes]
     g.tri_solid = _i32(cat(solid, (1,), np.int32), device)

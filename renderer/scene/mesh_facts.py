@@ -18,16 +18,11 @@ def _mix(z: np.ndarray) -> np.ndarray:
     return z
 
 
-def _odd_count_hash(keys: np.ndarray) -> int:
-    """XOR of a 64-bit mix of every key: 0 when each key occurs an even number of times, and non-zero but with
-    probability 2^-64 when one occurs an odd number of times."""
-    return int(np.bitwise_xor.reduce(_mix(keys.astype(np.uint64) + np.uint64(0x9E3779B97F4A7C15))))
-
-
 def _odd_edge_hash(vertex_keys: np.ndarray, t: np.ndarray) -> int:
-    """``_odd_count_hash`` of the undirected edges of triangles t (T, 3), an edge being the unordered pair of its
-    vertices' keys (so vertices with equal keys are one vertex): 0 when every edge occurs an even number of
-    times. Symmetric in the two ends by hashing the sum of their own hashes."""
+    """XOR over the undirected edges of triangles t (T, 3) of a 64-bit hash of each, an edge being the unordered
+    pair of its vertices' keys (so vertices with equal keys are one vertex): 0 when every edge occurs an even
+    number of times, non-zero but with probability ~2^-64 when one occurs an odd number of times. Symmetric in the
+    two ends by hashing the sum of their own hashes."""
     h = _mix(vertex_keys.astype(np.uint64) + np.uint64(0x9E3779B97F4A7C15))
     out = 0
     for a, b in ((0, 1), (1, 2), (2, 0)):
