@@ -143,14 +143,18 @@ def surface_at(geo: Geometry, inst: int, tri: int, b1: float, b2: float, ro: wp.
     """Position, normals, uv and tangent of a hit at time s (vertices and transform at that instant)."""
     m = geo.inst_mesh[inst]
     o2w = instance_object_to_world(geo, inst, s)
-    w2o_t = wp.transpose(instance_world_to_object(geo, inst, s))  # normals transform by the inverse transpose
+    w2o = instance_world_to_object(geo, inst, s)
+    w2o_t = wp.transpose(w2o)  # normals transform by the inverse transpose
     k0, k1, u = mesh_keys_at(geo, m, s)
     p0, p1, p2 = triangle_points(geo, m, tri - geo.mesh_tri_off[m], k0, k1, u)
     ng = wp.normalize(wp.transform_vector(w2o_t, wp.cross(p1 - p0, p2 - p0)))
+    analytic = geo.mesh_sphere[m] > 0.0
+    if analytic:  # a sphere centred at the object origin: its normal is the object-space hit point's direction
+        ng = wp.normalize(wp.transform_vector(w2o_t, wp.transform_point(w2o, ro + rd * t)))
     b0 = 1.0 - b1 - b2
     ns = ng
     nc = corner_index(geo, geo.mesh_normal_off, m, tri)
-    if nc >= 0:
+    if nc >= 0 and not analytic:
         n = geo.normals[nc] * b0 + geo.normals[nc + 1] * b1 + geo.normals[nc + 2] * b2
         nw = wp.transform_vector(w2o_t, n)
         if wp.length(nw) > 0.0:

@@ -21,6 +21,7 @@ from renderer.accel.intersect import (
     safe_inverse,
     tlas_keys_at,
 )
+from renderer.accel.sphere import sphere_crossings
 from renderer.accel.wide import entries, leaf_range, wide_stack_t
 from renderer.shading.materials import Materials, eval_opacity
 from renderer.shading.textures import Textures
@@ -49,6 +50,16 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
     stack[0] = 0  # the root
     sp = int(1)
     tr = trans
+    r = geo.mesh_sphere[m]
+    if r > 0.0:  # an analytic sphere: each crossing at the opacity of its material (no uvs), no walk
+        sp = 0
+        n = sphere_crossings(ro, rd, r, tmax)
+        if n > 0 and tr > 0.0:
+            tri = geo.mesh_tri_off[m]
+            opacity = eval_opacity(mats, tex, geo.tri_material[tri], hit_uv(geo, m, tri, 0.0, 0.0), s)
+            tr = tr * (1.0 - opacity)
+            if n == 2:
+                tr = tr * (1.0 - opacity)
     while sp > 0 and tr > 0.0:
         sp -= 1
         ref = stack[sp]

@@ -13,6 +13,7 @@ from dataclasses import replace
 import numpy as np
 
 from renderer.motion.transform import matrix_at
+from renderer.scene.analytic import analytic_spheres
 from renderer.scene.mesh_facts import is_closed
 from renderer.scene.model import LIGHT_MESH, Instance, Mesh, MotionTransform, Scene
 
@@ -20,11 +21,13 @@ SHARED_COPY_LIMIT = 1024  # triangles: shared meshes up to this size are copied 
 MERGED_LIMIT = 1 << 23  # triangles the merged mesh may reach through copies of shared meshes
 
 
-def _is_still(scene: Scene, inst: Instance) -> bool:
-    """Still and plain: meshes with per-corner colours stay instanced (the merged mesh carries none)."""
+def _is_still(scene: Scene, inst: Instance, analytic: np.ndarray) -> bool:
+    """Still and plain: meshes with per-corner colours stay instanced (the merged mesh carries none), and so do
+    analytic spheres (``scene.analytic``: a transformed sphere is intersected in its own object space)."""
     mesh = scene.meshes[inst.mesh]
     return (inst.transform.num_keys == 1 and not mesh.deforming and mesh.colors is None
-            and inst.visible_from <= 0.0 and inst.visible_to >= 1.0 and inst.csg_group < 0)
+            and inst.visible_from <= 0.0 and inst.visible_to >= 1.0 and inst.csg_group < 0
+            and analytic[inst.mesh] == 0.0)
 
 
 def flatten_still_instances(scene: Scene) -> Scene:
@@ -33,11 +36,12 @@ def flatten_still_instances(scene: Scene) -> Scene:
         return scene  # light linking is per instance: merging would lose which instance is which
     one_sided = {lt.instance for lt in scene.lights if lt.kind == LIGHT_MESH and lt.uniform}  # MeshLightAPI
     users = np.bincount([i.mesh for i in scene.instances], minlength=len(scene.meshes))
+    analytic = analytic_spheres(scene)
     merge, keep = [], []
     copied = 0
     for idx, inst in enumerate(scene.instances):
         ntri = len(scene.meshes[inst.mesh].triangles)
-        ok = idx not in one_sided and _is_still(scene, inst) and (users[inst.mesh] == 1 or
+        ok = idx not in one_sided and _is_still(scene, inst, analytic) and (users[inst.mesh] == 1 or
                                          (ntri <= SHARED_COPY_LIMIT and copied + ntri <= MERGED_LIMIT))
         if ok and users[inst.mesh] > 1:
             copied += ntri

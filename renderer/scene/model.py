@@ -58,6 +58,10 @@ class Mesh:
     # w * cross(n, t)); w = 0 where uvs are missing or degenerate. None: computed from points key 0 and uvs when
     # uploaded (``materials.mesh_tangents``).
     tangents: np.ndarray | None = None
+    # The mesh tessellates a UsdGeomSphere of this radius (scene units) centred at the object origin, and does not
+    # deform: the renderer may intersect the sphere itself instead of its triangles (``scene.analytic``). None for
+    # every other mesh.
+    sphere_radius: float | None = None
 
     @property
     def deforming(self) -> bool:

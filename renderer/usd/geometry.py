@@ -36,6 +36,7 @@ class GeomData:
     uvs: np.ndarray | None = None  # (T, 3, 2) float32
     double_sided: bool = False
     subdivision_level: int | None = None  # refinement level of a subdivision surface; None: not subdivided
+    sphere_radius: float | None = None  # a Sphere prim whose radius does not vary (``Mesh.sphere_radius``)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -787,6 +788,7 @@ def read_primitive(prim, shutter: Shutter, warn) -> GeomData | None:
         normals=np.ascontiguousarray(nrm[tris], np.float32),
         uvs=None,
         double_sided=bool(ds),
+        sphere_radius=float(_primitive_params(prim, frame)[0]) if kind == "Sphere" and len(times) == 1 else None,
     )
 
 

@@ -1,0 +1,182 @@
+"""UsdGeomSphere intersected as a quadric (``scene.analytic``, ``accel.sphere``) instead of its tessellation."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import warp as wp
+from pxr import Usd, UsdGeom
+
+import stages
+from renderer.accel.sphere import BIG, sphere_roots
+from renderer.accel.upload import upload_geometry
+from renderer.motion.transform import make_transform
+from renderer.scene.analytic import analytic_spheres
+from renderer.scene.flatten import flatten_still_instances
+from renderer.scene.model import LIGHT_MESH, Camera, Instance, Light, Material, Mesh, MotionTransform, Scene
+from renderer.usd.geometry import _sphere
+from renderer.usd.importer import load_scene
+from test_accel import _probe, random_mesh
+
+
+@wp.kernel
+def _roots(ro: wp.array(dtype=wp.vec3), rd: wp.array(dtype=wp.vec3), r: wp.array(dtype=float),
+           out: wp.array(dtype=wp.vec2)):
+    i = wp.tid()
+    t0, t1 = sphere_roots(ro[i], rd[i], r[i])
+    out[i] = wp.vec2(t0, t1)
+
+
+def _exact_roots(o, d, r):
+    """Both roots in float64 (NaN on a miss) of |o + t d| = r."""
+    a, b, c = d @ d, o @ d, o @ o - r * r
+    disc = b * b - a * c
+    if disc < 0:
+        return np.nan, np.nan
+    return (-b - np.sqrt(disc)) / a, (-b + np.sqrt(disc)) / a
+
+
+def test_sphere_roots_match_float64_for_near_far_small_and_inside_rays():
+    rng = np.random.default_rng(3)
+    n = 4000
+    r = 10.0 ** rng.uniform(-3, 1, n)  # 1 mm to 10 m
+    dist = r * 10.0 ** rng.uniform(-0.5, 4, n)  # from inside the sphere to ten thousand radii away
+    ro = rng.normal(size=(n, 3))
+    ro *= (dist / np.linalg.norm(ro, axis=1))[:, None]
+    aim = rng.normal(size=(n, 3)) * (r * rng.uniform(0, 1.5, n))[:, None]  # some graze, some miss
+    rd = (aim - ro) * rng.uniform(0.1, 10, (n, 1))  # not unit length: rays come from scaled instances
+    out = wp.zeros(n, dtype=wp.vec2)
+    wp.launch(_roots, n, [wp.array(ro, dtype=wp.vec3), wp.array(rd, dtype=wp.vec3), wp.array(r, dtype=float), out])
+    got = out.numpy()
+    ro32, rd32, r32 = ro.astype(np.float32).astype(np.float64), rd.astype(np.float32), r.astype(np.float32)
+    checked = 0
+    for i in range(n):
+        e0, e1 = _exact_roots(ro32[i], rd32[i].astype(np.float64), float(r32[i]))
+        # the closest approach, relative to the radius: away from a tangent a hit and a miss cannot be confused
+        closest = np.linalg.norm(np.cross(ro32[i], rd32[i])) / np.linalg.norm(rd32[i]) / r32[i]
+        if abs(closest - 1.0) < 1e-3:
+            continue
+        if np.isnan(e0):
+            assert got[i, 0] == BIG and got[i, 1] == BIG, i
+            continue
+        checked += 1
+        # each root to within a float32 rounding of the distance covered (the origin is ~dist from the centre)
+        scale = (np.linalg.norm(ro32[i]) + r32[i]) / np.linalg.norm(rd32[i])
+        np.testing.assert_allclose(got[i], [e0, e1], rtol=0, atol=4e-7 * scale + 1e-6 * abs(e1 - e0))
+    assert checked > n // 3
+
+
+def _sphere_mesh(radius, name="ball"):
+    p, t, n = _sphere(radius)
+    return Mesh(name, np.zeros(1, np.float32), p[None].astype(np.float32), t.astype(np.int32),
+                np.zeros(len(t), np.int32), normals=n[t].astype(np.float32), sphere_radius=radius)
+
+
+def _scene(meshes, instances, opacity=1.0):
+    cam = Camera("cam", MotionTransform.static(np.eye(4)))
+    return Scene(meshes, instances, [Material("m", opacity=opacity)], [], cam, 0, 0, 1)
+
+
+def _ellipsoid_hit(o, d, w2o, r):
+    """Nearest positive root, exactly, of the ray under the inverse transform w2o, or inf."""
+    oo = w2o[:3, :3] @ o + w2o[:3, 3]
+    dd = w2o[:3, :3] @ d
+    roots = [t for t in _exact_roots(oo, dd, r) if t > 0]
+    return min(roots) if roots else np.inf
+
+
+def test_walks_hit_a_scaled_sphere_and_a_moving_one_exactly_and_shadows_cross_each_twice():
+    """A squashed, rotated sphere (an ellipsoid), a sphere moving over the shutter and a triangle mesh: closest
+    hits at the exact distances of the quadric, at random times, the sphere's hit reporting its mesh's first
+    triangle; a shadow ray through a sphere of opacity 0.5 crosses it twice (0.25 gets through)."""
+    rng = np.random.default_rng(17)
+    squash = np.diag([1.5, 0.5, 1.0, 1.0])
+    c, s_ = np.cos(0.6), np.sin(0.6)
+    squash = np.array([[c, -s_, 0, 0], [s_, c, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]) @ squash
+    squash[:3, 3] = (-1.5, 0.2, -1.0)
+    move0, move1 = np.eye(4), np.eye(4)
+    move0[:3, 3], move1[:3, 3] = (1.0, -0.5, 0.0), (2.5, 0.5, -1.0)
+    clutter = np.eye(4)
+    clutter[:3, 3] = (0.0, 0.0, -6.0)
+    scene = _scene([_sphere_mesh(0.8), random_mesh(rng, 200, name="clutter")],
+                   [Instance(0, MotionTransform.static(squash)), Instance(0, make_transform([0, 1], [move0, move1])),
+                    Instance(1, MotionTransform.static(clutter))], opacity=0.5)
+    geo, _ = upload_geometry(scene)
+    assert geo.mesh_sphere.numpy().tolist() == [np.float32(0.8), 0.0]
+    n = 3000
+    ro = np.tile([0.0, 0.0, 6.0], (n, 1)) + rng.normal(0, 0.3, (n, 3))
+    rd = rng.uniform([-3.5, -1.5, -1.5], [3.5, 1.5, 0.0], (n, 3)) - ro
+    rd /= np.linalg.norm(rd, axis=1, keepdims=True)
+    times = rng.uniform(0, 1, n).astype(np.float32)
+    t, inst, tri, tr = _probe(geo, scene, ro, rd, times)
+    sphere_hits = 0
+    for i in range(n):
+        x = [_ellipsoid_hit(ro[i], rd[i], np.linalg.inv(squash), 0.8)]
+        m = move0.copy()
+        m[:3, 3] = move0[:3, 3] + times[i] * (move1[:3, 3] - move0[:3, 3])
+        x.append(_ellipsoid_hit(ro[i], rd[i], np.linalg.inv(m), 0.8))
+        k = int(np.argmin(x))
+        if inst[i] in (0, 1):
+            sphere_hits += 1
+            assert inst[i] == k and tri[i] == 0, i
+            np.testing.assert_allclose(t[i], x[k], rtol=2e-6, atol=2e-6)
+            # an opaque-half sphere in the way: both its crossings count
+            assert tr[i] <= 0.25 + 1e-6, i
+        elif np.isfinite(min(x)):  # the clutter is behind both spheres: only a graze may tell them apart
+            assert inst[i] == 2 or abs(x[k] - t[i]) < 1e-3, i
+    assert sphere_hits > n // 8
+
+
+def test_a_shadow_ray_leaving_a_sphere_crosses_it_once():
+    scene = _scene([_sphere_mesh(1.0)], [Instance(0, MotionTransform.static(np.eye(4)))], opacity=0.5)
+    geo, _ = upload_geometry(scene)
+    ro = np.array([[0.0, 0.0, 0.0], [0.2, 0.3, -0.1], [0.0, 0.0, 3.0]])
+    rd = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+    t, inst, _, tr = _probe(geo, scene, ro, rd, np.zeros(3, np.float32))
+    np.testing.assert_allclose(t, [1.0, np.sqrt(1 - 0.09 - 0.01) - 0.2, 2.0], rtol=1e-6)
+    np.testing.assert_allclose(tr, [0.5, 0.5, 0.25], rtol=1e-6)
+
+
+def test_which_spheres_are_analytic():
+    """Static spheres are; deforming ones, emitters, CSG operands and spheres with uvs or colours keep their
+    triangles; other meshes never are."""
+    base = [_sphere_mesh(1.0, f"s{i}") for i in range(6)] + [random_mesh(np.random.default_rng(0), 4)]
+    base[1].point_times = np.array([0.0, 1.0], np.float32)
+    base[1].points = np.concatenate([base[1].points, base[1].points * 2])
+    base[3].uvs = np.zeros((len(base[3].triangles), 3, 2), np.float32)
+    base[4].colors = np.ones((len(base[4].triangles), 3, 3), np.float32)
+    still = MotionTransform.static(np.eye(4))
+    instances = [Instance(i, still) for i in range(7)] + [Instance(5, still, csg_group=0)]
+    scene = _scene(base, instances)
+    scene.csg_operations = ["union"]
+    scene.lights = [Light(LIGHT_MESH, "glow", (1.0, 1.0, 1.0), still, instance=2)]
+    assert analytic_spheres(scene).tolist() == [1.0, 0, 0, 0, 0, 0, 0]
+
+
+def test_analytic_spheres_stay_instanced_when_still_geometry_is_merged():
+    rng = np.random.default_rng(1)
+    still = MotionTransform.static(np.eye(4))
+    scene = _scene([random_mesh(rng, 10, name="a"), random_mesh(rng, 10, name="b"), _sphere_mesh(0.5)],
+                   [Instance(0, still), Instance(1, still), Instance(2, still), Instance(2, still)])
+    flat = flatten_still_instances(scene)
+    assert len(flat.instances) == 3  # the merged mesh and both spheres
+    assert [flat.meshes[i.mesh].sphere_radius for i in flat.instances[1:]] == [0.5, 0.5]
+
+
+def test_the_importer_marks_spheres_whose_radius_holds_over_the_shutter(tmp_path):
+    """A sphere growing over the shutter deforms and keeps its triangles; with a closed shutter it is the sphere of
+    its radius at the frame."""
+    stage = stages.new_stage(tmp_path / "s.usda")
+    stages.camera(stage, translate=(0, 0, 5), shutter=(-0.25, 0.25))
+    stages.sphere(stage, "/World/Still", 0.7)
+    grows = stages.sphere(stage, "/World/Grows", 0.5, center=(2, 0, 0))
+    grows.GetRadiusAttr().Set(0.5, Usd.TimeCode(0))
+    grows.GetRadiusAttr().Set(1.0, Usd.TimeCode(48))
+    UsdGeom.Cube.Define(stage, "/World/Box")
+    stage.SetStartTimeCode(0)
+    stage.SetEndTimeCode(48)
+    stage.Save()
+    scene = load_scene(tmp_path / "s.usda", frame=24)
+    radius = {m.name: m.sphere_radius for m in scene.meshes}
+    assert radius == {"/World/Still": pytest.approx(0.7), "/World/Grows": None, "/World/Box": None}
+    scene = load_scene(tmp_path / "s.usda", frame=24, motion_blur=False)
+    assert {m.name: m.sphere_radius for m in scene.meshes}["/World/Grows"] == pytest.approx(0.75)
