@@ -145,12 +145,17 @@ def surface_at(geo: Geometry, inst: int, tri: int, b1: float, b2: float, ro: wp.
     o2w = instance_object_to_world(geo, inst, s)
     w2o = instance_world_to_object(geo, inst, s)
     w2o_t = wp.transpose(w2o)  # normals transform by the inverse transpose
-    k0, k1, u = mesh_keys_at(geo, m, s)
-    p0, p1, p2 = triangle_points(geo, m, tri - geo.mesh_tri_off[m], k0, k1, u)
-    ng = wp.normalize(wp.transform_vector(w2o_t, wp.cross(p1 - p0, p2 - p0)))
     analytic = geo.mesh_sphere[m] > 0.0
+    p0 = wp.vec3(0.0)
+    p1 = wp.vec3(0.0)
+    p2 = wp.vec3(0.0)
+    ng = wp.vec3(0.0)
     if analytic:  # a sphere centred at the object origin: its normal is the object-space hit point's direction
         ng = wp.normalize(wp.transform_vector(w2o_t, wp.transform_point(w2o, ro + rd * t)))
+    else:
+        k0, k1, u = mesh_keys_at(geo, m, s)
+        p0, p1, p2 = triangle_points(geo, m, tri - geo.mesh_tri_off[m], k0, k1, u)
+        ng = wp.normalize(wp.transform_vector(w2o_t, wp.cross(p1 - p0, p2 - p0)))
     b0 = 1.0 - b1 - b2
     ns = ng
     nc = corner_index(geo, geo.mesh_normal_off, m, tri)

@@ -64,8 +64,23 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    return run_command(build_parser().parse_args(argv))
+
+
+def console_main() -> None:
+    """The ``drt`` executable: ``main``, and after a render or warmup an exit without the interpreter's teardown
+    (``renderer.cli.exit_now``)."""
+    args = build_parser().parse_args()
+    code = run_command(args)
+    if args.command in ("render", "warmup"):
+        from renderer.cli import exit_now
+
+        exit_now(code)
+    sys.exit(code)
+
+
+def run_command(args: argparse.Namespace) -> int:
+    """Run a parsed ``drt`` command under the CLI's error contract; returns the exit code."""
     if args.command in ("render", "warmup"):
         from renderer.cli import render_main
 

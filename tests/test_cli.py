@@ -159,3 +159,21 @@ def test_noise_flags_adaptive_spp_aov_denoise_and_unbiased(scene_file, tmp_path)
     r = drt("render", scene_file, "-o", out, "--noise-threshold", -1)
     assert_one_line_error(r, "--noise-threshold")
     assert r.returncode == 2
+
+
+def test_the_drt_executable_flushes_its_report_and_exit_code_before_its_quick_exit(scene_file, tmp_path):
+    """The installed ``drt`` ends a render with ``os._exit`` (no interpreter teardown): the image, the report on a
+    pipe and the exit code must all be there; an error still exits 1 with its one line."""
+    exe = os.path.join(os.path.dirname(sys.executable), "drt")
+    if not os.path.exists(exe):
+        pytest.skip("the drt executable is not installed beside this Python")
+    out = tmp_path / "quick.exr"
+    r = subprocess.run([exe, "render", str(scene_file), "-o", str(out), "--width", "16", "--height", "12", "--spp",
+                        "2"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith(f"wrote {out} (16x12, 2 spp") and r.stdout.endswith("rays/s\n")
+    assert read_exr(out)[0]["R"].shape == (12, 16)
+    r = subprocess.run([exe, "render", str(tmp_path / "missing.usda"), "-o", str(out)], capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 1
+    assert_one_line_error(r, "scene file not found")
