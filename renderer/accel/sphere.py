@@ -26,7 +26,7 @@ def sphere_roots(ro: wp.vec3, rd: wp.vec3, r: float):
         return float(BIG), float(BIG)
     root = wp.sqrt(a * disc)
     q = wp.where(b >= 0.0, -b - root, -b + root)
-    if q == 0.0:  # grazing through the origin of a zero-radius sphere
+    if q == 0.0:  # b = 0 and a tangent: the ray starts on the sphere, tangent to it
         return float(0.0), float(0.0)
     c = wp.dot(ro, ro) - r * r
     t0 = c / q
