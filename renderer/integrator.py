@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import warp as wp
 
+from renderer.accel.analytic import shape_normal
 from renderer.accel.csg import csg_closest
 from renderer.accel.intersect import (
     BIG,
@@ -145,13 +146,16 @@ def surface_at(geo: Geometry, inst: int, tri: int, b1: float, b2: float, ro: wp.
     o2w = instance_object_to_world(geo, inst, s)
     w2o = instance_world_to_object(geo, inst, s)
     w2o_t = wp.transpose(w2o)  # normals transform by the inverse transpose
-    analytic = geo.mesh_sphere[m] > 0.0
+    kind = geo.mesh_shape[m]
+    analytic = kind > 0
     p0 = wp.vec3(0.0)
     p1 = wp.vec3(0.0)
     p2 = wp.vec3(0.0)
     ng = wp.vec3(0.0)
-    if analytic:  # a sphere centred at the object origin: its normal is the object-space hit point's direction
-        ng = wp.normalize(wp.transform_vector(w2o_t, wp.transform_point(w2o, ro + rd * t)))
+    if analytic:  # an exact shape: the normal of the piece crossed (b1) at the object-space hit point
+        po = wp.transform_point(w2o, ro + rd * t)
+        no = shape_normal(kind, geo.mesh_shape_axis[m], geo.mesh_shape_param[m], po, int(b1))
+        ng = wp.normalize(wp.transform_vector(w2o_t, no))
     else:
         k0, k1, u = mesh_keys_at(geo, m, s)
         p0, p1, p2 = triangle_points(geo, m, tri - geo.mesh_tri_off[m], k0, k1, u)

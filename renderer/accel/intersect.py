@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from renderer.accel.sphere import sphere_closest
+from renderer.accel.analytic import shape_hits
 from renderer.accel.wide import dist_stack_t, entries, far_to_near, leaf_range, wide_stack_t
 from renderer.motion.kernels import MotionKeys, find_segment, keys_matrix
 from renderer.struct_refs import by_reference
@@ -68,9 +68,12 @@ class Geometry:
     colors: wp.array(dtype=wp.vec3)
     mesh_color_off: wp.array(dtype=wp.int32)
     tri_solid: wp.array(dtype=wp.int32)  # per global triangle, 1: part of a closed surface (refracts, absorbs)
-    # per mesh: the radius of the analytic sphere (centred at the object origin) the walks test instead of the
-    # mesh's tree, or 0 (``scene.analytic``); a hit on it reports the mesh's first triangle, for its material
-    mesh_sphere: wp.array(dtype=wp.float32)
+    # per mesh: the exact shape the walks test instead of the mesh's tree (``accel.analytic``: SHAPE_SPHERE, ...), or
+    # 0; its spine axis and parameters (rb, rt, half height, 0). A hit on it reports the mesh's first triangle (for
+    # its material) and the piece it crossed in b1.
+    mesh_shape: wp.array(dtype=wp.int32)
+    mesh_shape_axis: wp.array(dtype=wp.int32)
+    mesh_shape_param: wp.array(dtype=wp.vec4)
     # --- top level
     # four-wide nodes as the bottom level's: node n, key k (uniform key times k / (K - 1)), coordinate c at
     # (n * tlas_nkeys + k) * 6 + c
@@ -262,15 +265,15 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float, s
     dist[0] = 0.0
     sp = int(1)
     t_best = tmax
-    r = geo.mesh_sphere[m]
-    if r > 0.0:  # an analytic sphere: one quadratic, no walk
+    kind = geo.mesh_shape[m]
+    if kind > 0:  # an exact shape: a quadratic or two, no walk
         sp = 0
-        t = sphere_closest(ro, rd, r, t_best)
+        t, part, n = shape_hits(kind, geo.mesh_shape_axis[m], geo.mesh_shape_param[m], ro, rd, t_best)
         if t < t_best:
             best.t = t
             best.inst = inst
             best.tri = geo.mesh_tri_off[m]
-            best.b1 = 0.0
+            best.b1 = float(part)
             best.b2 = 0.0
     while sp > 0:
         sp -= 1

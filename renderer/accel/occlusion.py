@@ -21,7 +21,7 @@ from renderer.accel.intersect import (
     safe_inverse,
     tlas_keys_at,
 )
-from renderer.accel.sphere import sphere_crossings
+from renderer.accel.analytic import shape_hits
 from renderer.accel.wide import entries, leaf_range, wide_stack_t
 from renderer.shading.materials import Materials, eval_opacity
 from renderer.shading.textures import Textures
@@ -50,10 +50,10 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
     stack[0] = 0  # the root
     sp = int(1)
     tr = trans
-    r = geo.mesh_sphere[m]
-    if r > 0.0:  # an analytic sphere: each crossing at the opacity of its material (no uvs), no walk
+    kind = geo.mesh_shape[m]
+    if kind > 0:  # an exact shape: each crossing at the opacity of its material (no uvs), no walk
         sp = 0
-        n = sphere_crossings(ro, rd, r, tmax)
+        t, part, n = shape_hits(kind, geo.mesh_shape_axis[m], geo.mesh_shape_param[m], ro, rd, tmax)
         if n > 0 and tr > 0.0:
             tri = geo.mesh_tri_off[m]
             opacity = eval_opacity(mats, tex, geo.tri_material[tri], hit_uv(geo, m, tri, 0.0, 0.0), s)

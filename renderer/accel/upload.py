@@ -18,7 +18,7 @@ from renderer.accel.wide import WideBvh, collapse
 from renderer.accel.triangle_kernels import leaf_triangles, triangle_boxes
 from renderer.motion.kernels import upload_keys
 from renderer.motion.transform import matrix_at
-from renderer.scene.analytic import analytic_spheres
+from renderer.scene.analytic import analytic_shapes, shape_bounds, shape_table
 from renderer.scene.mesh_facts import is_closed
 from renderer.scene.model import Instance, Mesh, MotionTransform, Scene
 
@@ -30,7 +30,7 @@ SUBSTEPS = 8  # samples per top-level segment when measuring how far curved moti
 # heavy scene (8 / 2: 58, slower; 4 / 1: 69, no faster).
 BLAS_MAX_LEAF = 4
 BLAS_TRAVERSAL_COST = 2.0
-SPHERE_BOX_PAD = 1.0 + 1e-5  # an analytic sphere's box, relative to its radius: float32 rounding never clips it
+SHAPE_BOX_PAD = 1.0 + 1e-5  # an analytic shape's box, relative to its size: float32 rounding never clips it
 
 
 @dataclass
@@ -204,11 +204,10 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     t_start = time.perf_counter()
     blas: list[Bvh] = []
     wide: list[WideBvh] = []
-    sphere = analytic_spheres(scene)
-    for mesh, r in zip(scene.meshes, sphere):
-        if r > 0.0:  # one leaf holding the sphere's box (walks test the sphere, never this leaf's triangle)
-            lo, hi = np.full((1, 1, 3), -r * SPHERE_BOX_PAD, np.float32), np.full((1, 1, 3), r * SPHERE_BOX_PAD,
-                                                                                   np.float32)
+    shapes = analytic_shapes(scene)
+    for mesh, shape in zip(scene.meshes, shapes):
+        if shape is not None:  # one leaf holding the shape's box (walks test the shape, never this leaf's triangle)
+            lo, hi = (np.asarray(b * SHAPE_BOX_PAD, np.float32)[None, None] for b in shape_bounds(shape))
         else:
             lo, hi = _mesh_prim_bounds(mesh, device)
         blas.append(build_bvh(lo, hi, max_leaf=BLAS_MAX_LEAF, c_trav=BLAS_TRAVERSAL_COST))
@@ -259,7 +258,10 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     solid = [m.solid if m.solid is not None else np.full(len(m.triangles), is_closed(m.triangles, m.points[0]))
              for m in scene.meshes]
     g.tri_solid = _i32(cat(solid, (1,), np.int32), device)
-    g.mesh_sphere = _f32(sphere if len(sphere) else [0.0], device)
+    codes, axes, params = shape_table(shapes)
+    g.mesh_shape = _i32(codes if len(codes) else [0], device)
+    g.mesh_shape_axis = _i32(axes if len(axes) else [0], device)
+    g.mesh_shape_param = _wp(params if len(params) else np.zeros((1, 4), np.float32), wp.vec4, device)
 
     # --- top level over instances, boxes on a uniform grid of time keys
     nk = _tlas_key_count(scene)

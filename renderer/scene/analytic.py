@@ -1,11 +1,12 @@
-"""Which meshes the renderer intersects as the analytic shapes they tessellate.
+"""Which meshes the renderer intersects as the exact implicit prims they tessellate.
 
-A UsdGeomSphere is a quadric: RenderMan, Karma and Arnold intersect it exactly, so its silhouette and shading are
-smooth at any distance, and a ray pays one quadratic instead of a walk over thousands of triangles (the README
-demo's three spheres were 4032 triangles each). The tessellation stays in the scene for everything that needs
-triangles, so a sphere is analytic only where nothing reads those triangles at a hit:
+A UsdGeomSphere, Cylinder, Cone or Capsule is a quadric (pieces of quadrics and planes): RenderMan, Karma and
+Arnold intersect them exactly, so silhouettes and shading are smooth at any distance, and a ray pays a quadratic or
+two instead of a walk over thousands of triangles (the README demo's three spheres were 4032 triangles each). The
+tessellation stays in the scene for everything that needs triangles, so a prim is analytic only where nothing reads
+those triangles at a hit:
 
-* it does not deform (its radius does not vary over the shutter: ``Mesh.sphere_radius`` is set);
+* its size holds over the shutter (``Mesh.shape`` is set; transforms may move it);
 * it carries no per-corner data a hit would interpolate: texture coordinates or a varying displayColor;
 * it is not an emitter (mesh lights sample its triangles, whose pdf must match what rays hit);
 * it is not a CSG operand (the CSG walks classify crossings triangle by triangle).
@@ -14,18 +15,39 @@ from __future__ import annotations
 
 import numpy as np
 
-from renderer.scene.model import LIGHT_MESH, Scene
+from renderer.scene.model import LIGHT_MESH, AnalyticShape, Scene
+
+# Shape codes of the kernels (``accel.analytic``); 0: a triangle mesh
+SHAPE_CODES = {"sphere": 1, "frustum": 2, "capsule": 3}
 
 
-def analytic_spheres(scene: Scene) -> np.ndarray:
-    """(M,) float32 per mesh: the radius of the sphere the renderer intersects in its place, 0 for a mesh
-    intersected as triangles."""
-    radius = np.array([m.sphere_radius if (m.sphere_radius or 0.0) > 0.0 and not m.deforming and m.uvs is None
-                       and m.colors is None else 0.0 for m in scene.meshes], np.float32)
+def analytic_shapes(scene: Scene) -> list[AnalyticShape | None]:
+    """Per mesh, the shape the renderer intersects in place of its triangles, or None."""
+    shapes = [m.shape if m.shape is not None and not m.deforming and m.uvs is None and m.colors is None else None
+              for m in scene.meshes]
     for light in scene.lights:
         if light.kind == LIGHT_MESH and 0 <= light.instance < len(scene.instances):
-            radius[scene.instances[light.instance].mesh] = 0.0
+            shapes[scene.instances[light.instance].mesh] = None
     for inst in scene.instances:
         if inst.csg_group >= 0:
-            radius[inst.mesh] = 0.0
-    return radius
+            shapes[inst.mesh] = None
+    return shapes
+
+
+def shape_bounds(shape: AnalyticShape) -> tuple[np.ndarray, np.ndarray]:
+    """Object-space box (lo, hi) of a shape, float64."""
+    if shape.kind == "sphere":
+        half = np.full(3, shape.radius_bottom)
+    else:
+        half = np.full(3, max(shape.radius_bottom, shape.radius_top))
+        half[shape.axis] = 0.5 * shape.height + (shape.radius_bottom if shape.kind == "capsule" else 0.0)
+    return -half, half
+
+
+def shape_table(shapes: list[AnalyticShape | None]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per mesh the kernels' shape code (0: triangles), axis, and (radius_bottom, radius_top, height / 2, 0)."""
+    codes = np.array([SHAPE_CODES[s.kind] if s is not None else 0 for s in shapes], np.int32)
+    axes = np.array([s.axis if s is not None else 0 for s in shapes], np.int32)
+    params = np.array([(s.radius_bottom, s.radius_top, 0.5 * s.height, 0.0) if s is not None else (0, 0, 0, 0)
+                       for s in shapes], np.float32).reshape(-1, 4)
+    return codes, axes, params

@@ -13,7 +13,7 @@ from dataclasses import replace
 import numpy as np
 
 from renderer.motion.transform import matrix_at
-from renderer.scene.analytic import analytic_spheres
+from renderer.scene.analytic import analytic_shapes
 from renderer.scene.mesh_facts import is_closed
 from renderer.scene.model import LIGHT_MESH, Instance, Mesh, MotionTransform, Scene
 
@@ -21,13 +21,13 @@ SHARED_COPY_LIMIT = 1024  # triangles: shared meshes up to this size are copied 
 MERGED_LIMIT = 1 << 23  # triangles the merged mesh may reach through copies of shared meshes
 
 
-def _is_still(scene: Scene, inst: Instance, analytic: np.ndarray) -> bool:
+def _is_still(scene: Scene, inst: Instance, analytic: list) -> bool:
     """Still and plain: meshes with per-corner colours stay instanced (the merged mesh carries none), and so do
-    analytic spheres (``scene.analytic``: a transformed sphere is intersected in its own object space)."""
+    analytic shapes (``scene.analytic``: a transformed sphere or cylinder is intersected in its own object space)."""
     mesh = scene.meshes[inst.mesh]
     return (inst.transform.num_keys == 1 and not mesh.deforming and mesh.colors is None
             and inst.visible_from <= 0.0 and inst.visible_to >= 1.0 and inst.csg_group < 0
-            and analytic[inst.mesh] == 0.0)
+            and analytic[inst.mesh] is None)
 
 
 def flatten_still_instances(scene: Scene) -> Scene:
@@ -36,7 +36,7 @@ def flatten_still_instances(scene: Scene) -> Scene:
         return scene  # light linking is per instance: merging would lose which instance is which
     one_sided = {lt.instance for lt in scene.lights if lt.kind == LIGHT_MESH and lt.uniform}  # MeshLightAPI
     users = np.bincount([i.mesh for i in scene.instances], minlength=len(scene.meshes))
-    analytic = analytic_spheres(scene)
+    analytic = analytic_shapes(scene)
     merge, keep = [], []
     copied = 0
     for idx, inst in enumerate(scene.instances):

@@ -33,6 +33,17 @@ LIGHT_DISTANT = 4
 LIGHT_DOME = 5
 LIGHT_MESH = 6  # emissive geometry, sampled by area
 
+@dataclass(frozen=True)
+class AnalyticShape:
+    """An implicit prim as its exact surface, in object space, centred at the origin (``scene.analytic``)."""
+
+    kind: str  # "sphere", "frustum" (Cylinder, Cylinder_1, Cone: closed by flat caps) or "capsule"
+    radius_bottom: float  # scene units, at -height/2 along the axis (a sphere's radius)
+    radius_top: float = 0.0  # at +height/2 (a capsule's radius_bottom is its radius)
+    height: float = 0.0  # of the spine: a frustum's height, a capsule's cylinder part, 0 for a sphere
+    axis: int = 2  # the spine: 0, 1, 2 for X, Y, Z
+
+
 @dataclass
 class Mesh:
     """A triangle mesh in object space (the bottom level of the two-level hierarchy).
@@ -58,10 +69,10 @@ class Mesh:
     # w * cross(n, t)); w = 0 where uvs are missing or degenerate. None: computed from points key 0 and uvs when
     # uploaded (``materials.mesh_tangents``).
     tangents: np.ndarray | None = None
-    # The mesh tessellates a UsdGeomSphere of this radius (scene units) centred at the object origin, and does not
-    # deform: the renderer may intersect the sphere itself instead of its triangles (``scene.analytic``). None for
+    # The implicit prim (Sphere, Cylinder, Cone, Capsule) the mesh tessellates, when its size holds over the
+    # shutter: the renderer may intersect that shape itself instead of its triangles (``scene.analytic``). None for
     # every other mesh.
-    sphere_radius: float | None = None
+    shape: AnalyticShape | None = None
 
     @property
     def deforming(self) -> bool:

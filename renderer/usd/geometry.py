@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from pxr import Usd, UsdGeom
 
+from renderer.scene.model import AnalyticShape
 from renderer.usd import subdiv as usd_subdiv
 from renderer.usd.motion import Shutter
 from renderer.usd.subdiv import SubdivisionDetail
@@ -36,7 +37,7 @@ class GeomData:
     uvs: np.ndarray | None = None  # (T, 3, 2) float32
     double_sided: bool = False
     subdivision_level: int | None = None  # refinement level of a subdivision surface; None: not subdivided
-    sphere_radius: float | None = None  # a Sphere prim whose radius does not vary (``Mesh.sphere_radius``)
+    shape: AnalyticShape | None = None  # an implicit prim whose size does not vary (``Mesh.shape``)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -713,6 +714,21 @@ def _primitive_params(prim, t: float) -> tuple:
     raise ValueError(kind)
 
 
+def _analytic_shape(kind: str, params: tuple, perm: list[int]) -> AnalyticShape | None:
+    """The exact shape of a still implicit prim (``Mesh.shape``), or None for those drawn only as triangles: planes
+    and cubes (flat already), tapered capsules (``Capsule_1`` with two radii), degenerate sizes."""
+    axis = perm.index(2)  # the tessellation's Z spine lands on this object axis
+    if kind == "Sphere":
+        return AnalyticShape("sphere", float(params[0])) if params[0] > 0 else None
+    if kind in ("Cylinder", "Cylinder_1", "Cone"):
+        rb, rt, h = (float(x) for x in params)
+        return AnalyticShape("frustum", rb, rt, h, axis) if h > 0 and max(rb, rt) > 0 else None
+    if kind in ("Capsule", "Capsule_1"):
+        rb, rt, h = (float(x) for x in params)
+        return AnalyticShape("capsule", rb, rb, h, axis) if rb == rt and rb > 0 and h >= 0 else None
+    return None
+
+
 def _tessellate(kind: str, params: tuple):
     if kind == "Sphere":
         return _sphere(*params)
@@ -788,7 +804,7 @@ def read_primitive(prim, shutter: Shutter, warn) -> GeomData | None:
         normals=np.ascontiguousarray(nrm[tris], np.float32),
         uvs=None,
         double_sided=bool(ds),
-        sphere_radius=float(_primitive_params(prim, frame)[0]) if kind == "Sphere" and len(times) == 1 else None,
+        shape=_analytic_shape(kind, _primitive_params(prim, frame), perm) if len(times) == 1 else None,
     )
 
 

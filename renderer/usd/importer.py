@@ -476,7 +476,7 @@ class _Importer:
                 colors=colors,
                 double_sided=geom.double_sided,
                 solid=getattr(geom, "solid", None),
-                sphere_radius=getattr(geom, "sphere_radius", None),
+                shape=getattr(geom, "shape", None),
             ))
             flat = geom.points.reshape(-1, 3)
             self._mesh_bounds.append(np.stack([flat.min(axis=0), flat.max(axis=0)]).astype(np.float64))
