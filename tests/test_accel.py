@@ -62,6 +62,22 @@ def make_scene(rng):
     return Scene(meshes, instances, [Material("m", opacity=0.5)], [], cam, 0, 0, 1)
 
 
+def ray_triangles(v, o, d):
+    """Moller-Trumbore in float64 over triangles v (T, 3, 3): the ray parameter t of each and whether the ray hits
+    it ahead of its origin."""
+    e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
+    pv = np.cross(d, e2)
+    det = np.einsum("ij,ij->i", e1, pv)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1 / det
+        tv = o - v[:, 0]
+        b1 = np.einsum("ij,ij->i", tv, pv) * inv
+        qv = np.cross(tv, e1)
+        b2 = (qv @ d) * inv
+        t = np.einsum("ij,ij->i", e2, qv) * inv
+    return t, (b1 >= 0) & (b2 >= 0) & (b1 + b2 <= 1) & (t > 0)
+
+
 def brute_force(scene, o, d, s):
     best = (np.inf, -1, -1)
     for ii, inst in enumerate(scene.instances):
@@ -78,18 +94,7 @@ def brute_force(scene, o, d, s):
             pts = mesh.points[j - 1] * (1 - u) + mesh.points[j] * u
         else:
             pts = mesh.points[0]
-        v = pts[mesh.triangles].astype(np.float64)
-        e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
-        pv = np.cross(dd, e2)
-        det = np.einsum("ij,ij->i", e1, pv)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1 / det
-            tv = oo - v[:, 0]
-            b1 = np.einsum("ij,ij->i", tv, pv) * inv
-            qv = np.cross(tv, e1)
-            b2 = (qv @ dd) * inv
-            t = np.einsum("ij,ij->i", e2, qv) * inv
-        ok = (b1 >= 0) & (b2 >= 0) & (b1 + b2 <= 1) & (t > 0)
+        t, ok = ray_triangles(pts[mesh.triangles].astype(np.float64), oo, dd)
         if ok.any():
             k = np.argmin(np.where(ok, t, np.inf))
             if t[k] < best[0]:

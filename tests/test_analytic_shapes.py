@@ -25,7 +25,7 @@ from renderer.scene.model import (
 )
 from renderer.usd.geometry import _AXIS_PERM, _analytic_shape, _sphere, _tessellate
 from renderer.usd.importer import load_scene
-from test_accel import _probe, random_mesh
+from test_accel import _probe, random_mesh, ray_triangles
 
 
 @wp.kernel
@@ -235,18 +235,7 @@ def _shape_probe(kind: int, axis: int, prm: wp.vec4, ro: wp.array(dtype=wp.vec3)
 
 def _tessellated_hits(p, tris, nrm, o, d):
     """Brute force over a tessellation: (nearest t or inf, its triangle's mean corner normal, crossings)."""
-    v = p[tris]
-    e1, e2 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
-    pv = np.cross(d, e2)
-    det = np.einsum("ij,ij->i", e1, pv)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / det
-        tv = o - v[:, 0]
-        b1 = np.einsum("ij,ij->i", tv, pv) * inv
-        qv = np.cross(tv, e1)
-        b2 = (qv @ d) * inv
-        t = np.einsum("ij,ij->i", e2, qv) * inv
-    ok = (b1 >= 0) & (b2 >= 0) & (b1 + b2 <= 1) & (t > 0)
+    t, ok = ray_triangles(p[tris], o, d)
     if not ok.any():
         return np.inf, None, 0
     k = int(np.argmin(np.where(ok, t, np.inf)))

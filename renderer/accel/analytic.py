@@ -16,10 +16,12 @@ from __future__ import annotations
 
 import warp as wp
 
+from renderer.scene.analytic import SHAPE_CODES
+
 BIG = 3.4e38
-SHAPE_SPHERE = wp.constant(1)
-SHAPE_FRUSTUM = wp.constant(2)
-SHAPE_CAPSULE = wp.constant(3)
+SHAPE_SPHERE = wp.constant(SHAPE_CODES["sphere"])
+SHAPE_FRUSTUM = wp.constant(SHAPE_CODES["frustum"])
+SHAPE_CAPSULE = wp.constant(SHAPE_CODES["capsule"])
 PART_SIDE = wp.constant(0)  # a sphere, a frustum's or a capsule's side
 PART_BOTTOM = wp.constant(1)  # the cap (flat or round) at z = -hh
 PART_TOP = wp.constant(2)  # the cap at z = +hh
