@@ -17,7 +17,7 @@ from renderer.accel.intersect import Geometry
 from renderer.accel.wide import WideBvh, collapse
 from renderer.accel.triangle_kernels import leaf_triangles, triangle_boxes
 from renderer.motion.kernels import upload_keys
-from renderer.motion.transform import matrix_at
+from renderer.motion.transform import matrices_at, matrix_at
 from renderer.scene.analytic import analytic_shapes, shape_bounds, shape_table
 from renderer.scene.mesh_facts import is_closed
 from renderer.scene.model import Instance, Mesh, MotionTransform, Scene
@@ -74,6 +74,14 @@ def _world_box(xf: MotionTransform, lo: np.ndarray, hi: np.ndarray, s: np.ndarra
         w = corners[i] @ m[:3, :3].T + m[:3, 3]
         out_lo[i], out_hi[i] = w.min(0), w.max(0)
     return out_lo, out_hi
+
+
+def _world_boxes(m: np.ndarray, box: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World boxes (N, 3), (N, 3) of object boxes ``box`` (N, 2, 3) under column-vector matrices m (N, 4, 4);
+    the same arithmetic as ``_world_box`` at one time."""
+    corners = _box_corners(box[:, 0], box[:, 1])  # (N, 8, 3)
+    w = np.matmul(corners, np.swapaxes(m[:, :3, :3], 1, 2)) + m[:, None, :3, 3]
+    return w.min(1), w.max(1)
 
 
 def instance_key_bounds(inst: Instance, mesh_bvh: Bvh, mesh_times: np.ndarray, nkeys: int):
@@ -268,7 +276,16 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     ninst = len(scene.instances)
     lo = np.empty((nk, ninst, 3), np.float32)
     hi = np.empty((nk, ninst, 3), np.float32)
-    for i, inst in enumerate(scene.instances):
+    o2w = matrices_at([inst.transform for inst in scene.instances], 0.0) if ninst else np.eye(4)[None]
+    still = np.array([nk == 1 or (inst.transform.num_keys == 1 and len(scene.meshes[inst.mesh].point_times) == 1)
+                      for inst in scene.instances], bool)
+    if still.any():  # instance_key_bounds of the still instances in one batch: their box at time 0 at every key
+        idx = np.nonzero(still)[0]
+        root = np.array([[b.node_lower[0, 0], b.node_upper[0, 0]] for b in blas], np.float64)  # (M, 2, 3)
+        wlo, whi = _world_boxes(o2w[idx], root[[scene.instances[i].mesh for i in idx]])
+        lo[:, idx], hi[:, idx] = wlo[None], whi[None]
+    for i in np.nonzero(~still)[0]:
+        inst = scene.instances[i]
         mesh = scene.meshes[inst.mesh]
         klo, khi = instance_key_bounds(inst, blas[inst.mesh], mesh.point_times.astype(np.float64), nk)
         lo[:, i], hi[:, i] = klo, khi
@@ -289,9 +306,8 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     g.inst_mesh = _i32([inst.mesh for inst in scene.instances] or [0], device)
     g.inst_xf_off = _i32(offs if ninst else [0], device)
     g.inst_xf_count = _i32(counts if ninst else [1], device)
-    o2w = [matrix_at(inst.transform, 0.0) for inst in scene.instances] or [np.eye(4)]
-    g.inst_o2w = wp.array(np.array(o2w, np.float32), dtype=wp.mat44, device=device)
-    g.inst_w2o = wp.array(np.array([np.linalg.inv(m) for m in o2w], np.float32), dtype=wp.mat44, device=device)
+    g.inst_o2w = wp.array(o2w.astype(np.float32), dtype=wp.mat44, device=device)
+    g.inst_w2o = wp.array(np.linalg.inv(o2w).astype(np.float32), dtype=wp.mat44, device=device)
     g.inst_translate_only = _i32([int(_translate_only(inst.transform)) for inst in scene.instances] or [0], device)
     g.inst_vis_from = _f32([inst.visible_from for inst in scene.instances] or [0.0], device)
     g.inst_vis_to = _f32([inst.visible_to for inst in scene.instances] or [1.0], device)

@@ -22,7 +22,7 @@ from renderer.lights.linking import Links, upload_links
 from renderer.lights.select import SelectEstimate, Selection, upload_selection
 from renderer.lights.shaping import mean_shaping
 from renderer.motion.kernels import MotionKeys, upload_keys
-from renderer.motion.transform import matrix_at
+from renderer.motion.transform import matrices_at, matrix_at
 from renderer.scene.model import (
     LIGHT_CYLINDER,
     LIGHT_DISK,
@@ -89,16 +89,18 @@ def _luminance(rgb) -> float:
 
 def scene_sphere(scene: Scene) -> tuple[np.ndarray, float]:
     """Centre and radius of a sphere around the scene's geometry at the shutter start (origin, 1 if empty)."""
-    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
-    for inst in scene.instances:
-        pts = scene.meshes[inst.mesh].points[0]
-        if len(pts) == 0:
-            continue
-        m = matrix_at(inst.transform, 0.0)
-        a, b = pts.min(0).astype(np.float64), pts.max(0).astype(np.float64)
-        corners = np.array([[x, y, z] for x in (a[0], b[0]) for y in (a[1], b[1]) for z in (a[2], b[2])])
-        w = corners @ m[:3, :3].T + m[:3, 3]
-        lo, hi = np.minimum(lo, w.min(0)), np.maximum(hi, w.max(0))
+    # each mesh's box once, then every instance's box corners placed in one batch
+    boxes = np.array([np.stack([m.points[0].min(0), m.points[0].max(0)]).astype(np.float64)
+                      if len(m.points[0]) else np.full((2, 3), np.nan) for m in scene.meshes]).reshape(-1, 2, 3)
+    insts = [i for i in scene.instances if len(scene.meshes[i.mesh].points[0])]
+    if not insts:
+        return np.zeros(3), 1.0
+    m = matrices_at([i.transform for i in insts], 0.0)
+    b = boxes[[i.mesh for i in insts]]  # (N, 2, 3)
+    sel = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)])  # (8, 3) low/high per axis
+    corners = b[:, sel, [0, 1, 2]]  # (N, 8, 3)
+    w = np.matmul(corners, np.swapaxes(m[:, :3, :3], 1, 2)) + m[:, None, :3, 3]
+    lo, hi = w.reshape(-1, 3).min(0), w.reshape(-1, 3).max(0)
     if not np.isfinite(lo).all():
         return np.zeros(3), 1.0
     return (lo + hi) / 2, float(max(0.5 * np.linalg.norm(hi - lo), 1e-6))
@@ -306,7 +308,7 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
     lt.keys = keys
     lt.xf_off = i32(offs, [0])
     lt.xf_count = i32(kcounts, [1])
-    still = [matrix_at(xf, 0.0) for xf in transforms] or [np.eye(4)]
+    still = matrices_at(transforms, 0.0) if transforms else np.eye(4)[None]
     lt.xf_still = wp.array(np.array(still, np.float32), dtype=wp.mat44, device=device)
     lt.rect_still = wp.array(rect_frames(still, size or [[0, 0, 0, 0]]).reshape(-1, 3), dtype=wp.vec3, device=device)
     p = np.array(powers or [1.0], np.float64)

@@ -129,6 +129,39 @@ def make_transform(times, matrices):
     )
 
 
+def quat_to_matrices(q: np.ndarray) -> np.ndarray:
+    """``quat_to_matrix`` of (N, 4) quaternions: (N, 3, 3), the same arithmetic elementwise."""
+    x, y, z, w = np.asarray(q, dtype=np.float64).T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+    ], -2)
+
+
+def matrices_at(xfs, s: float) -> np.ndarray:
+    """``matrix_at(xf, s)`` of many MotionTransforms: (N, 4, 4). The still ones (one key) in one vectorised
+    pass, bit-identical to ``matrix_at``; the moving ones through it. Scenes of 10^4 instances spent seconds of
+    their preparation calling ``matrix_at`` one instance at a time."""
+    n = len(xfs)
+    out = np.zeros((n, 4, 4))
+    out[:, 3, 3] = 1.0
+    still = np.array([len(xf.times) == 1 for xf in xfs], bool)
+    idx = np.nonzero(still)[0]
+    if len(idx):
+        # matrix_at with one key: slerp(q, q, 0) normalises q; the blends of translation and scale are exact
+        t = np.stack([xfs[i].translation[0] for i in idx]).astype(np.float64)
+        q = np.stack([xfs[i].rotation[0] for i in idx]).astype(np.float64)
+        sc = np.stack([xfs[i].scale[0] for i in idx]).astype(np.float64)
+        q = q / np.linalg.norm(q, axis=1, keepdims=True)
+        r = quat_to_matrices(q)
+        out[idx, :3, :3] = np.matmul(r, sc)  # as `@` per matrix (einsum sums in another order)
+        out[idx, :3, 3] = t
+    for i in np.nonzero(~still)[0]:
+        out[i] = matrix_at(xfs[i], s)
+    return out
+
+
 def matrix_at(xf, s: float) -> np.ndarray:
     """The 4x4 column-vector matrix of a MotionTransform at normalised time s (clamped to its keys)."""
     times = np.asarray(xf.times, np.float64)

@@ -163,6 +163,9 @@ class _Importer:
         self._mesh_bounds: list[np.ndarray] = []
         self._lo = np.full(3, np.inf)
         self._hi = np.full(3, -np.inf)
+        # instances waiting for their transforms: (K, key times' bytes) -> (normalised times (K,), chunks of
+        # (instance indices, row matrices (n, K, 4, 4), mesh indices)); see _add_instances
+        self._pending: dict[tuple, tuple[np.ndarray, list]] = {}
         self._vis_chain: dict[str, tuple[bool, tuple[float, ...]]] = {}
         self._proxies: list = []
         self._saw_render = False
@@ -199,6 +202,7 @@ class _Importer:
         if not self._saw_render:
             for prim, interval in self._proxies:
                 self._guarded(self._gprim, prim, interval)
+        self._place_instances()
         if not self.instances:
             warn("no renderable geometry in stage")
 
@@ -511,27 +515,43 @@ class _Importer:
         return usd_curves.view_in_object_space(*self._density_camera, self.xf.world(prim, [self.frame])[0])
 
     def _add_instances(self, meshes, names, times, rows, interval) -> None:
-        """Instances of meshes[i] with row-vector world matrices rows[i] (N, K, 4, 4) at absolute times (K,)."""
+        """Instances of meshes[i] with row-vector world matrices rows[i] (N, K, 4, 4) at absolute times (K,).
+
+        Their transforms are decomposed later, all at once (``_place_instances``): one vectorised call per set
+        of key times instead of one per gprim (a stage of 10^4 spheres spent 5 of its 10 s of import here)."""
         rows = np.asarray(rows, np.float64)
         finite = np.all(np.isfinite(rows), axis=(1, 2, 3))
         if not np.all(finite):
             self.warn("instances with non-finite transforms skipped", names[int(np.argmin(finite))])
-        xfs = motion_transforms(self.shutter.normalise(times), rows)
         s0, s1 = interval
-        for mesh, name, xf, ok in zip(meshes, names, xfs, finite):
+        first = len(self.instances)
+        kept = []
+        for mesh, name, ok in zip(meshes, names, finite):
             if ok:
-                self.instances.append(sc.Instance(mesh=int(mesh), transform=xf, name=name,
+                kept.append(int(mesh))
+                self.instances.append(sc.Instance(mesh=int(mesh), transform=None, name=name,
                                                   visible_from=s0, visible_to=s1))
-        # world bounds, for the automatic camera
-        meshes = np.asarray(meshes)[finite]
-        rows = rows[finite]
-        if len(meshes):
-            b = np.stack([self._mesh_bounds[m] for m in meshes])  # (N, 2, 3)
+        if kept:
+            norm = np.asarray(self.shutter.normalise(times), np.float64)
+            group = self._pending.setdefault((len(norm), norm.tobytes()), (norm, []))
+            group[1].append((np.arange(first, len(self.instances)), rows[finite], np.asarray(kept, np.int64)))
+
+    def _place_instances(self) -> None:
+        """The transforms of the instances added since the last call (``MotionTransform``s, decomposed per set of
+        key times in one batch), and their world bounds for the automatic camera."""
+        for norm, chunks in self._pending.values():
+            index = np.concatenate([c[0] for c in chunks])
+            rows = np.concatenate([c[1] for c in chunks])
+            meshes = np.concatenate([c[2] for c in chunks])
+            for i, xf in zip(index.tolist(), motion_transforms(norm, rows)):
+                self.instances[i].transform = xf
+            b = np.stack(self._mesh_bounds)[meshes]  # (N, 2, 3)
             sel = np.array(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij")).reshape(3, 8).T  # (8, 3)
             corners = b[:, sel, [0, 1, 2]]  # (N, 8, 3)
             world = np.einsum("nci,nkij->nkcj", corners, rows[:, :, :3, :3]) + rows[:, :, None, 3, :3]
             self._lo = np.minimum(self._lo, world.reshape(-1, 3).min(axis=0))
             self._hi = np.maximum(self._hi, world.reshape(-1, 3).max(axis=0))
+        self._pending.clear()
 
     # -- point instancers ------------------------------------------------------------------------------------------
     def _point_instancer(self, prim, interval) -> None:
