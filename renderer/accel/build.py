@@ -158,6 +158,10 @@ def build_bvh(
     nkeys, n, _ = lower.shape
     if n == 0:
         return _empty_bvh(nkeys)
+    if n == 1:  # one leaf, what the kernels give, without their launches (a scene's many one-shape meshes)
+        return Bvh(node_lower=lower.transpose(1, 0, 2).copy(), node_upper=upper.transpose(1, 0, 2).copy(),
+                   node_a=np.array([-1], np.int32), node_b=np.array([1], np.int32),
+                   prim_order=np.zeros(1, np.int32))
 
     with wp.ScopedDevice(device):
         on_cpu = wp.get_device().is_cpu
