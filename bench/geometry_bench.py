@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Geometry benchmark: memory and time for one million curve segments and one million points.
 
-``python bench/geometry_bench.py [--spp N] [--width W] [--which curves,points,spheres]``
+``python bench/geometry_bench.py [--spp N] [--width W] [--which curves,points,spheres,prims]``
 
 Each case runs in a child process (so peak memory is its own) that authors a stage with usd-core, then loads it
 (tessellation), prepares it (BVH build and upload) and renders it, printing the triangle count, the seconds of
@@ -9,7 +9,9 @@ each phase and the process's peak resident memory. Cases:
 
 * curves: 100 000 hairs of 10 linear segments (1 M segments), 0.002 wide: sub-pixel, camera-facing ribbons;
 * points: 1 M points 0.004 wide seen from 10 units away: tiny, camera-facing hexagons;
-* spheres: 1 M points 0.03 wide: a few pixels each, 20-triangle icospheres.
+* spheres: 1 M points 0.03 wide: a few pixels each, 20-triangle icospheres;
+* prims: 10 000 gprims (spheres, cubes, cylinders, cones of 500 sizes), each under a transform of its own in
+  100 groups, the set-dressing case: what costs here is the work per prim, not per triangle.
 """
 from __future__ import annotations
 
@@ -52,6 +54,20 @@ def author(kind: str, path: pathlib.Path) -> int:
         curves.CreateWidthsAttr(Vt.FloatArray([0.002]))
         curves.SetWidthsInterpolation(UsdGeom.Tokens.constant)
         count = n * segs
+    elif kind == "prims":
+        count = 10_000
+        kinds = (UsdGeom.Sphere, UsdGeom.Cube, UsdGeom.Cylinder, UsdGeom.Cone)
+        for g in range(100):
+            UsdGeom.Xform.Define(stage, f"/Set/G{g}").AddTranslateOp().Set(Gf.Vec3d(*rng.uniform(-2, 2, 3)))
+            for i in range(count // 100):
+                prim = kinds[i % 4].Define(stage, f"/Set/G{g}/P{i}")
+                size = 0.01 * (1 + int(rng.integers(0, 500)) / 100)  # 500 distinct sizes
+                if i % 4 == 1:
+                    prim.CreateSizeAttr(2 * size)
+                else:
+                    prim.CreateRadiusAttr(size)
+                prim.AddTranslateOp().Set(Gf.Vec3d(*rng.uniform(-1, 1, 3)))
+                prim.AddRotateXYZOp().Set(Gf.Vec3f(*rng.uniform(-180, 180, 3)))
     else:
         n = 1_000_000
         pts = np.stack([rng.uniform(-3, 3, n), rng.uniform(-2, 2, n), rng.uniform(-1, 1, n)], 1)
@@ -87,7 +103,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--spp", type=int, default=4)
     ap.add_argument("--width", type=int, default=320)
-    ap.add_argument("--which", default="curves,points,spheres")
+    ap.add_argument("--which", default="curves,points,spheres,prims")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.child:
@@ -100,8 +116,8 @@ def main() -> None:
             print(f"{kind}: failed: {(p.stderr.strip().splitlines() or ['?'])[-1]}")
             continue
         r = json.loads(p.stdout.strip().splitlines()[-1])
-        unit = "segments" if kind == "curves" else "points"
-        print(f"{kind:8s} {r['elements'] / 1e6:.1f} M {unit}: {r['triangles'] / 1e6:.1f} M triangles, "
+        unit = {"curves": "M segments", "prims": "M gprims"}.get(kind, "M points")
+        print(f"{kind:8s} {r['elements'] / 1e6:.2f} {unit}: {r['triangles'] / 1e6:.1f} M triangles, "
               f"load (tessellate) {r['load_s']:.1f} s, prepare (BVH) {r['prepare_s']:.1f} s, render "
               f"{a.width}x{a.width * 3 // 4} at {a.spp} spp {r['render_s']:.1f} s, peak memory {r['peak_gib']:.2f} GiB",
               flush=True)
