@@ -54,6 +54,7 @@ def flatten_still_instances(scene: Scene) -> Scene:
     has_normals = any(scene.meshes[scene.instances[i].mesh].normals is not None for i in merge)
     has_uvs = any(scene.meshes[scene.instances[i].mesh].uvs is not None for i in merge)
     nvert = ntri = 0
+    closed: dict[int, bool] = {}  # mesh index -> is_closed
     for idx in merge:
         inst = scene.instances[idx]
         mesh = scene.meshes[inst.mesh]
@@ -63,8 +64,9 @@ def flatten_still_instances(scene: Scene) -> Scene:
         tris.append(mesh.triangles + nvert)
         mats.append(mesh.material_ids)
         t = len(mesh.triangles)
-        solid.append(mesh.solid if mesh.solid is not None else
-                     np.full(t, is_closed(mesh.triangles, mesh.points[0])))
+        if mesh.solid is None and inst.mesh not in closed:  # once per mesh, not per copy
+            closed[inst.mesh] = is_closed(mesh.triangles, mesh.points[0])
+        solid.append(mesh.solid if mesh.solid is not None else np.full(t, closed[inst.mesh]))
         if has_normals:
             if mesh.normals is not None:
                 nm = np.linalg.inv(m[:3, :3]).T  # normals transform by the inverse transpose
