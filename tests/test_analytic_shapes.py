@@ -23,7 +23,7 @@ from renderer.scene.model import (
     MotionTransform,
     Scene,
 )
-from renderer.usd.geometry import _AXIS_PERM, _analytic_shape, _sphere, _tessellate
+from renderer.usd.geometry import _AXIS_PERM, _analytic_shape, _sphere, _tessellate, tessellate_primitive
 from renderer.usd.importer import load_scene
 from test_accel import _probe, random_mesh, ray_triangles
 
@@ -204,6 +204,42 @@ def test_the_importer_marks_implicit_prims_whose_size_holds_over_the_shutter(tmp
                      "/World/Taper": AnalyticShape("frustum", 1.0, pytest.approx(0.2), 2.0, 2), "/World/Tapered": None}
     scene = load_scene(tmp_path / "s.usda", frame=24, motion_blur=False)
     assert {m.name: m.shape for m in scene.meshes}["/World/Grows"].radius_bottom == pytest.approx(0.75)
+
+
+def test_stand_ins_get_their_triangles_where_the_shape_cannot_be_used(tmp_path):
+    """A still implicit prim arrives as its shape and a one-triangle stand-in. An emissive one (a light samples its
+    triangles) and the operands of a CSG group get exactly the tessellation the importer made before; a stand-in
+    that stops being usable after import (a light made of it through the library) gets it when prepared."""
+    from renderer.render import RenderOptions, prepare
+
+    stage = stages.new_stage(tmp_path / "s.usda")
+    stages.camera(stage, translate=(0, 0, 8))
+    stages.sphere(stage, "/World/Plain", 0.5, center=(-2, 0, 0))
+    stages.sphere(stage, "/World/Glow", 0.6, center=(2, 0, 0), mat=stages.material(stage, "E", emissive=(1, 1, 1)))
+    group = UsdGeom.Xform.Define(stage, "/World/Group").GetPrim()
+    group.CreateAttribute("drt:csg:operation", Sdf.ValueTypeNames.Token, variability=Sdf.VariabilityUniform).Set(
+        "union")
+    stages.sphere(stage, "/World/Group/A", 0.7, center=(0, 2, 0))
+    stages.sphere(stage, "/World/Group/B", 0.8, center=(0.5, 2, 0))
+    stage.Save()
+    scene = load_scene(tmp_path / "s.usda")
+    mesh = {m.name: m for m in scene.meshes}
+    assert len(mesh["/World/Plain"].triangles) == 1 and mesh["/World/Plain"].tessellate is not None
+    assert scene.csg_operations == ["union"]
+    for name, r in (("/World/Glow", 0.6), ("/World/Group/A", 0.7), ("/World/Group/B", 0.8)):
+        m = mesh[name]
+        p, tris, nrm = tessellate_primitive("Sphere", (r,), tuple(_AXIS_PERM["Z"]))
+        assert m.tessellate is None and m.solid is None, name
+        assert np.array_equal(m.points, p) and np.array_equal(m.triangles, tris) and np.array_equal(m.normals, nrm)
+        assert len(m.material_ids) == len(tris) and len(set(m.material_ids.tolist())) == 1
+    assert [s is not None for s in analytic_shapes(scene)] == [m.name == "/World/Plain" for m in scene.meshes]
+    assert not any("closed" in w for w in scene.warnings), scene.warnings
+    plain = next(i for i, inst in enumerate(scene.instances) if scene.meshes[inst.mesh].name == "/World/Plain")
+    scene.lights.append(Light(LIGHT_MESH, "late", (1.0, 1.0, 1.0), scene.instances[plain].transform, instance=plain))
+    prep = prepare(scene, RenderOptions(width=16, height=16, spp=1))
+    n = len(tessellate_primitive("Sphere", (0.5,), tuple(_AXIS_PERM["Z"]))[1])
+    assert mesh["/World/Plain"].tessellate is None and len(mesh["/World/Plain"].triangles) == n
+    assert prep.stats.triangles == 4 * n
 
 
 def test_a_sphere_covers_exactly_its_disc_in_an_orthographic_view(tmp_path):

@@ -173,6 +173,16 @@ def test_primitives_are_tessellated_to_size(tmp_path):
     cap.CreateHeightAttr(2.0)
     cap.CreateAxisAttr(UsdGeom.Tokens.y)
     scene = save_and_load(stage, path)
+    # still implicit prims arrive as their exact shape with a one-triangle stand-in spanning the shape's box;
+    # their tessellation is made on demand (scene.analytic.realize_tessellations)
+    for name in ("Sphere", "Cyl", "Cone", "Capsule"):
+        m = by_name(scene.meshes, name)
+        assert m.shape is not None and m.tessellate is not None and len(m.triangles) == 1 and m.solid.all()
+        box = m.points[0].min(0), m.points[0].max(0)
+        m.realize()
+        assert m.tessellate is None and m.solid is None and len(m.material_ids) == len(m.triangles) > 100
+        np.testing.assert_allclose(m.points[0].min(0), box[0], atol=1e-6)
+        np.testing.assert_allclose(m.points[0].max(0), box[1], atol=1e-6)
 
     s = by_name(scene.meshes, "Sphere")
     r = np.linalg.norm(s.points[0], axis=1)

@@ -18,7 +18,7 @@ from renderer.accel.wide import WideBvh, collapse
 from renderer.accel.triangle_kernels import leaf_triangles, triangle_boxes
 from renderer.motion.kernels import upload_keys
 from renderer.motion.transform import matrices_at, matrix_at
-from renderer.scene.analytic import analytic_shapes, shape_bounds, shape_table
+from renderer.scene.analytic import analytic_shapes, realize_tessellations, shape_bounds, shape_table
 from renderer.scene.mesh_facts import is_closed
 from renderer.scene.model import Instance, Mesh, MotionTransform, Scene
 
@@ -212,7 +212,7 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     t_start = time.perf_counter()
     blas: list[Bvh] = []
     wide: list[WideBvh] = []
-    shapes = analytic_shapes(scene)
+    shapes = analytic_shapes(realize_tessellations(scene))  # a stand-in that cannot be its shape gets triangles
     for mesh, shape in zip(scene.meshes, shapes):
         if shape is not None:  # one leaf holding the shape's box (walks test the shape, never this leaf's triangle)
             lo, hi = (np.asarray(b * SHAPE_BOX_PAD, np.float32)[None, None] for b in shape_bounds(shape))

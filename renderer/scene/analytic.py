@@ -10,6 +10,9 @@ those triangles at a hit:
 * it carries no per-corner data a hit would interpolate: texture coordinates or a varying displayColor;
 * it is not an emitter (mesh lights sample its triangles, whose pdf must match what rays hit);
 * it is not a CSG operand (the CSG walks classify crossings triangle by triangle).
+
+A still implicit prim is imported as its shape and a one-triangle stand-in; its tessellation is made only for the
+meshes the rules above keep as triangles (``realize_tessellations``).
 """
 from __future__ import annotations
 
@@ -32,6 +35,15 @@ def analytic_shapes(scene: Scene) -> list[AnalyticShape | None]:
         if inst.csg_group >= 0:
             shapes[inst.mesh] = None
     return shapes
+
+
+def realize_tessellations(scene: Scene) -> Scene:
+    """Give every mesh the renderer will not intersect as its shape its real triangles (``Mesh.realize``): a
+    stand-in's shape can stop being usable after import (a light or a CSG group made of it). Idempotent."""
+    for mesh, shape in zip(scene.meshes, analytic_shapes(scene)):
+        if shape is None and mesh.tessellate is not None:
+            mesh.realize()
+    return scene
 
 
 def shape_bounds(shape: AnalyticShape) -> tuple[np.ndarray, np.ndarray]:

@@ -18,6 +18,7 @@ the half of the shutter in which it moves.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -73,10 +74,25 @@ class Mesh:
     # shutter: the renderer may intersect that shape itself instead of its triangles (``scene.analytic``). None for
     # every other mesh.
     shape: AnalyticShape | None = None
+    # The full tessellation, not made yet: an exact shape's mesh holds a one-triangle stand-in (its box's corners
+    # as points, solid) until something reads its triangles (``realize``; ``scene.analytic.realize_tessellations``
+    # realizes every mesh the renderer will not intersect as its shape). A callable returning (points (1, V, 3)
+    # float32, triangles (T, 3) int32, normals (T, 3, 3) float32); None once the triangles are the real ones.
+    tessellate: Callable[[], tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
 
     @property
     def deforming(self) -> bool:
         return len(self.point_times) > 1
+
+    def realize(self) -> Mesh:
+        """Make the deferred tessellation (if any) this mesh's triangles; its one material covers them all."""
+        if self.tessellate is not None:
+            points, triangles, normals = self.tessellate()
+            self.material_ids = np.full(len(triangles), self.material_ids[0], self.material_ids.dtype)
+            self.points, self.triangles, self.normals = points, triangles, normals
+            self.solid = None  # derived from the triangles again
+            self.tessellate = None
+        return self
 
 
 @dataclass

@@ -82,7 +82,7 @@ class CsgGroups:
             inst = instances[i]
             m = inst.mesh
             if m not in closed:
-                mesh = meshes[m]
+                mesh = meshes[m].realize()  # CSG walks classify triangles: an exact shape's stand-in won't do
                 closed[m] = bool(is_closed(mesh.triangles, mesh.points[0]))
             if not closed[m]:
                 self.warn("CSG operands that are not closed meshes (inside/outside is ill-defined)", path)

@@ -27,6 +27,7 @@ from pxr import Gf, Tf, Usd, UsdGeom, UsdLux, UsdRender, UsdShade
 
 from renderer.errors import SceneError, SettingsError
 from renderer.scene import model as sc
+from renderer.scene.analytic import realize_tessellations
 from renderer.subdiv import MAX_LEVEL
 from renderer.usd import camera as usd_camera
 from renderer.usd import csg as usd_csg
@@ -230,7 +231,7 @@ class _Importer:
             self.lights.append(usd_lights.default_light(cam_row, self._up_axis()))
             warn(usd_lights.default_light_warning())
 
-        return sc.Scene(
+        return realize_tessellations(sc.Scene(
             meshes=self.meshes,
             instances=self.instances,
             materials=self.materials.materials or [sc.Material(name="default grey")],
@@ -246,7 +247,7 @@ class _Importer:
             csg_operations=self.csg.finish(self.instances, self.meshes),
             warnings=warn.lines(),
             source=self.source,
-        )
+        ))
 
     def _subdivision_detail(self, cam_prim, settings: sc.RenderSettingsInfo) -> SubdivisionDetail:
         """How finely subdivision surfaces are refined: the fixed level asked for, else from the camera."""
@@ -481,6 +482,7 @@ class _Importer:
                 double_sided=geom.double_sided,
                 solid=getattr(geom, "solid", None),
                 shape=getattr(geom, "shape", None),
+                tessellate=getattr(geom, "tessellate", None),
             ))
             flat = geom.points.reshape(-1, 3)
             self._mesh_bounds.append(np.stack([flat.min(axis=0), flat.max(axis=0)]).astype(np.float64))

@@ -60,7 +60,7 @@ def apply_mesh_light(prim, instances: list[int], scene_meshes: list[sc.Mesh], sc
     lights = []
     for i in instances:
         inst = scene_instances[i]
-        mesh = scene_meshes[inst.mesh]
+        mesh = scene_meshes[inst.mesh].realize()  # a light samples its triangles: an exact shape's stand-in won't do
         bases = [materials[int(k)] if int(k) < len(materials) else sc.Material(name="default grey")
                  for k in np.unique(mesh.material_ids)]
         e = np.asarray(emission, np.float64)
