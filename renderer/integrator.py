@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from renderer.accel.analytic import shape_normal
+from renderer.accel.analytic import SHAPE_POINTS, shape_normal
 from renderer.accel.csg import csg_closest
 from renderer.accel.intersect import (
     BIG,
@@ -34,6 +34,7 @@ from renderer.accel.intersect import (
     instance_world_to_object,
     intersect_closest,
     mesh_keys_at,
+    mesh_vertex,
     triangle_points,
 )
 from renderer.accel.occlusion import hit_uv, transmittance
@@ -152,7 +153,11 @@ def surface_at(geo: Geometry, inst: int, tri: int, b1: float, b2: float, ro: wp.
     p1 = wp.vec3(0.0)
     p2 = wp.vec3(0.0)
     ng = wp.vec3(0.0)
-    if analytic:  # an exact shape: the normal of the piece crossed (b1) at the object-space hit point
+    if kind == SHAPE_POINTS:  # a sphere of a point cloud: outward from its centre at the hit's time
+        pk0, pk1, pu = mesh_keys_at(geo, m, s)
+        centre = mesh_vertex(geo, m, pk0, pk1, pu, geo.tri_vidx[tri][0])
+        ng = wp.normalize(wp.transform_vector(w2o_t, wp.transform_point(w2o, ro + rd * t) - centre))
+    elif analytic:  # an exact shape: the normal of the piece crossed (b1) at the object-space hit point
         po = wp.transform_point(w2o, ro + rd * t)
         no = shape_normal(kind, geo.mesh_shape_axis[m], geo.mesh_shape_param[m], po, int(b1))
         ng = wp.normalize(wp.transform_vector(w2o_t, no))

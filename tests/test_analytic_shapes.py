@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import warp as wp
-from pxr import Sdf, Usd, UsdGeom
+from pxr import Sdf, Usd, UsdGeom, UsdShade
 
 import stages
 from renderer.accel.analytic import BIG, shape_hits, shape_normal, sphere_roots
@@ -136,6 +136,64 @@ def test_walks_hit_a_scaled_sphere_and_a_moving_one_exactly_and_shadows_cross_ea
     assert sphere_hits > n // 8
 
 
+def _cloud_mesh(centres, radii, name="cloud"):
+    """A sphere cloud as the importer makes it (``curves._sphere_cloud``): centres (P, N, 3), radii (N,)."""
+    n = centres.shape[1]
+    return Mesh(name, np.linspace(0, 1, len(centres)).astype(np.float32), centres.astype(np.float32),
+                np.repeat(np.arange(n, dtype=np.int32)[:, None], 3, 1), np.zeros(n, np.int32),
+                solid=np.ones(n, bool), shape=AnalyticShape("points", float(radii.max())),
+                point_radii=radii.astype(np.float32))
+
+
+def _spheres_hits(o, d, centres, radii):
+    """Brute force, float64: (nearest t > 0 or inf, its sphere, crossings in (0, inf)) of a ray and spheres."""
+    oc = o[None] - centres
+    b = oc @ d
+    disc = b * b - (np.sum(oc * oc, 1) - radii ** 2)
+    root = np.sqrt(np.maximum(disc, 0.0))
+    t0, t1 = np.where(disc >= 0, -b - root, np.inf), np.where(disc >= 0, -b + root, np.inf)
+    crossings = int(np.sum(np.isfinite(t0) & (t0 > 0)) + np.sum(np.isfinite(t1) & (t1 > 0)))
+    t = np.where(t0 > 0, t0, np.where(t1 > 0, t1, np.inf))
+    k = int(np.argmin(t))
+    return t[k], k, crossings
+
+
+@pytest.mark.parametrize("moving", [False, True])
+def test_point_clouds_are_exact_spheres_to_the_walks(moving):
+    """A cloud of 400 spheres of different radii, scaled and placed by its instance, its points still or moving
+    (two point keys): closest hits at the exact distance of the nearest sphere at the ray's time, reporting that
+    sphere's point as the triangle; shadow rays multiply (1 - opacity) once per crossing."""
+    rng = np.random.default_rng(5)
+    n = 400
+    c0 = rng.uniform(-1.5, 1.5, (n, 3))
+    keys = np.stack([c0, c0 + rng.normal(0, 0.3, (n, 3))]) if moving else c0[None]
+    radii = rng.uniform(0.03, 0.12, n)
+    xf = np.diag([1.2, 1.2, 1.2, 1.0])
+    xf[:3, 3] = (0.2, -0.1, 0.0)
+    scene = _scene([_cloud_mesh(keys, radii)], [Instance(0, MotionTransform.static(xf))], opacity=0.5)
+    assert analytic_shapes(scene)[0].kind == "points"
+    geo, stats = upload_geometry(scene)
+    assert geo.mesh_shape.numpy()[0] == SHAPE_CODES["points"] and stats.triangles == n
+    m = 2000
+    ro = np.tile([0.0, 0.0, 6.0], (m, 1)) + rng.normal(0, 0.2, (m, 3))
+    rd = rng.uniform([-0.3, -0.3, -1], [0.3, 0.3, -1], (m, 3))
+    rd /= np.linalg.norm(rd, axis=1, keepdims=True)
+    times = rng.uniform(0, 1, m).astype(np.float32)
+    t, inst, tri, tr = _probe(geo, scene, ro, rd, times)
+    hits = 0
+    for i in range(m):
+        centres = (keys[0] + (keys[-1] - keys[0]) * float(times[i])) * 1.2 + xf[:3, 3]
+        tb, k, crossings = _spheres_hits(ro[i], rd[i], centres, radii * 1.2)
+        if np.isfinite(tb):
+            hits += 1
+            assert inst[i] == 0 and tri[i] == k, i
+            np.testing.assert_allclose(t[i], tb, rtol=1e-5, atol=1e-5)
+        else:
+            assert inst[i] == -1, i
+        np.testing.assert_allclose(tr[i], 0.5 ** crossings, rtol=1e-5, atol=1e-30)
+    assert hits > m // 4
+
+
 def test_a_shadow_ray_leaving_a_sphere_crosses_it_once():
     scene = _scene([_sphere_mesh(1.0)], [Instance(0, MotionTransform.static(np.eye(4)))], opacity=0.5)
     geo, _ = upload_geometry(scene)
@@ -228,7 +286,7 @@ def test_stand_ins_get_their_triangles_where_the_shape_cannot_be_used(tmp_path):
     assert scene.csg_operations == ["union"]
     for name, r in (("/World/Glow", 0.6), ("/World/Group/A", 0.7), ("/World/Group/B", 0.8)):
         m = mesh[name]
-        p, tris, nrm = tessellate_primitive("Sphere", (r,), tuple(_AXIS_PERM["Z"]))
+        p, tris, nrm, _, _ = tessellate_primitive("Sphere", (r,), tuple(_AXIS_PERM["Z"]))
         assert m.tessellate is None and m.solid is None, name
         assert np.array_equal(m.points, p) and np.array_equal(m.triangles, tris) and np.array_equal(m.normals, nrm)
         assert len(m.material_ids) == len(tris) and len(set(m.material_ids.tolist())) == 1
@@ -240,6 +298,36 @@ def test_stand_ins_get_their_triangles_where_the_shape_cannot_be_used(tmp_path):
     n = len(tessellate_primitive("Sphere", (0.5,), tuple(_AXIS_PERM["Z"]))[1])
     assert mesh["/World/Plain"].tessellate is None and len(mesh["/World/Plain"].triangles) == n
     assert prep.stats.triangles == 4 * n
+
+
+def test_points_import_as_sphere_clouds(tmp_path):
+    """Points without normals are a sphere cloud: radii from the widths (diameters), one colour per point where
+    displayColor varies per point; with normals they stay discs facing them; an emissive cloud gets its triangles
+    (a light samples them), each keeping its point's colour."""
+    stage = stages.new_stage(tmp_path / "p.usda")
+    stages.camera(stage, translate=(0, 0, 8))
+    for name in ("Beads", "Discs", "Glow"):
+        p = UsdGeom.Points.Define(stage, f"/World/{name}")
+        p.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (0, 1, 0)])
+        p.CreateWidthsAttr([0.2, 0.4, 0.6])
+        p.SetWidthsInterpolation(UsdGeom.Tokens.vertex)
+        p.CreateDisplayColorPrimvar(UsdGeom.Tokens.vertex).Set([(1, 0, 0), (0, 1, 0), (0, 0, 1)])
+    UsdGeom.Points.Get(stage, "/World/Discs").CreateNormalsAttr([(0, 0, 1)] * 3)
+    glow = stages.material(stage, "E", emissive=(1, 1, 1))
+    UsdShade.MaterialBindingAPI.Apply(stage.GetPrimAtPath("/World/Glow")).Bind(glow)
+    stage.Save()
+    scene = load_scene(tmp_path / "p.usda")
+    mesh = {m.name: m for m in scene.meshes}
+    beads = mesh["/World/Beads"]
+    assert beads.shape.kind == "points" and len(beads.triangles) == 3 and beads.normals is None
+    np.testing.assert_allclose(beads.point_radii, [0.1, 0.2, 0.3], rtol=1e-6)
+    np.testing.assert_allclose(beads.colors[:, 0], [(1, 0, 0), (0, 1, 0), (0, 0, 1)])
+    assert beads.solid.all() and beads.tessellate is not None
+    assert mesh["/World/Discs"].shape is None and len(mesh["/World/Discs"].triangles) > 3
+    g = mesh["/World/Glow"]
+    assert g.tessellate is None and g.point_radii is None and len(g.triangles) > 3
+    assert any(lt.kind == LIGHT_MESH for lt in scene.lights)
+    assert [s is not None for s in analytic_shapes(scene)] == [m.name == "/World/Beads" for m in scene.meshes]
 
 
 def test_a_sphere_covers_exactly_its_disc_in_an_orthographic_view(tmp_path):

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from renderer.accel.analytic import shape_hits
+from renderer.accel.analytic import SHAPE_POINTS, shape_hits, sphere_roots
 from renderer.accel.wide import dist_stack_t, entries, far_to_near, leaf_range, wide_stack_t
 from renderer.motion.kernels import MotionKeys, find_segment, keys_matrix
 from renderer.struct_refs import by_reference
@@ -51,7 +51,8 @@ class Geometry:
     blas_child: wp.array(dtype=wp.vec4i)
     blas_prim: wp.array(dtype=wp.int32)  # local triangle index per leaf slot
     # Still meshes (one point key): each leaf slot's triangle as a vertex and two edges, contiguous in leaf
-    # order, so a leaf's triangle tests read consecutive memory instead of gathering indexed vertices.
+    # order, so a leaf's triangle tests read consecutive memory instead of gathering indexed vertices. A sphere
+    # cloud (SHAPE_POINTS): the slot's centre in leaf_v0 (still clouds) and its radius in leaf_e1.x.
     leaf_v0: wp.array(dtype=wp.vec3)
     leaf_e1: wp.array(dtype=wp.vec3)
     leaf_e2: wp.array(dtype=wp.vec3)
@@ -198,6 +199,27 @@ def leaf_hit(geo: Geometry, m: int, slot: int, nkeys: int, k0: int, k1: int, u: 
 
 
 @wp.func
+def point_hit(geo: Geometry, m: int, slot: int, nkeys: int, k0: int, k1: int, u: float, ro: wp.vec3, rd: wp.vec3,
+              tmax: float):
+    """The sphere in leaf slot ``slot`` of sphere cloud m against the object-space ray at the walk's time: (t of its
+    nearest crossing in (0, tmax), BIG if none; crossings in (0, tmax), 0..2; its point, the local "triangle")."""
+    lt = geo.blas_prim[slot]
+    c = geo.leaf_v0[slot]
+    if nkeys > 1:  # moving points: the centre between the point keys
+        c = mesh_vertex(geo, m, k0, k1, u, lt)
+    t0, t1 = sphere_roots(ro - c, rd, geo.leaf_e1[slot][0])
+    t = float(BIG)
+    n = int(0)
+    if t1 > 0.0 and t1 < tmax:
+        t = t1
+        n = 1
+    if t0 > 0.0 and t0 < tmax:
+        t = t0
+        n += 1
+    return t, n, lt
+
+
+@wp.func
 def corner_index(geo: Geometry, first_corner: wp.array(dtype=wp.int32), m: int, tri: int):
     """Index of global triangle tri's first corner in a per-corner table (normals, uvs, colours) where mesh m's
     corners start at first_corner[m]; -1 when mesh m has none there."""
@@ -266,7 +288,7 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float, s
     sp = int(1)
     t_best = tmax
     kind = geo.mesh_shape[m]
-    if kind > 0:  # an exact shape: a quadratic or two, no walk
+    if kind > 0 and kind != SHAPE_POINTS:  # an exact shape: a quadratic or two, no walk
         sp = 0
         t, part, n = shape_hits(kind, geo.mesh_shape_axis[m], geo.mesh_shape_param[m], ro, rd, t_best)
         if t < t_best:
@@ -282,14 +304,24 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float, s
             if ref < 0:
                 first, count = leaf_range(ref)
                 for i in range(count):
-                    t, b1, b2, lt = leaf_hit(geo, m, poff + first + i, nk, k0, k1, u, ro, rd, t_best)
-                    if t < t_best:
-                        t_best = t
-                        best.t = t
-                        best.inst = inst
-                        best.tri = geo.mesh_tri_off[m] + lt
-                        best.b1 = b1
-                        best.b2 = b2
+                    if kind == SHAPE_POINTS:  # a sphere of a point cloud
+                        tp, np_, lp = point_hit(geo, m, poff + first + i, nk, k0, k1, u, ro, rd, t_best)
+                        if tp < t_best:
+                            t_best = tp
+                            best.t = tp
+                            best.inst = inst
+                            best.tri = geo.mesh_tri_off[m] + lp
+                            best.b1 = 0.0
+                            best.b2 = 0.0
+                    else:
+                        t, b1, b2, lt = leaf_hit(geo, m, poff + first + i, nk, k0, k1, u, ro, rd, t_best)
+                        if t < t_best:
+                            t_best = t
+                            best.t = t
+                            best.inst = inst
+                            best.tri = geo.mesh_tri_off[m] + lt
+                            best.b1 = b1
+                            best.b2 = b2
             else:
                 c = geo.blas_child[noff + ref]
                 d, c = far_to_near(entries(geo.blas_box, boff + ref * nk * 6, c, k0, k1, u, ro, inv_d, t_best), c)

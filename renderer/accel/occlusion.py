@@ -18,10 +18,11 @@ from renderer.accel.intersect import (
     instance_world_to_object,
     leaf_hit,
     mesh_keys_at,
+    point_hit,
     safe_inverse,
     tlas_keys_at,
 )
-from renderer.accel.analytic import shape_hits
+from renderer.accel.analytic import SHAPE_POINTS, shape_hits
 from renderer.accel.wide import entries, leaf_range, wide_stack_t
 from renderer.shading.materials import Materials, eval_opacity
 from renderer.shading.textures import Textures
@@ -51,7 +52,7 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
     sp = int(1)
     tr = trans
     kind = geo.mesh_shape[m]
-    if kind > 0:  # an exact shape: each crossing at the opacity of its material (no uvs), no walk
+    if kind > 0 and kind != SHAPE_POINTS:  # an exact shape: each crossing at the opacity of its material, no walk
         sp = 0
         t, part, n = shape_hits(kind, geo.mesh_shape_axis[m], geo.mesh_shape_param[m], ro, rd, tmax)
         if n > 0 and tr > 0.0:
@@ -66,11 +67,20 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
         if ref < 0:
             first, count = leaf_range(ref)
             for i in range(count):
-                t, b1, b2, lt = leaf_hit(geo, m, poff + first + i, nk, k0, k1, u, ro, rd, tmax)
-                if t < BIG and tr > 0.0:
-                    tri = geo.mesh_tri_off[m] + lt
-                    opacity = eval_opacity(mats, tex, geo.tri_material[tri], hit_uv(geo, m, tri, b1, b2), s)
-                    tr = tr * (1.0 - opacity)
+                if kind == SHAPE_POINTS:  # a sphere of a point cloud: each crossing at its point's opacity
+                    tp, nq, lp = point_hit(geo, m, poff + first + i, nk, k0, k1, u, ro, rd, tmax)
+                    if nq > 0 and tr > 0.0:
+                        trp = geo.mesh_tri_off[m] + lp
+                        op = eval_opacity(mats, tex, geo.tri_material[trp], hit_uv(geo, m, trp, 0.0, 0.0), s)
+                        tr = tr * (1.0 - op)
+                        if nq == 2:
+                            tr = tr * (1.0 - op)
+                else:
+                    t, b1, b2, lt = leaf_hit(geo, m, poff + first + i, nk, k0, k1, u, ro, rd, tmax)
+                    if t < BIG and tr > 0.0:
+                        tri = geo.mesh_tri_off[m] + lt
+                        opacity = eval_opacity(mats, tex, geo.tri_material[tri], hit_uv(geo, m, tri, b1, b2), s)
+                        tr = tr * (1.0 - opacity)
         else:
             c = geo.blas_child[noff + ref]
             d = entries(geo.blas_box, boff + ref * nk * 6, c, k0, k1, u, ro, inv_d, tmax)

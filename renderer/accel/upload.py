@@ -44,7 +44,10 @@ class GeometryStats:
 
 
 def _mesh_prim_bounds(mesh: Mesh, device: str = "cpu") -> tuple[np.ndarray, np.ndarray]:
-    """Per-key triangle boxes (P, T, 3) of a mesh."""
+    """Per-key primitive boxes (P, T, 3) of a mesh: its triangles', or a sphere cloud's spheres'."""
+    if mesh.point_radii is not None:
+        r = mesh.point_radii[None, :, None]
+        return (np.ascontiguousarray(mesh.points - r, np.float32), np.ascontiguousarray(mesh.points + r, np.float32))
     return triangle_boxes(mesh.points, mesh.triangles, device)
 
 
@@ -214,7 +217,8 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     wide: list[WideBvh] = []
     shapes = analytic_shapes(realize_tessellations(scene))  # a stand-in that cannot be its shape gets triangles
     for mesh, shape in zip(scene.meshes, shapes):
-        if shape is not None:  # one leaf holding the shape's box (walks test the shape, never this leaf's triangle)
+        if shape is not None and shape.kind != "points":  # one leaf holding the shape's box (walks test the shape,
+            # never this leaf's triangle)
             lo, hi = (np.asarray(b * SHAPE_BOX_PAD, np.float32)[None, None] for b in shape_bounds(shape))
         else:
             lo, hi = _mesh_prim_bounds(mesh, device)
@@ -244,8 +248,14 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     g.blas_child = _wp(cat([w.child for w in wide], (1, 4), np.int32), wp.vec4i, device)
     g.blas_prim = _i32(cat([b.prim_order for b in blas], (1,), np.int32), device)
     v0, e1, e2 = [], [], []
-    for mesh, b in zip(scene.meshes, blas):
-        if len(mesh.point_times) == 1 and len(b.prim_order):
+    for mesh, b, shape in zip(scene.meshes, blas, shapes):
+        if shape is not None and shape.kind == "points":  # a sphere per slot: centre (still clouds) and radius
+            z = np.zeros((len(b.prim_order), 3), np.float32)
+            radius = z.copy()
+            radius[:, 0] = mesh.point_radii[b.prim_order]
+            v0.append(mesh.points[0][b.prim_order] if len(mesh.point_times) == 1 else z), e1.append(radius)
+            e2.append(z)
+        elif len(mesh.point_times) == 1 and len(b.prim_order):
             p0, d1, d2 = leaf_triangles(mesh.points[0], mesh.triangles, b.prim_order, device)  # leaf order
             v0.append(p0), e1.append(d1), e2.append(d2)
         else:  # deforming: interpolated at the ray's time instead

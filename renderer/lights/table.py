@@ -90,8 +90,11 @@ def _luminance(rgb) -> float:
 def scene_sphere(scene: Scene) -> tuple[np.ndarray, float]:
     """Centre and radius of a sphere around the scene's geometry at the shutter start (origin, 1 if empty)."""
     # each mesh's box once, then every instance's box corners placed in one batch
-    boxes = np.array([np.stack([m.points[0].min(0), m.points[0].max(0)]).astype(np.float64)
-                      if len(m.points[0]) else np.full((2, 3), np.nan) for m in scene.meshes]).reshape(-1, 2, 3)
+    pads = [float(m.point_radii.max()) if m.point_radii is not None and len(m.point_radii) else 0.0
+            for m in scene.meshes]  # a cloud of spheres reaches its radius beyond its centres
+    boxes = np.array([np.stack([m.points[0].min(0) - pad, m.points[0].max(0) + pad]).astype(np.float64)
+                      if len(m.points[0]) else np.full((2, 3), np.nan)
+                      for m, pad in zip(scene.meshes, pads)]).reshape(-1, 2, 3)
     insts = [i for i in scene.instances if len(scene.meshes[i.mesh].points[0])]
     if not insts:
         return np.zeros(3), 1.0

@@ -11,6 +11,9 @@ those triangles at a hit:
 * it is not an emitter (mesh lights sample its triangles, whose pdf must match what rays hit);
 * it is not a CSG operand (the CSG walks classify crossings triangle by triangle).
 
+A ``Points`` prim without normals is a cloud of exact spheres (kind "points", ``Mesh.point_radii``): each point is
+a leaf primitive of its mesh's tree, moving with its point keys, with a colour of its own.
+
 A still implicit prim is imported as its shape and a one-triangle stand-in; its tessellation is made only for the
 meshes the rules above keep as triangles (``realize_tessellations``).
 """
@@ -21,13 +24,12 @@ import numpy as np
 from renderer.scene.model import LIGHT_MESH, AnalyticShape, Scene
 
 # Shape codes of the kernels (``accel.analytic``); 0: a triangle mesh
-SHAPE_CODES = {"sphere": 1, "frustum": 2, "capsule": 3}
+SHAPE_CODES = {"sphere": 1, "frustum": 2, "capsule": 3, "points": 4}
 
 
 def analytic_shapes(scene: Scene) -> list[AnalyticShape | None]:
     """Per mesh, the shape the renderer intersects in place of its triangles, or None."""
-    shapes = [m.shape if m.shape is not None and not m.deforming and m.uvs is None and m.colors is None else None
-              for m in scene.meshes]
+    shapes = [m.shape if _usable(m) else None for m in scene.meshes]
     for light in scene.lights:
         if light.kind == LIGHT_MESH and 0 <= light.instance < len(scene.instances):
             shapes[scene.instances[light.instance].mesh] = None
@@ -35,6 +37,23 @@ def analytic_shapes(scene: Scene) -> list[AnalyticShape | None]:
         if inst.csg_group >= 0:
             shapes[inst.mesh] = None
     return shapes
+
+
+def _usable(m) -> bool:
+    """The mesh's own conditions (the scene's are in ``analytic_shapes``). A point cloud's spheres may move point
+    by point and carry a colour each (a hit reads its point's); it must still be the spheres, not realized."""
+    if m.shape is None or m.uvs is not None:
+        return False
+    if m.shape.kind == "points":
+        return m.point_radii is not None
+    return not m.deforming and m.colors is None
+
+
+def object_box(mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Object-space box (lo, hi) float64 of a mesh over its point keys, a point cloud's spheres included."""
+    flat = mesh.points.reshape(-1, 3)
+    pad = float(mesh.point_radii.max()) if mesh.point_radii is not None and len(mesh.point_radii) else 0.0
+    return flat.min(axis=0).astype(np.float64) - pad, flat.max(axis=0).astype(np.float64) + pad
 
 
 def realize_tessellations(scene: Scene) -> Scene:

@@ -71,26 +71,34 @@ class Mesh:
     # uploaded (``materials.mesh_tangents``).
     tangents: np.ndarray | None = None
     # The implicit prim (Sphere, Cylinder, Cone, Capsule) the mesh tessellates, when its size holds over the
-    # shutter: the renderer may intersect that shape itself instead of its triangles (``scene.analytic``). None for
-    # every other mesh.
+    # shutter: the renderer may intersect that shape itself instead of its triangles (``scene.analytic``); kind
+    # "points" for a point cloud of exact spheres (``point_radii``). None for every other mesh.
     shape: AnalyticShape | None = None
-    # The full tessellation, not made yet: an exact shape's mesh holds a one-triangle stand-in (its box's corners
-    # as points, solid) until something reads its triangles (``realize``; ``scene.analytic.realize_tessellations``
-    # realizes every mesh the renderer will not intersect as its shape). A callable returning (points (1, V, 3)
-    # float32, triangles (T, 3) int32, normals (T, 3, 3) float32); None once the triangles are the real ones.
-    tessellate: Callable[[], tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
+    # A point cloud's sphere radii (V,) float32, scene units: point v is the sphere of centre points[:, v] and this
+    # radius, carried by "triangle" v = (v, v, v) (its material, colour, solidity). None for every other mesh.
+    point_radii: np.ndarray | None = None
+    # The full tessellation, not made yet: an exact shape's mesh holds a stand-in (a one-triangle box corner set
+    # for a prim, the point triangles above for a point cloud) until something reads real triangles
+    # (``realize``; ``scene.analytic.realize_tessellations`` realizes every mesh the renderer will not intersect
+    # as its shape). A callable returning (points (P, V, 3) float32, triangles (T, 3) int32, normals (T, 3, 3)
+    # float32, origin (T,) int: the stand-in triangle each comes from, solid (T,) bool or None); None once the
+    # triangles are the real ones.
+    tessellate: Callable[[], tuple] | None = None
 
     @property
     def deforming(self) -> bool:
         return len(self.point_times) > 1
 
     def realize(self) -> Mesh:
-        """Make the deferred tessellation (if any) this mesh's triangles; its one material covers them all."""
+        """Make the deferred tessellation (if any) this mesh's triangles; each takes the material and colour of the
+        stand-in triangle it comes from."""
         if self.tessellate is not None:
-            points, triangles, normals = self.tessellate()
-            self.material_ids = np.full(len(triangles), self.material_ids[0], self.material_ids.dtype)
-            self.points, self.triangles, self.normals = points, triangles, normals
-            self.solid = None  # derived from the triangles again
+            points, triangles, normals, origin, solid = self.tessellate()
+            self.material_ids = np.ascontiguousarray(self.material_ids[origin])
+            if self.colors is not None:
+                self.colors = np.ascontiguousarray(self.colors[origin])
+            self.points, self.triangles, self.normals, self.solid = points, triangles, normals, solid
+            self.point_radii = None
             self.tessellate = None
         return self
 

@@ -28,6 +28,7 @@ A ``displayColor`` that varies becomes per-corner ``CurveGeom.colors``: along Ba
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,6 +36,7 @@ from pxr import UsdGeom
 
 from renderer.scene import tessellate_curves as tc
 from renderer.scene import tessellate_points as tp
+from renderer.scene.model import AnalyticShape
 from renderer.usd.geometry import GeomData, point_keys, varying_colors
 from renderer.usd.motion import Shutter
 
@@ -107,7 +109,8 @@ def view_in_object_space(cam_row: np.ndarray, horizontal_aperture: float, focal_
 
 @dataclass
 class CurveGeom(GeomData):
-    """GeomData plus which triangles are thin (points and curves never refract as solids)."""
+    """GeomData plus which triangles are thin (curves and tessellated points never refract as solids; a cloud of
+    exact spheres does)."""
 
     solid: np.ndarray | None = None  # (T,) bool
     colors: np.ndarray | None = None  # (T, 3, 3) per-corner displayColor where it varies (points, BasisCurves)
@@ -208,6 +211,51 @@ def _points(prim, keys, frame: float, warn, view: View | None, path: str) -> Cur
 
     centres = pts[:, idx]
     wd = width[idx]
+    colors = None  # one colour per kept point, or None
+    dc = _varying_display_color(prim, frame)
+    if dc is not None:
+        if dc[1] in ("vertex", "varying") and len(dc[0]) >= n:
+            colors = np.asarray(dc[0], np.float64)[idx]
+        else:
+            warn("point displayColor that is not per point: its mean used", path)
+    if normals is None:  # spheres: exact, one leaf primitive each; triangles only if something needs them
+        return _sphere_cloud(times, centres, wd, idx, n, colors, view)
+    return _tessellated_points(times, centres, wd, idx, n, colors, view, normals)
+
+
+def _sphere_cloud(times, centres, wd, idx, n: int, colors, view) -> CurveGeom:
+    """Points as exact spheres (``scene.analytic``, kind "points"): point j is "triangle" (j, j, j) of the stand-in,
+    which carries its material and colour; ``tessellate`` gives the icospheres and discs of
+    ``_tessellated_points``, should something need triangles (an emissive cloud, a CSG operand)."""
+    k = len(idx)
+    tris = np.repeat(np.arange(k, dtype=np.int32)[:, None], 3, axis=1)
+    return CurveGeom(
+        point_times=np.asarray(times),
+        points=np.ascontiguousarray(centres, np.float32),
+        triangles=tris,
+        tri_faces=idx.astype(np.int64),
+        num_faces=int(n),
+        normals=None,
+        uvs=None,
+        double_sided=True,
+        shape=AnalyticShape("points", float(wd.max()) / 2),
+        point_radii=np.ascontiguousarray(wd / 2, np.float32),
+        solid=np.ones(k, bool),  # a sphere is closed: a glass bead refracts
+        colors=None if colors is None else np.ascontiguousarray(np.repeat(colors[:, None, :], 3, axis=1), np.float32),
+        tessellate=functools.partial(_points_as_triangles, times, centres, wd, idx, n, view),
+    )
+
+
+def _points_as_triangles(times, centres, wd, idx, n: int, view):
+    """``Mesh.tessellate`` of a sphere cloud: its icospheres and camera-facing discs (thin, as before)."""
+    out = _tessellated_points(times, centres, wd, idx, n, None, view, None)
+    origin = np.searchsorted(idx, out.tri_faces)  # each triangle's point, as an index into the kept points
+    return out.points, out.triangles, out.normals, origin, out.solid
+
+
+def _tessellated_points(times, centres, wd, idx, n: int, colors, view, normals) -> CurveGeom | None:
+    """Points as triangles: discs facing their ``normals`` when given, else camera-facing discs under ``DISC_PX``
+    pixels and icospheres by size on screen (the density needs the view: 80-triangle spheres without one)."""
     parts = []
     if normals is not None:
         d_px = wd / view.footprint(centres[0]) if view is not None else np.full(len(idx), 1e3)
@@ -229,12 +277,10 @@ def _points(prim, keys, frame: float, warn, view: View | None, path: str) -> Cur
             else:
                 parts.append((*tp.spheres(centres[:, sel], wd[sel], int(b)), idx[sel]))
     out = _assemble(parts, times, n)
-    dc = _varying_display_color(prim, frame)
-    if out is not None and dc is not None:
-        if dc[1] in ("vertex", "varying") and len(dc[0]) >= n:  # one colour per point, over its whole shape
-            out.colors = np.ascontiguousarray(np.repeat(dc[0][out.tri_faces][:, None, :], 3, axis=1), np.float32)
-        else:
-            warn("point displayColor that is not per point: its mean used", path)
+    if out is not None and colors is not None:  # one colour per point, over its whole shape
+        full = np.zeros((n, 3))
+        full[idx] = colors
+        out.colors = np.ascontiguousarray(np.repeat(full[out.tri_faces][:, None, :], 3, axis=1), np.float32)
     return out
 
 

@@ -42,6 +42,7 @@ class GeomData:
     shape: AnalyticShape | None = None  # an implicit prim whose size does not vary (``Mesh.shape``)
     solid: np.ndarray | None = None  # (T,) bool, ``Mesh.solid``
     tessellate: object = None  # ``Mesh.tessellate``: the full triangles of a stand-in, deferred
+    point_radii: np.ndarray | None = None  # ``Mesh.point_radii``: a cloud of exact spheres
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -817,13 +818,14 @@ def read_primitive(prim, shutter: Shutter, warn) -> GeomData | None:
     )
 
 
-def tessellate_primitive(kind: str, params: tuple, perm: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The triangles ``read_primitive`` makes of a still implicit prim: points (1, V, 3) float32, triangles
-    (T, 3) int32, per-corner normals (T, 3, 3) float32."""
+def tessellate_primitive(kind: str, params: tuple, perm: tuple):
+    """The triangles ``read_primitive`` makes of a still implicit prim, as ``Mesh.tessellate`` returns them: points
+    (1, V, 3) float32, triangles (T, 3) int32, per-corner normals (T, 3, 3) float32, origin (T,) (all from the
+    stand-in's one triangle), solid None (derived from the triangles)."""
     p, tris, nrm = _tessellate(kind, params)
     points = p[:, list(perm)][None].astype(np.float32)
     return (np.ascontiguousarray(points), np.ascontiguousarray(tris, np.int32),
-            np.ascontiguousarray(nrm[:, list(perm)][tris], np.float32))
+            np.ascontiguousarray(nrm[:, list(perm)][tris], np.float32), np.zeros(len(tris), np.int64), None)
 
 
 def _stand_in(kind: str, params: tuple, perm: list[int], shape: AnalyticShape, double_sided: bool,

@@ -27,7 +27,7 @@ from pxr import Gf, Tf, Usd, UsdGeom, UsdLux, UsdRender, UsdShade
 
 from renderer.errors import SceneError, SettingsError
 from renderer.scene import model as sc
-from renderer.scene.analytic import realize_tessellations
+from renderer.scene.analytic import object_box, realize_tessellations
 from renderer.subdiv import MAX_LEVEL
 from renderer.usd import camera as usd_camera
 from renderer.usd import csg as usd_csg
@@ -483,9 +483,9 @@ class _Importer:
                 solid=getattr(geom, "solid", None),
                 shape=getattr(geom, "shape", None),
                 tessellate=getattr(geom, "tessellate", None),
+                point_radii=getattr(geom, "point_radii", None),
             ))
-            flat = geom.points.reshape(-1, 3)
-            self._mesh_bounds.append(np.stack([flat.min(axis=0), flat.max(axis=0)]).astype(np.float64))
+            self._mesh_bounds.append(np.stack(object_box(self.meshes[-1])))
         self._mesh_cache[key] = index
         return index
 
