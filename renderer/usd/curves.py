@@ -1,4 +1,4 @@
-"""UsdGeomPoints, UsdGeomBasisCurves and UsdGeomHermiteCurves as triangle meshes (``CurveGeom``).
+"""UsdGeomPoints (exact spheres), UsdGeomBasisCurves and UsdGeomHermiteCurves as triangle meshes (``CurveGeom``).
 
 Tessellated at import (``renderer/scene/tessellate_curves``, ``tessellate_points``) so motion keys, materials,
 instancing and shadows follow the mesh path unchanged. Density is chosen from each element's size on screen,
@@ -16,9 +16,10 @@ Curves (``widths`` are diameters; ``primvars:widths`` wins over ``widths``; unau
   of the segment when no camera is known).
 
 Points (``widths`` are diameters, default ``DEFAULT_WIDTH``): authored ``normals`` give discs facing them;
-points under ``DISC_PX`` pixels are camera-facing hexagons (4 triangles); larger ones icospheres of 20 / 80 /
-320 triangles by size. With no camera (automatic framing) or inside PointInstancer prototypes the view is
-unknown: curves are 6-sided tubes, points 80-triangle spheres.
+without, a cloud of exact spheres (``_sphere_cloud``, ``scene.analytic``) whose triangles, made only if
+something needs them (an emissive cloud, a CSG operand), are camera-facing hexagons (4 triangles) under
+``DISC_PX`` pixels and icospheres of 20 / 80 / 320 triangles by size above. With no camera (automatic framing) or
+inside PointInstancer prototypes the view is unknown: curves are 6-sided tubes, points 80-triangle spheres.
 
 NurbsCurves are evaluated (rational, Cox-de Boor) at ``NURBS_SAMPLES`` points per knot span of their ``ranges``
 and rendered as linear curves through those points; their vertex widths go through the same basis.
