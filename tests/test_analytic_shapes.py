@@ -194,6 +194,36 @@ def test_point_clouds_are_exact_spheres_to_the_walks(moving):
     assert hits > m // 4
 
 
+@pytest.mark.parametrize("kind, params, axis", [
+    ("Sphere", (0.9,), "Z"),
+    ("Cylinder", (0.6, 0.6, 1.8), "X"),
+    ("Cylinder_1", (0.3, 0.8, 1.5), "Z"),
+    ("Cone", (0.7, 0.0, 1.6), "Y"),
+    ("Capsule", (0.45, 0.45, 1.2), "Y"),
+])
+def test_a_shapes_world_box_is_exact(kind, params, axis):
+    """The top level's box of a transformed shape (rotated, sheared, scaled unevenly, mirrored) holds all of its
+    fine tessellation, and that tessellation reaches it to within its facets' error (the box of the object
+    box's corners is up to sqrt 3 times wider per axis)."""
+    from renderer.scene.analytic import shape_world_box
+
+    rng = np.random.default_rng(3)
+    perm = _AXIS_PERM[axis]
+    shape = _analytic_shape(kind, params, perm)
+    p = _tessellate(kind, params)[0][:, perm]
+    for _ in range(20):
+        q, _r = np.linalg.qr(rng.normal(size=(3, 3)))
+        m = np.eye(4)
+        m[:3, :3] = q @ np.diag(rng.uniform(0.3, 3.0, 3) * rng.choice([-1, 1], 3)) @ (np.eye(3) + np.triu(
+            rng.uniform(-0.4, 0.4, (3, 3)), 1))
+        m[:3, 3] = rng.uniform(-50, 50, 3)
+        lo, hi = shape_world_box(shape, m)
+        w = p @ m[:3, :3].T + m[:3, 3]
+        assert np.all(w >= lo) and np.all(w <= hi)
+        size = hi - lo
+        assert np.all(w.min(0) - lo <= 2e-3 * size) and np.all(hi - w.max(0) <= 2e-3 * size)
+
+
 def test_a_shadow_ray_leaving_a_sphere_crosses_it_once():
     scene = _scene([_sphere_mesh(1.0)], [Instance(0, MotionTransform.static(np.eye(4)))], opacity=0.5)
     geo, _ = upload_geometry(scene)

@@ -18,7 +18,8 @@ from renderer.accel.wide import WideBvh, collapse
 from renderer.accel.triangle_kernels import leaf_triangles, triangle_boxes
 from renderer.motion.kernels import upload_keys
 from renderer.motion.transform import matrices_at, matrix_at
-from renderer.scene.analytic import analytic_shapes, realize_tessellations, shape_bounds, shape_table
+from renderer.scene.analytic import (SHAPE_BOX_PAD, analytic_shapes, realize_tessellations, shape_bounds,
+                                     shape_table, shape_world_box)
 from renderer.scene.mesh_facts import is_closed
 from renderer.scene.model import Instance, Mesh, MotionTransform, Scene
 
@@ -30,7 +31,6 @@ SUBSTEPS = 8  # samples per top-level segment when measuring how far curved moti
 # heavy scene (8 / 2: 58, slower; 4 / 1: 69, no faster).
 BLAS_MAX_LEAF = 4
 BLAS_TRAVERSAL_COST = 2.0
-SHAPE_BOX_PAD = 1.0 + 1e-5  # an analytic shape's box, relative to its size: float32 rounding never clips it
 
 
 @dataclass
@@ -293,6 +293,11 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
         idx = np.nonzero(still)[0]
         root = np.array([[b.node_lower[0, 0], b.node_upper[0, 0]] for b in blas], np.float64)  # (M, 2, 3)
         wlo, whi = _world_boxes(o2w[idx], root[[scene.instances[i].mesh for i in idx]])
+        for j, i in enumerate(idx):  # an exact shape: the box of the shape itself, not of its box's corners
+            shape = shapes[scene.instances[i].mesh]
+            if shape is not None and shape.kind != "points":
+                elo, ehi = shape_world_box(shape, o2w[i])
+                wlo[j], whi[j] = np.maximum(wlo[j], elo), np.minimum(whi[j], ehi)
         lo[:, idx], hi[:, idx] = wlo[None], whi[None]
     for i in np.nonzero(~still)[0]:
         inst = scene.instances[i]

@@ -23,6 +23,7 @@ import numpy as np
 
 from renderer.scene.model import LIGHT_MESH, AnalyticShape, Scene
 
+SHAPE_BOX_PAD = 1.0 + 1e-5  # a shape's box, relative to its size: float32 rounding never clips it
 # Shape codes of the kernels (``accel.analytic``); 0: a triangle mesh
 SHAPE_CODES = {"sphere": 1, "frustum": 2, "capsule": 3, "points": 4}
 
@@ -73,6 +74,32 @@ def shape_bounds(shape: AnalyticShape) -> tuple[np.ndarray, np.ndarray]:
         half = np.full(3, max(shape.radius_bottom, shape.radius_top))
         half[shape.axis] = 0.5 * shape.height + (shape.radius_bottom if shape.kind == "capsule" else 0.0)
     return -half, half
+
+
+def shape_world_box(shape: AnalyticShape, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The exact world box (lo, hi) float64 of a shape under the column-vector matrix m (4, 4), padded by 1e-5 of
+    its size for float32 rounding. The box of the shape's object box's corners is up to sqrt 3 times wider per
+    axis for a rotated sphere; this one is what the shape reaches: a sphere's support along world axis i is
+    r |A_i| (A the linear part, A_i its row i), a disc's of radius r around spine e is r |A_i with its e part
+    removed|, and a capsule is its spine swept by a sphere."""
+    a = np.asarray(m, np.float64)[:3, :3]
+    centre = np.asarray(m, np.float64)[:3, 3]
+    row = np.linalg.norm(a, axis=1)  # |A_i|
+    if shape.kind == "sphere":
+        half = shape.radius_bottom * row
+        lo, hi = centre - half, centre + half
+    else:
+        spine = a[:, shape.axis] * (0.5 * shape.height)  # the world offset of the spine's top end
+        if shape.kind == "capsule":
+            half = np.abs(spine) + shape.radius_bottom * row
+            lo, hi = centre - half, centre + half
+        else:  # a frustum: the hull of its two end discs
+            across = np.sqrt(np.maximum(row ** 2 - a[:, shape.axis] ** 2, 0.0))
+            bottom, top = centre - spine, centre + spine
+            lo = np.minimum(bottom - shape.radius_bottom * across, top - shape.radius_top * across)
+            hi = np.maximum(bottom + shape.radius_bottom * across, top + shape.radius_top * across)
+    pad = (SHAPE_BOX_PAD - 1.0) * (np.abs(centre) + (hi - lo))
+    return lo - pad, hi + pad
 
 
 def shape_table(shapes: list[AnalyticShape | None]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
