@@ -8,8 +8,8 @@ Each case runs in a child process (so peak memory is its own) that authors a sta
 each phase and the process's peak resident memory. Cases:
 
 * curves: 100 000 hairs of 10 linear segments (1 M segments), 0.002 wide: sub-pixel, camera-facing ribbons;
-* points: 1 M points 0.004 wide seen from 10 units away: tiny, camera-facing hexagons;
-* spheres: 1 M points 0.03 wide: a few pixels each, 20-triangle icospheres;
+* points: 1 M points 0.004 wide seen from 10 units away: tiny exact spheres (they were camera-facing hexagons);
+* spheres: 1 M points 0.03 wide: a few pixels each, exact spheres (they were 20-triangle icospheres);
 * prims: 10 000 gprims (spheres, cubes, cylinders, cones of 500 sizes), each under a transform of its own in
   100 groups, the set-dressing case: what costs here is the work per prim, not per triangle.
 """
@@ -117,7 +117,7 @@ def main() -> None:
             continue
         r = json.loads(p.stdout.strip().splitlines()[-1])
         unit = {"curves": "M segments", "prims": "M gprims"}.get(kind, "M points")
-        print(f"{kind:8s} {r['elements'] / 1e6:.2f} {unit}: {r['triangles'] / 1e6:.1f} M triangles, "
+        print(f"{kind:8s} {r['elements'] / 1e6:.2f} {unit}: {r['triangles'] / 1e6:.1f} M primitives, "
               f"load (tessellate) {r['load_s']:.1f} s, prepare (BVH) {r['prepare_s']:.1f} s, render "
               f"{a.width}x{a.width * 3 // 4} at {a.spp} spp {r['render_s']:.1f} s, peak memory {r['peak_gib']:.2f} GiB",
               flush=True)

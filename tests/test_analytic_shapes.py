@@ -360,6 +360,33 @@ def test_points_import_as_sphere_clouds(tmp_path):
     assert [s is not None for s in analytic_shapes(scene)] == [m.name == "/World/Beads" for m in scene.meshes]
 
 
+def test_threads_realizing_one_cloud_get_one_whole_tessellation(tmp_path):
+    """Workers sharing a scene may realize its meshes at once: each mesh is realized once, whole (its triangles'
+    materials and colours from the right points)."""
+    import threading
+
+    stage = stages.new_stage(tmp_path / "c.usda")
+    stages.camera(stage, translate=(0, 0, 8))
+    p = UsdGeom.Points.Define(stage, "/World/Cloud")
+    p.CreatePointsAttr([(x, 0, 0) for x in range(50)])
+    p.CreateWidthsAttr([0.3])
+    p.CreateDisplayColorPrimvar(UsdGeom.Tokens.vertex).Set([(x / 50, 1 - x / 50, 0.5) for x in range(50)])
+    stage.Save()
+    meshes = [load_scene(tmp_path / "c.usda").meshes[0] for _ in range(2)]
+    want = meshes[0].realize()
+    shared = meshes[1]
+    threads = [threading.Thread(target=shared.realize) for _ in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for name in ("points", "triangles", "normals", "material_ids", "colors"):
+        assert np.array_equal(getattr(shared, name), getattr(want, name)), name
+    # each triangle's colour is its point's: the point nearest its centroid
+    centroid = want.points[0][want.triangles].mean(1)
+    np.testing.assert_allclose(want.colors[:, 0, 0], np.round(centroid[:, 0]) / 50, atol=1e-6)
+
+
 def test_a_sphere_covers_exactly_its_disc_in_an_orthographic_view(tmp_path):
     """Coverage through the whole render path (camera, walk, film): the alpha of a unit sphere seen orthographically
     integrates to pi (seeds 0 and 1: +1.0e-4, +0.5e-4). Its 4032-triangle tessellation covered 0.165 % less (a

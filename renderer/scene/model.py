@@ -18,6 +18,7 @@ the half of the shutter in which it moves.
 """
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -43,6 +44,9 @@ class AnalyticShape:
     radius_top: float = 0.0  # at +height/2 (a capsule's radius_bottom is its radius)
     height: float = 0.0  # of the spine: a frustum's height, a capsule's cylinder part, 0 for a sphere
     axis: int = 2  # the spine: 0, 1, 2 for X, Y, Z
+
+
+_REALIZE_LOCK = threading.Lock()  # Mesh.realize
 
 
 @dataclass
@@ -92,7 +96,9 @@ class Mesh:
     def realize(self) -> Mesh:
         """Make the deferred tessellation (if any) this mesh's triangles; each takes the material and colour of the
         stand-in triangle it comes from."""
-        if self.tessellate is not None:
+        with _REALIZE_LOCK:  # a scene shared by threads (a service's workers) is realized once, whole
+            if self.tessellate is None:
+                return self
             points, triangles, normals, origin, solid = self.tessellate()
             self.material_ids = np.ascontiguousarray(self.material_ids[origin])
             if self.colors is not None:
