@@ -205,19 +205,20 @@ def test_a_shapes_world_box_is_exact(kind, params, axis):
     """The top level's box of a transformed shape (rotated, sheared, scaled unevenly, mirrored) holds all of its
     fine tessellation, and that tessellation reaches it to within its facets' error (the box of the object
     box's corners is up to sqrt 3 times wider per axis)."""
-    from renderer.scene.analytic import shape_world_box
+    from renderer.scene.analytic import shape_world_boxes
 
     rng = np.random.default_rng(3)
     perm = _AXIS_PERM[axis]
     shape = _analytic_shape(kind, params, perm)
     p = _tessellate(kind, params)[0][:, perm]
-    for _ in range(20):
+    ms = np.tile(np.eye(4), (20, 1, 1))
+    for m in ms:
         q, _r = np.linalg.qr(rng.normal(size=(3, 3)))
-        m = np.eye(4)
         m[:3, :3] = q @ np.diag(rng.uniform(0.3, 3.0, 3) * rng.choice([-1, 1], 3)) @ (np.eye(3) + np.triu(
             rng.uniform(-0.4, 0.4, (3, 3)), 1))
         m[:3, 3] = rng.uniform(-50, 50, 3)
-        lo, hi = shape_world_box(shape, m)
+    los, his = shape_world_boxes(shape, ms)  # all 20 in one batch
+    for m, lo, hi in zip(ms, los, his):
         w = p @ m[:3, :3].T + m[:3, 3]
         assert np.all(w >= lo) and np.all(w <= hi)
         size = hi - lo

@@ -19,7 +19,7 @@ from renderer.accel.triangle_kernels import leaf_triangles, triangle_boxes
 from renderer.motion.kernels import upload_keys
 from renderer.motion.transform import matrices_at, matrix_at
 from renderer.scene.analytic import (SHAPE_BOX_PAD, analytic_shapes, realize_tessellations, shape_bounds,
-                                     shape_table, shape_world_box)
+                                     shape_table, shape_world_boxes)
 from renderer.scene.mesh_facts import is_closed
 from renderer.scene.model import Instance, Mesh, MotionTransform, Scene
 
@@ -293,10 +293,12 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
         idx = np.nonzero(still)[0]
         root = np.array([[b.node_lower[0, 0], b.node_upper[0, 0]] for b in blas], np.float64)  # (M, 2, 3)
         wlo, whi = _world_boxes(o2w[idx], root[[scene.instances[i].mesh for i in idx]])
-        for j, i in enumerate(idx):  # an exact shape: the box of the shape itself, not of its box's corners
-            shape = shapes[scene.instances[i].mesh]
+        mesh_of = np.array([scene.instances[i].mesh for i in idx], np.int64)
+        for mi in np.unique(mesh_of):  # an exact shape: the box of the shape itself, not of its box's corners
+            shape = shapes[mi]
             if shape is not None and shape.kind != "points":
-                elo, ehi = shape_world_box(shape, o2w[i])
+                j = np.nonzero(mesh_of == mi)[0]
+                elo, ehi = shape_world_boxes(shape, o2w[idx[j]])
                 wlo[j], whi[j] = np.maximum(wlo[j], elo), np.minimum(whi[j], ehi)
         lo[:, idx], hi[:, idx] = wlo[None], whi[None]
     for i in np.nonzero(~still)[0]:

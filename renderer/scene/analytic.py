@@ -76,25 +76,26 @@ def shape_bounds(shape: AnalyticShape) -> tuple[np.ndarray, np.ndarray]:
     return -half, half
 
 
-def shape_world_box(shape: AnalyticShape, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The exact world box (lo, hi) float64 of a shape under the column-vector matrix m (4, 4), padded by 1e-5 of
-    its size for float32 rounding. The box of the shape's object box's corners is up to sqrt 3 times wider per
-    axis for a rotated sphere; this one is what the shape reaches: a sphere's support along world axis i is
+def shape_world_boxes(shape: AnalyticShape, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The exact world boxes (lo, hi), (N, 3) float64, of a shape under column-vector matrices m (N, 4, 4), padded by
+    1e-5 of their size for float32 rounding. The box of the shape's object box's corners is up to sqrt 3 times wider
+    per axis for a rotated sphere; these are what the shape reaches: a sphere's support along world axis i is
     r |A_i| (A the linear part, A_i its row i), a disc's of radius r around spine e is r |A_i with its e part
     removed|, and a capsule is its spine swept by a sphere."""
-    a = np.asarray(m, np.float64)[:3, :3]
-    centre = np.asarray(m, np.float64)[:3, 3]
-    row = np.linalg.norm(a, axis=1)  # |A_i|
+    m = np.asarray(m, np.float64).reshape(-1, 4, 4)
+    a = m[:, :3, :3]
+    centre = m[:, :3, 3]
+    row = np.linalg.norm(a, axis=2)  # |A_i|, (N, 3)
     if shape.kind == "sphere":
         half = shape.radius_bottom * row
         lo, hi = centre - half, centre + half
     else:
-        spine = a[:, shape.axis] * (0.5 * shape.height)  # the world offset of the spine's top end
+        spine = a[:, :, shape.axis] * (0.5 * shape.height)  # the world offset of the spine's top end
         if shape.kind == "capsule":
             half = np.abs(spine) + shape.radius_bottom * row
             lo, hi = centre - half, centre + half
         else:  # a frustum: the hull of its two end discs
-            across = np.sqrt(np.maximum(row ** 2 - a[:, shape.axis] ** 2, 0.0))
+            across = np.sqrt(np.maximum(row ** 2 - a[:, :, shape.axis] ** 2, 0.0))
             bottom, top = centre - spine, centre + spine
             lo = np.minimum(bottom - shape.radius_bottom * across, top - shape.radius_top * across)
             hi = np.maximum(bottom + shape.radius_bottom * across, top + shape.radius_top * across)
