@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from renderer.accel.analytic import SHAPE_POINTS, shape_normal
+from renderer.accel.analytic import SHAPE_DISCS, SHAPE_POINTS, shape_normal
 from renderer.accel.csg import csg_closest
 from renderer.accel.intersect import (
     BIG,
@@ -153,7 +153,9 @@ def surface_at(geo: Geometry, inst: int, tri: int, b1: float, b2: float, ro: wp.
     p1 = wp.vec3(0.0)
     p2 = wp.vec3(0.0)
     ng = wp.vec3(0.0)
-    if kind == SHAPE_POINTS:  # a sphere of a point cloud: outward from its centre at the hit's time
+    if kind == SHAPE_DISCS:  # a disc of a point cloud: its normal (the point's, in the per-corner table)
+        ng = wp.normalize(wp.transform_vector(w2o_t, geo.normals[corner_index(geo, geo.mesh_normal_off, m, tri)]))
+    elif kind == SHAPE_POINTS:  # a sphere of a point cloud: outward from its centre at the hit's time
         pk0, pk1, pu = mesh_keys_at(geo, m, s)
         centre = mesh_vertex(geo, m, pk0, pk1, pu, geo.tri_vidx[tri][0])
         ng = wp.normalize(wp.transform_vector(w2o_t, wp.transform_point(w2o, ro + rd * t) - centre))

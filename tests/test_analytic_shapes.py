@@ -136,13 +136,28 @@ def test_walks_hit_a_scaled_sphere_and_a_moving_one_exactly_and_shadows_cross_ea
     assert sphere_hits > n // 8
 
 
-def _cloud_mesh(centres, radii, name="cloud"):
-    """A sphere cloud as the importer makes it (``curves._sphere_cloud``): centres (P, N, 3), radii (N,)."""
+def _cloud_mesh(centres, radii, normals=None, name="cloud"):
+    """A point cloud as the importer makes it (``curves._point_cloud``): centres (P, N, 3), radii (N,), and for
+    discs their unit normals (N, 3)."""
     n = centres.shape[1]
+    corner = None if normals is None else np.repeat(normals[:, None, :], 3, 1).astype(np.float32)
     return Mesh(name, np.linspace(0, 1, len(centres)).astype(np.float32), centres.astype(np.float32),
-                np.repeat(np.arange(n, dtype=np.int32)[:, None], 3, 1), np.zeros(n, np.int32),
-                solid=np.ones(n, bool), shape=AnalyticShape("points", float(radii.max())),
+                np.repeat(np.arange(n, dtype=np.int32)[:, None], 3, 1), np.zeros(n, np.int32), normals=corner,
+                solid=np.full(n, normals is None), shape=AnalyticShape("points" if normals is None else "discs",
+                                                                       float(radii.max())),
                 point_radii=radii.astype(np.float32))
+
+
+def _discs_hits(o, d, centres, radii, normals):
+    """Brute force, float64: (nearest t > 0 or inf, its disc, crossings) of a ray and discs."""
+    denom = normals @ d
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.sum((centres - o[None]) * normals, 1) / denom
+    q = o[None] + t[:, None] * d[None] - centres
+    ok = np.isfinite(t) & (t > 0) & (np.sum(q * q, 1) <= radii ** 2)
+    t = np.where(ok, t, np.inf)
+    k = int(np.argmin(t))
+    return t[k], k, int(ok.sum())
 
 
 def _spheres_hits(o, d, centres, radii):
@@ -159,21 +174,26 @@ def _spheres_hits(o, d, centres, radii):
 
 
 @pytest.mark.parametrize("moving", [False, True])
-def test_point_clouds_are_exact_spheres_to_the_walks(moving):
-    """A cloud of 400 spheres of different radii, scaled and placed by its instance, its points still or moving
-    (two point keys): closest hits at the exact distance of the nearest sphere at the ray's time, reporting that
-    sphere's point as the triangle; shadow rays multiply (1 - opacity) once per crossing."""
+@pytest.mark.parametrize("kind", ["points", "discs"])
+def test_point_clouds_are_exact_spheres_or_discs_to_the_walks(moving, kind):
+    """A cloud of 400 spheres (or discs facing random normals) of different radii, scaled and placed by its
+    instance, its points still or moving (two point keys): closest hits at the exact distance of the nearest one at
+    the ray's time, reporting its point as the triangle; shadow rays multiply (1 - opacity) once per crossing."""
     rng = np.random.default_rng(5)
     n = 400
     c0 = rng.uniform(-1.5, 1.5, (n, 3))
     keys = np.stack([c0, c0 + rng.normal(0, 0.3, (n, 3))]) if moving else c0[None]
-    radii = rng.uniform(0.03, 0.12, n)
+    radii = rng.uniform(0.03, 0.12, n) * (2.0 if kind == "discs" else 1.0)
+    normals = None
+    if kind == "discs":
+        normals = rng.normal(size=(n, 3))
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     xf = np.diag([1.2, 1.2, 1.2, 1.0])
     xf[:3, 3] = (0.2, -0.1, 0.0)
-    scene = _scene([_cloud_mesh(keys, radii)], [Instance(0, MotionTransform.static(xf))], opacity=0.5)
-    assert analytic_shapes(scene)[0].kind == "points"
+    scene = _scene([_cloud_mesh(keys, radii, normals)], [Instance(0, MotionTransform.static(xf))], opacity=0.5)
+    assert analytic_shapes(scene)[0].kind == kind
     geo, stats = upload_geometry(scene)
-    assert geo.mesh_shape.numpy()[0] == SHAPE_CODES["points"] and stats.triangles == n
+    assert geo.mesh_shape.numpy()[0] == SHAPE_CODES[kind] and stats.triangles == n
     m = 2000
     ro = np.tile([0.0, 0.0, 6.0], (m, 1)) + rng.normal(0, 0.2, (m, 3))
     rd = rng.uniform([-0.3, -0.3, -1], [0.3, 0.3, -1], (m, 3))
@@ -183,7 +203,10 @@ def test_point_clouds_are_exact_spheres_to_the_walks(moving):
     hits = 0
     for i in range(m):
         centres = (keys[0] + (keys[-1] - keys[0]) * float(times[i])) * 1.2 + xf[:3, 3]
-        tb, k, crossings = _spheres_hits(ro[i], rd[i], centres, radii * 1.2)
+        if kind == "discs":  # a uniform scale keeps the normals
+            tb, k, crossings = _discs_hits(ro[i], rd[i], centres, radii * 1.2, normals)
+        else:
+            tb, k, crossings = _spheres_hits(ro[i], rd[i], centres, radii * 1.2)
         if np.isfinite(tb):
             hits += 1
             assert inst[i] == 0 and tri[i] == k, i
@@ -333,8 +356,8 @@ def test_stand_ins_get_their_triangles_where_the_shape_cannot_be_used(tmp_path):
 
 def test_points_import_as_sphere_clouds(tmp_path):
     """Points without normals are a sphere cloud: radii from the widths (diameters), one colour per point where
-    displayColor varies per point; with normals they stay discs facing them; an emissive cloud gets its triangles
-    (a light samples them), each keeping its point's colour."""
+    displayColor varies per point; with normals, a cloud of discs facing them (thin); an emissive cloud gets its
+    triangles (a light samples them), each keeping its point's colour."""
     stage = stages.new_stage(tmp_path / "p.usda")
     stages.camera(stage, translate=(0, 0, 8))
     for name in ("Beads", "Discs", "Glow"):
@@ -354,11 +377,13 @@ def test_points_import_as_sphere_clouds(tmp_path):
     np.testing.assert_allclose(beads.point_radii, [0.1, 0.2, 0.3], rtol=1e-6)
     np.testing.assert_allclose(beads.colors[:, 0], [(1, 0, 0), (0, 1, 0), (0, 0, 1)])
     assert beads.solid.all() and beads.tessellate is not None
-    assert mesh["/World/Discs"].shape is None and len(mesh["/World/Discs"].triangles) > 3
+    discs = mesh["/World/Discs"]
+    assert discs.shape.kind == "discs" and len(discs.triangles) == 3 and not discs.solid.any()
+    np.testing.assert_allclose(discs.normals, np.broadcast_to([0, 0, 1], (3, 3, 3)))
     g = mesh["/World/Glow"]
     assert g.tessellate is None and g.point_radii is None and len(g.triangles) > 3
     assert any(lt.kind == LIGHT_MESH for lt in scene.lights)
-    assert [s is not None for s in analytic_shapes(scene)] == [m.name == "/World/Beads" for m in scene.meshes]
+    assert [s is not None for s in analytic_shapes(scene)] == [m.name != "/World/Glow" for m in scene.meshes]
 
 
 def test_threads_realizing_one_cloud_get_one_whole_tessellation(tmp_path):

@@ -9,7 +9,8 @@ spine along object axis ``axis``, z below its coordinate on it; parameters ``(rb
   by flat caps at z = -hh (radius rb) and z = hh (radius rt); a cone has rt = 0;
 * SHAPE_CAPSULE: a cylinder of radius rb over |z| <= hh, closed by hemispheres centred at z = -hh and z = hh.
 
-A point cloud (SHAPE_POINTS) is not one shape but a tree of spheres, walked like a mesh (``intersect.point_hit``).
+A point cloud (SHAPE_POINTS, SHAPE_DISCS) is not one shape but a tree of spheres or discs, walked like a mesh
+(``intersect.point_hit``).
 
 Every shape is convex: a ray crosses it at most twice. A hit reports which piece it crossed (``part``), from which
 ``shape_normal`` takes the normal.
@@ -25,6 +26,13 @@ SHAPE_SPHERE = wp.constant(SHAPE_CODES["sphere"])
 SHAPE_FRUSTUM = wp.constant(SHAPE_CODES["frustum"])
 SHAPE_CAPSULE = wp.constant(SHAPE_CODES["capsule"])
 SHAPE_POINTS = wp.constant(SHAPE_CODES["points"])  # a cloud of spheres: a leaf primitive each (``intersect.point_hit``)
+SHAPE_DISCS = wp.constant(SHAPE_CODES["discs"])  # a cloud of discs facing their normals, the same way
+
+
+@wp.func
+def is_cloud(kind: int) -> bool:
+    """A mesh of one small shape per point (spheres or discs), walked like a triangle mesh."""
+    return kind == SHAPE_POINTS or kind == SHAPE_DISCS
 PART_SIDE = wp.constant(0)  # a sphere, a frustum's or a capsule's side
 PART_BOTTOM = wp.constant(1)  # the cap (flat or round) at z = -hh
 PART_TOP = wp.constant(2)  # the cap at z = +hh

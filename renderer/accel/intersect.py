@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from renderer.accel.analytic import SHAPE_POINTS, shape_hits, sphere_roots
+from renderer.accel.analytic import SHAPE_DISCS, is_cloud, shape_hits, sphere_roots
 from renderer.accel.wide import dist_stack_t, entries, far_to_near, leaf_range, wide_stack_t
 from renderer.motion.kernels import MotionKeys, find_segment, keys_matrix
 from renderer.struct_refs import by_reference
@@ -52,7 +52,8 @@ class Geometry:
     blas_prim: wp.array(dtype=wp.int32)  # local triangle index per leaf slot
     # Still meshes (one point key): each leaf slot's triangle as a vertex and two edges, contiguous in leaf
     # order, so a leaf's triangle tests read consecutive memory instead of gathering indexed vertices. A sphere
-    # cloud (SHAPE_POINTS): the slot's centre in leaf_v0 (still clouds) and its radius in leaf_e1.x.
+    # cloud (SHAPE_POINTS, SHAPE_DISCS): the slot's centre in leaf_v0 (still clouds), its radius in leaf_e1.x and a
+    # disc's unit normal in leaf_e2.
     leaf_v0: wp.array(dtype=wp.vec3)
     leaf_e1: wp.array(dtype=wp.vec3)
     leaf_e2: wp.array(dtype=wp.vec3)
@@ -199,15 +200,28 @@ def leaf_hit(geo: Geometry, m: int, slot: int, nkeys: int, k0: int, k1: int, u: 
 
 
 @wp.func
-def point_hit(geo: Geometry, m: int, slot: int, nkeys: int, k0: int, k1: int, u: float, ro: wp.vec3, rd: wp.vec3,
-              tmax: float):
-    """The sphere in leaf slot ``slot`` of sphere cloud m against the object-space ray at the walk's time: (t of its
-    nearest crossing in (0, tmax), BIG if none; crossings in (0, tmax), 0..2; its point, the local "triangle")."""
+def point_hit(geo: Geometry, m: int, kind: int, slot: int, nkeys: int, k0: int, k1: int, u: float, ro: wp.vec3,
+              rd: wp.vec3, tmax: float):
+    """The sphere (or disc, ``kind``) in leaf slot ``slot`` of point cloud m against the object-space ray at the
+    walk's time: (t of its nearest crossing in (0, tmax), BIG if none; crossings in (0, tmax), 0..2; its point, the
+    local "triangle")."""
     lt = geo.blas_prim[slot]
     c = geo.leaf_v0[slot]
     if nkeys > 1:  # moving points: the centre between the point keys
         c = mesh_vertex(geo, m, k0, k1, u, lt)
-    t0, t1 = sphere_roots(ro - c, rd, geo.leaf_e1[slot][0])
+    r = geo.leaf_e1[slot][0]
+    if kind == SHAPE_DISCS:  # the plane through c facing the slot's normal, within r of c
+        nrm = geo.leaf_e2[slot]
+        denom = wp.dot(rd, nrm)
+        td = float(BIG)
+        if denom != 0.0:
+            td = wp.dot(c - ro, nrm) / denom
+        if td > 0.0 and td < tmax:
+            q = ro + rd * td - c
+            if wp.dot(q, q) <= r * r:
+                return td, 1, lt
+        return float(BIG), 0, lt
+    t0, t1 = sphere_roots(ro - c, rd, r)
     t = float(BIG)
     n = int(0)
     if t1 > 0.0 and t1 < tmax:
@@ -288,7 +302,7 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float, s
     sp = int(1)
     t_best = tmax
     kind = geo.mesh_shape[m]
-    if kind > 0 and kind != SHAPE_POINTS:  # an exact shape: a quadratic or two, no walk
+    if kind > 0 and not is_cloud(kind):  # an exact shape: a quadratic or two, no walk
         sp = 0
         t, part, n = shape_hits(kind, geo.mesh_shape_axis[m], geo.mesh_shape_param[m], ro, rd, t_best)
         if t < t_best:
@@ -304,8 +318,8 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float, s
             if ref < 0:
                 first, count = leaf_range(ref)
                 for i in range(count):
-                    if kind == SHAPE_POINTS:  # a sphere of a point cloud
-                        tp, np_, lp = point_hit(geo, m, poff + first + i, nk, k0, k1, u, ro, rd, t_best)
+                    if is_cloud(kind):  # a sphere or disc of a point cloud
+                        tp, np_, lp = point_hit(geo, m, kind, poff + first + i, nk, k0, k1, u, ro, rd, t_best)
                         if tp < t_best:
                             t_best = tp
                             best.t = tp

@@ -22,7 +22,7 @@ from renderer.accel.intersect import (
     safe_inverse,
     tlas_keys_at,
 )
-from renderer.accel.analytic import SHAPE_POINTS, shape_hits
+from renderer.accel.analytic import is_cloud, shape_hits
 from renderer.accel.wide import entries, leaf_range, wide_stack_t
 from renderer.shading.materials import Materials, eval_opacity
 from renderer.shading.textures import Textures
@@ -52,7 +52,7 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
     sp = int(1)
     tr = trans
     kind = geo.mesh_shape[m]
-    if kind > 0 and kind != SHAPE_POINTS:  # an exact shape: each crossing at the opacity of its material, no walk
+    if kind > 0 and not is_cloud(kind):  # an exact shape: each crossing at the opacity of its material, no walk
         sp = 0
         t, part, n = shape_hits(kind, geo.mesh_shape_axis[m], geo.mesh_shape_param[m], ro, rd, tmax)
         if n > 0 and tr > 0.0:
@@ -67,8 +67,8 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
         if ref < 0:
             first, count = leaf_range(ref)
             for i in range(count):
-                if kind == SHAPE_POINTS:  # a sphere of a point cloud: each crossing at its point's opacity
-                    tp, nq, lp = point_hit(geo, m, poff + first + i, nk, k0, k1, u, ro, rd, tmax)
+                if is_cloud(kind):  # a sphere or disc of a point cloud: each crossing at its point's opacity
+                    tp, nq, lp = point_hit(geo, m, kind, poff + first + i, nk, k0, k1, u, ro, rd, tmax)
                     if nq > 0 and tr > 0.0:
                         trp = geo.mesh_tri_off[m] + lp
                         op = eval_opacity(mats, tex, geo.tri_material[trp], hit_uv(geo, m, trp, 0.0, 0.0), s)

@@ -18,8 +18,8 @@ from renderer.accel.wide import WideBvh, collapse
 from renderer.accel.triangle_kernels import leaf_triangles, triangle_boxes
 from renderer.motion.kernels import upload_keys
 from renderer.motion.transform import matrices_at, matrix_at
-from renderer.scene.analytic import (SHAPE_BOX_PAD, analytic_shapes, realize_tessellations, shape_bounds,
-                                     shape_table, shape_world_boxes)
+from renderer.scene.analytic import (CLOUD_KINDS, SHAPE_BOX_PAD, analytic_shapes, realize_tessellations,
+                                     shape_bounds, shape_table, shape_world_boxes)
 from renderer.scene.mesh_facts import is_closed
 from renderer.scene.model import Instance, Mesh, MotionTransform, Scene
 
@@ -45,9 +45,16 @@ class GeometryStats:
 
 def _mesh_prim_bounds(mesh: Mesh, device: str = "cpu") -> tuple[np.ndarray, np.ndarray]:
     """Per-key primitive boxes (P, T, 3) of a mesh: its triangles', or a sphere cloud's spheres'."""
-    if mesh.point_radii is not None:
-        r = mesh.point_radii[None, :, None]
-        return (np.ascontiguousarray(mesh.points - r, np.float32), np.ascontiguousarray(mesh.points + r, np.float32))
+    if mesh.point_radii is not None:  # a sphere reaches r along every axis, a disc r sqrt(1 - n_i^2) along axis i
+        r = mesh.point_radii.astype(np.float64)[None, :, None]
+        if mesh.shape is not None and mesh.shape.kind == "discs":
+            n = mesh.normals[:, 0].astype(np.float64)
+            r = r * np.sqrt(np.maximum(1.0 - n * n, 0.0))[None]
+        c = mesh.points.astype(np.float64)
+        # rounded outwards to float32: a box never clips its sphere, however far from the origin
+        lo = np.nextafter((c - r).astype(np.float32), np.float32(-np.inf))
+        hi = np.nextafter((c + r).astype(np.float32), np.float32(np.inf))
+        return np.ascontiguousarray(lo), np.ascontiguousarray(hi)
     return triangle_boxes(mesh.points, mesh.triangles, device)
 
 
@@ -217,8 +224,8 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     wide: list[WideBvh] = []
     shapes = analytic_shapes(realize_tessellations(scene))  # a stand-in that cannot be its shape gets triangles
     for mesh, shape in zip(scene.meshes, shapes):
-        if shape is not None and shape.kind != "points":  # one leaf holding the shape's box (walks test the shape,
-            # never this leaf's triangle)
+        if shape is not None and shape.kind not in CLOUD_KINDS:  # one leaf holding the shape's box (walks test
+            # the shape, never this leaf's triangle)
             lo, hi = (np.asarray(b * SHAPE_BOX_PAD, np.float32)[None, None] for b in shape_bounds(shape))
         else:
             lo, hi = _mesh_prim_bounds(mesh, device)
@@ -249,12 +256,12 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     g.blas_prim = _i32(cat([b.prim_order for b in blas], (1,), np.int32), device)
     v0, e1, e2 = [], [], []
     for mesh, b, shape in zip(scene.meshes, blas, shapes):
-        if shape is not None and shape.kind == "points":  # a sphere per slot: centre (still clouds) and radius
+        if shape is not None and shape.kind in CLOUD_KINDS:  # per slot: centre (still clouds), radius, disc normal
             z = np.zeros((len(b.prim_order), 3), np.float32)
             radius = z.copy()
             radius[:, 0] = mesh.point_radii[b.prim_order]
             v0.append(mesh.points[0][b.prim_order] if len(mesh.point_times) == 1 else z), e1.append(radius)
-            e2.append(z)
+            e2.append(np.ascontiguousarray(mesh.normals[b.prim_order, 0], np.float32) if shape.kind == "discs" else z)
         elif len(mesh.point_times) == 1 and len(b.prim_order):
             p0, d1, d2 = leaf_triangles(mesh.points[0], mesh.triangles, b.prim_order, device)  # leaf order
             v0.append(p0), e1.append(d1), e2.append(d2)
@@ -296,7 +303,7 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
         mesh_of = np.array([scene.instances[i].mesh for i in idx], np.int64)
         for mi in np.unique(mesh_of):  # an exact shape: the box of the shape itself, not of its box's corners
             shape = shapes[mi]
-            if shape is not None and shape.kind != "points":
+            if shape is not None and shape.kind not in CLOUD_KINDS:
                 j = np.nonzero(mesh_of == mi)[0]
                 elo, ehi = shape_world_boxes(shape, o2w[idx[j]])
                 wlo[j], whi[j] = np.maximum(wlo[j], elo), np.minimum(whi[j], ehi)

@@ -11,8 +11,9 @@ those triangles at a hit:
 * it is not an emitter (mesh lights sample its triangles, whose pdf must match what rays hit);
 * it is not a CSG operand (the CSG walks classify crossings triangle by triangle).
 
-A ``Points`` prim without normals is a cloud of exact spheres (kind "points", ``Mesh.point_radii``): each point is
-a leaf primitive of its mesh's tree, moving with its point keys, with a colour of its own.
+A ``Points`` prim is a cloud of exact spheres (kind "points", ``Mesh.point_radii``), or of exact discs facing its
+authored normals (kind "discs", the normals in ``Mesh.normals``): each point is a leaf primitive of its mesh's tree,
+moving with its point keys, with a colour of its own.
 
 A still implicit prim is imported as its shape and a one-triangle stand-in; its tessellation is made only for the
 meshes the rules above keep as triangles (``realize_tessellations``).
@@ -25,7 +26,8 @@ from renderer.scene.model import LIGHT_MESH, AnalyticShape, Scene
 
 SHAPE_BOX_PAD = 1.0 + 1e-5  # a shape's box, relative to its size: float32 rounding never clips it
 # Shape codes of the kernels (``accel.analytic``); 0: a triangle mesh
-SHAPE_CODES = {"sphere": 1, "frustum": 2, "capsule": 3, "points": 4}
+SHAPE_CODES = {"sphere": 1, "frustum": 2, "capsule": 3, "points": 4, "discs": 5}
+CLOUD_KINDS = ("points", "discs")  # a mesh of many small shapes, one per point (``Mesh.point_radii``)
 
 
 def analytic_shapes(scene: Scene) -> list[AnalyticShape | None]:
@@ -45,7 +47,7 @@ def _usable(m) -> bool:
     by point and carry a colour each (a hit reads its point's); it must still be the spheres, not realized."""
     if m.shape is None or m.uvs is not None:
         return False
-    if m.shape.kind == "points":
+    if m.shape.kind in CLOUD_KINDS:
         return m.point_radii is not None
     return not m.deforming and m.colors is None
 

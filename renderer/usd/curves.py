@@ -15,9 +15,9 @@ Curves (``widths`` are diameters; ``primvars:widths`` wins over ``widths``; unau
 * cubic segments are cut into 1..16 sub-segments so the chord error stays under a quarter pixel (a hundredth
   of the segment when no camera is known).
 
-Points (``widths`` are diameters, default ``DEFAULT_WIDTH``): authored ``normals`` give discs facing them;
-without, a cloud of exact spheres (``_sphere_cloud``, ``scene.analytic``) whose triangles, made only if
-something needs them (an emissive cloud, a CSG operand), are camera-facing hexagons (4 triangles) under
+Points (``widths`` are diameters, default ``DEFAULT_WIDTH``): a cloud of exact spheres, or of exact discs facing
+authored ``normals`` (``_point_cloud``, ``scene.analytic``), whose triangles, made only if something needs them (an
+emissive cloud, a CSG operand), are polygons facing the normals, or camera-facing hexagons (4 triangles) under
 ``DISC_PX`` pixels and icospheres of 20 / 80 / 320 triangles by size above. With no camera (automatic framing) or
 inside PointInstancer prototypes the view is unknown: curves are 6-sided tubes, points 80-triangle spheres.
 
@@ -219,37 +219,43 @@ def _points(prim, keys, frame: float, warn, view: View | None, path: str) -> Cur
             colors = np.asarray(dc[0], np.float64)[idx]
         else:
             warn("point displayColor that is not per point: its mean used", path)
-    if normals is None:  # spheres: exact, one leaf primitive each; triangles only if something needs them
-        return _sphere_cloud(times, centres, wd, idx, n, colors, view)
-    return _tessellated_points(times, centres, wd, idx, n, colors, view, normals)
+    # exact spheres, or discs facing the normals: one leaf primitive each; triangles only if something needs them
+    return _point_cloud(times, centres, wd, idx, n, colors, view, None if normals is None else normals[idx])
 
 
-def _sphere_cloud(times, centres, wd, idx, n: int, colors, view) -> CurveGeom:
-    """Points as exact spheres (``scene.analytic``, kind "points"): point j is "triangle" (j, j, j) of the stand-in,
-    which carries its material and colour; ``tessellate`` gives the icospheres and discs of
-    ``_tessellated_points``, should something need triangles (an emissive cloud, a CSG operand)."""
+def _point_cloud(times, centres, wd, idx, n: int, colors, view, normals) -> CurveGeom:
+    """Points as exact spheres (``scene.analytic``, kind "points"), or as exact discs facing ``normals`` (kind
+    "discs"): point j is "triangle" (j, j, j) of the stand-in, which carries its material, colour and a disc's
+    normal; ``tessellate`` gives the icospheres and polygons of ``_tessellated_points``, should something need
+    triangles (an emissive cloud, a CSG operand)."""
     k = len(idx)
     tris = np.repeat(np.arange(k, dtype=np.int32)[:, None], 3, axis=1)
+    corner = None if normals is None else np.ascontiguousarray(np.repeat(normals[:, None, :], 3, axis=1), np.float32)
     return CurveGeom(
         point_times=np.asarray(times),
         points=np.ascontiguousarray(centres, np.float32),
         triangles=tris,
         tri_faces=idx.astype(np.int64),
         num_faces=int(n),
-        normals=None,
+        normals=corner,
         uvs=None,
         double_sided=True,
-        shape=AnalyticShape("points", float(wd.max()) / 2),
+        shape=AnalyticShape("points" if normals is None else "discs", float(wd.max()) / 2),
         point_radii=np.ascontiguousarray(wd / 2, np.float32),
-        solid=np.ones(k, bool),  # a sphere is closed: a glass bead refracts
+        solid=np.full(k, normals is None),  # a sphere is closed (a glass bead refracts), a disc is thin
         colors=None if colors is None else np.ascontiguousarray(np.repeat(colors[:, None, :], 3, axis=1), np.float32),
-        tessellate=functools.partial(_points_as_triangles, times, centres, wd, idx, n, view),
+        tessellate=functools.partial(_points_as_triangles, times, centres, wd, idx, n, view, normals),
     )
 
 
-def _points_as_triangles(times, centres, wd, idx, n: int, view):
-    """``Mesh.tessellate`` of a sphere cloud: its icospheres and camera-facing discs (thin, as before)."""
-    out = _tessellated_points(times, centres, wd, idx, n, None, view, None)
+def _points_as_triangles(times, centres, wd, idx, n: int, view, normals):
+    """``Mesh.tessellate`` of a point cloud: its icospheres and camera-facing discs, or its polygons facing the
+    normals (thin, as before)."""
+    full = None
+    if normals is not None:  # _tessellated_points indexes normals by point
+        full = np.zeros((n, 3))
+        full[idx] = normals
+    out = _tessellated_points(times, centres, wd, idx, n, None, view, full)
     origin = np.searchsorted(idx, out.tri_faces)  # each triangle's point, as an index into the kept points
     return out.points, out.triangles, out.normals, origin, out.solid
 
