@@ -51,7 +51,7 @@ class Geometry:
     blas_child: wp.array(dtype=wp.vec4i)
     blas_prim: wp.array(dtype=wp.int32)  # local triangle index per leaf slot
     # Still meshes (one point key): each leaf slot's triangle as a vertex and two edges, contiguous in leaf
-    # order, so a leaf's triangle tests read consecutive memory instead of gathering indexed vertices. A sphere
+    # order, so a leaf's triangle tests read consecutive memory instead of gathering indexed vertices. A point
     # cloud (SHAPE_POINTS, SHAPE_DISCS): the slot's centre in leaf_v0 (still clouds), its radius in leaf_e1.x and a
     # disc's unit normal in leaf_e2.
     leaf_v0: wp.array(dtype=wp.vec3)
