@@ -35,7 +35,6 @@ from renderer.lights.table import upload_lights
 from renderer.motion.transform import matrix_at
 # MAX_SPP and RenderOptions are re-exported: ``renderer.render`` is the library API the README shows.
 from renderer.options import AOV_NAMES, MAX_DEPTH, MAX_PIXELS, MAX_SPP, TIME_FILTERS, RenderOptions  # noqa: F401
-from renderer.scene.analytic import realize_tessellations
 from renderer.scene.flatten import flatten_still_instances
 from renderer.scene.model import Scene
 from renderer.shading.materials import upload_material_textures, upload_materials
@@ -118,7 +117,7 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> Prepar
     if width * height > MAX_PIXELS:
         raise SettingsError(f"image of {width}x{height} pixels is too large")
     dof = options.dof and not scene.render_settings.disable_depth_of_field
-    flat = flatten_still_instances(realize_tessellations(scene))
+    flat = flatten_still_instances(scene)
     geometry, stats = upload_geometry(flat, device)
     warnings = list(scene.warnings)
     textures = upload_material_textures(flat.materials, device, warn=warnings.append)

@@ -136,6 +136,16 @@ def test_walks_hit_a_scaled_sphere_and_a_moving_one_exactly_and_shadows_cross_ea
     assert sphere_hits > n // 8
 
 
+# Each implicit prim kind, with its USD parameters and spine axis (tapered cylinder and cone included)
+SHAPE_CASES = [
+    ("Sphere", (0.9,), "Z"),
+    ("Cylinder", (0.6, 0.6, 1.8), "X"),
+    ("Cylinder_1", (0.3, 0.8, 1.5), "Z"),
+    ("Cone", (0.7, 0.0, 1.6), "Y"),
+    ("Capsule", (0.45, 0.45, 1.2), "Y"),
+]
+
+
 def _cloud_mesh(centres, radii, normals=None, name="cloud"):
     """A point cloud as the importer makes it (``curves._point_cloud``): centres (P, N, 3), radii (N,), and for
     discs their unit normals (N, 3)."""
@@ -217,13 +227,7 @@ def test_point_clouds_are_exact_spheres_or_discs_to_the_walks(moving, kind):
     assert hits > m // 4
 
 
-@pytest.mark.parametrize("kind, params, axis", [
-    ("Sphere", (0.9,), "Z"),
-    ("Cylinder", (0.6, 0.6, 1.8), "X"),
-    ("Cylinder_1", (0.3, 0.8, 1.5), "Z"),
-    ("Cone", (0.7, 0.0, 1.6), "Y"),
-    ("Capsule", (0.45, 0.45, 1.2), "Y"),
-])
+@pytest.mark.parametrize("kind, params, axis", SHAPE_CASES)
 def test_a_shapes_world_box_is_exact(kind, params, axis):
     """The top level's box of a transformed shape (rotated, sheared, scaled unevenly, mirrored) holds all of its
     fine tessellation, and that tessellation reaches it to within its facets' error (the box of the object
@@ -450,13 +454,7 @@ def _tessellated_hits(p, tris, nrm, o, d):
     return t[k], n / np.linalg.norm(n), int(ok.sum())
 
 
-@pytest.mark.parametrize("kind, params, axis", [
-    ("Sphere", (0.9,), "Z"),
-    ("Cylinder", (0.6, 0.6, 1.8), "X"),
-    ("Cylinder_1", (0.3, 0.8, 1.5), "Z"),
-    ("Cone", (0.7, 0.0, 1.6), "Y"),
-    ("Capsule", (0.45, 0.45, 1.2), "Y"),
-])
+@pytest.mark.parametrize("kind, params, axis", SHAPE_CASES)
 def test_each_shape_agrees_with_its_own_tessellation(kind, params, axis):
     """The exact shape against brute force over the 64-segment tessellation it replaces, on rays from all around:
     the same rays hit (bar a few grazing the silhouette), at the same distances and with the same outward normals up

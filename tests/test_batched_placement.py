@@ -6,8 +6,8 @@ import numpy as np
 from pxr import Usd, UsdGeom
 
 from renderer.accel.build import build_bvh
-from renderer.accel.upload import _world_boxes, instance_key_bounds
-from renderer.motion.transform import make_transform, matrices_at, matrix_at
+from renderer.accel.upload import instance_key_bounds
+from renderer.motion.transform import make_transform, matrices_at, matrix_at, place_boxes
 from renderer.usd.importer import load_scene
 from renderer.usd.motion import motion_transform
 
@@ -49,9 +49,13 @@ def test_still_boxes_in_one_batch_equal_instance_key_bounds():
             self.transform = xf
 
     root = np.array([bvh.node_lower[0, 0], bvh.node_upper[0, 0]], np.float64)
-    lo, hi = _world_boxes(matrices_at(xfs, 0.0), np.repeat(root[None], len(xfs), 0))
+    lo, hi = place_boxes(matrices_at(xfs, 0.0), *(np.repeat(root[None, k], len(xfs), 0) for k in (0, 1)))
+    corners = np.array([[root[(i >> a) & 1, a] for a in range(3)] for i in range(8)])
     for i, xf in enumerate(xfs):
-        klo, khi = instance_key_bounds(Inst(xf), bvh, np.zeros(1), 3)
+        m = matrix_at(xf, 0.0)
+        w = corners @ m[:3, :3].T + m[:3, 3]  # one box, one matrix, as the upload placed them before batching
+        assert np.array_equal(lo[i], w.min(0)) and np.array_equal(hi[i], w.max(0))
+        klo, khi = instance_key_bounds(Inst(xf), bvh, np.zeros(1), 3)  # the same box at every key
         assert np.array_equal(klo, np.repeat(lo[i:i + 1], 3, 0)) and np.array_equal(khi, np.repeat(hi[i:i + 1], 3, 0))
 
 

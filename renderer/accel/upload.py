@@ -17,7 +17,7 @@ from renderer.accel.intersect import Geometry
 from renderer.accel.wide import WideBvh, collapse
 from renderer.accel.triangle_kernels import leaf_triangles, triangle_boxes
 from renderer.motion.kernels import upload_keys
-from renderer.motion.transform import matrices_at, matrix_at
+from renderer.motion.transform import matrices_at, matrix_at, place_boxes
 from renderer.scene.analytic import (CLOUD_KINDS, SHAPE_BOX_PAD, analytic_shapes, realize_tessellations,
                                      shape_bounds, shape_table, shape_world_boxes)
 from renderer.scene.mesh_facts import is_closed
@@ -58,12 +58,6 @@ def _mesh_prim_bounds(mesh: Mesh, device: str = "cpu") -> tuple[np.ndarray, np.n
     return triangle_boxes(mesh.points, mesh.triangles, device)
 
 
-def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """(..., 8, 3) corners of boxes (..., 3)."""
-    sel = np.array([[(i >> a) & 1 for a in range(3)] for i in range(8)], bool)
-    return np.where(sel, hi[..., None, :], lo[..., None, :])
-
-
 def _mesh_box_at(bvh: Bvh, times: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Root box of a mesh BVH at times s (n,), interpolated between its point keys."""
     lo, hi = bvh.node_lower[0].astype(np.float64), bvh.node_upper[0].astype(np.float64)  # (P, 3)
@@ -77,21 +71,7 @@ def _mesh_box_at(bvh: Bvh, times: np.ndarray, s: np.ndarray) -> tuple[np.ndarray
 
 def _world_box(xf: MotionTransform, lo: np.ndarray, hi: np.ndarray, s: np.ndarray):
     """World boxes (n, 3) of object boxes lo/hi (n, 3) under xf at times s (n,)."""
-    corners = _box_corners(lo, hi)  # (n, 8, 3)
-    out_lo, out_hi = np.empty_like(lo), np.empty_like(hi)
-    for i, si in enumerate(s):
-        m = matrix_at(xf, float(si))
-        w = corners[i] @ m[:3, :3].T + m[:3, 3]
-        out_lo[i], out_hi[i] = w.min(0), w.max(0)
-    return out_lo, out_hi
-
-
-def _world_boxes(m: np.ndarray, box: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """World boxes (N, 3), (N, 3) of object boxes ``box`` (N, 2, 3) under column-vector matrices m (N, 4, 4);
-    the same arithmetic as ``_world_box`` at one time."""
-    corners = _box_corners(box[:, 0], box[:, 1])  # (N, 8, 3)
-    w = np.matmul(corners, np.swapaxes(m[:, :3, :3], 1, 2)) + m[:, None, :3, 3]
-    return w.min(1), w.max(1)
+    return place_boxes(np.array([matrix_at(xf, float(si)) for si in s]), lo, hi)
 
 
 def instance_key_bounds(inst: Instance, mesh_bvh: Bvh, mesh_times: np.ndarray, nkeys: int):
@@ -298,9 +278,9 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
                       for inst in scene.instances], bool)
     if still.any():  # instance_key_bounds of the still instances in one batch: their box at time 0 at every key
         idx = np.nonzero(still)[0]
-        root = np.array([[b.node_lower[0, 0], b.node_upper[0, 0]] for b in blas], np.float64)  # (M, 2, 3)
-        wlo, whi = _world_boxes(o2w[idx], root[[scene.instances[i].mesh for i in idx]])
         mesh_of = np.array([scene.instances[i].mesh for i in idx], np.int64)
+        root = np.array([[b.node_lower[0, 0], b.node_upper[0, 0]] for b in blas], np.float64)[mesh_of]  # (n, 2, 3)
+        wlo, whi = place_boxes(o2w[idx], root[:, 0], root[:, 1])
         for mi in np.unique(mesh_of):  # an exact shape: the box of the shape itself, not of its box's corners
             shape = shapes[mi]
             if shape is not None and shape.kind not in CLOUD_KINDS:

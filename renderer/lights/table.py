@@ -22,7 +22,8 @@ from renderer.lights.linking import Links, upload_links
 from renderer.lights.select import SelectEstimate, Selection, upload_selection
 from renderer.lights.shaping import mean_shaping
 from renderer.motion.kernels import MotionKeys, upload_keys
-from renderer.motion.transform import matrices_at, matrix_at
+from renderer.motion.transform import matrices_at, matrix_at, place_boxes
+from renderer.scene.analytic import object_box
 from renderer.scene.model import (
     LIGHT_CYLINDER,
     LIGHT_DISK,
@@ -90,20 +91,14 @@ def _luminance(rgb) -> float:
 def scene_sphere(scene: Scene) -> tuple[np.ndarray, float]:
     """Centre and radius of a sphere around the scene's geometry at the shutter start (origin, 1 if empty)."""
     # each mesh's box once, then every instance's box corners placed in one batch
-    pads = [float(m.point_radii.max()) if m.point_radii is not None and len(m.point_radii) else 0.0
-            for m in scene.meshes]  # a cloud of spheres reaches its radius beyond its centres
-    boxes = np.array([np.stack([m.points[0].min(0) - pad, m.points[0].max(0) + pad]).astype(np.float64)
-                      if len(m.points[0]) else np.full((2, 3), np.nan)
-                      for m, pad in zip(scene.meshes, pads)]).reshape(-1, 2, 3)
+    boxes = np.array([np.stack(object_box(m, key=0)) if len(m.points[0]) else np.full((2, 3), np.nan)
+                      for m in scene.meshes]).reshape(-1, 2, 3)
     insts = [i for i in scene.instances if len(scene.meshes[i.mesh].points[0])]
     if not insts:
         return np.zeros(3), 1.0
-    m = matrices_at([i.transform for i in insts], 0.0)
     b = boxes[[i.mesh for i in insts]]  # (N, 2, 3)
-    sel = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)])  # (8, 3) low/high per axis
-    corners = b[:, sel, [0, 1, 2]]  # (N, 8, 3)
-    w = np.matmul(corners, np.swapaxes(m[:, :3, :3], 1, 2)) + m[:, None, :3, 3]
-    lo, hi = w.reshape(-1, 3).min(0), w.reshape(-1, 3).max(0)
+    wlo, whi = place_boxes(matrices_at([i.transform for i in insts], 0.0), b[:, 0], b[:, 1])
+    lo, hi = wlo.min(0), whi.max(0)
     if not np.isfinite(lo).all():
         return np.zeros(3), 1.0
     return (lo + hi) / 2, float(max(0.5 * np.linalg.norm(hi - lo), 1e-6))

@@ -52,9 +52,10 @@ def _usable(m) -> bool:
     return not m.deforming and m.colors is None
 
 
-def object_box(mesh) -> tuple[np.ndarray, np.ndarray]:
-    """Object-space box (lo, hi) float64 of a mesh over its point keys, a point cloud's spheres included."""
-    flat = mesh.points.reshape(-1, 3)
+def object_box(mesh, key: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Object-space box (lo, hi) float64 of a mesh over its point keys (or at one ``key``), a point cloud's
+    spheres included."""
+    flat = (mesh.points if key is None else mesh.points[key]).reshape(-1, 3)
     pad = float(mesh.point_radii.max()) if mesh.point_radii is not None and len(mesh.point_radii) else 0.0
     return flat.min(axis=0).astype(np.float64) - pad, flat.max(axis=0).astype(np.float64) + pad
 

@@ -13,7 +13,7 @@ from dataclasses import replace
 import numpy as np
 
 from renderer.motion.transform import matrix_at
-from renderer.scene.analytic import analytic_shapes
+from renderer.scene.analytic import analytic_shapes, realize_tessellations
 from renderer.scene.mesh_facts import is_closed
 from renderer.scene.model import LIGHT_MESH, Instance, Mesh, MotionTransform, Scene
 
@@ -36,7 +36,8 @@ def flatten_still_instances(scene: Scene) -> Scene:
         return scene  # light linking is per instance: merging would lose which instance is which
     one_sided = {lt.instance for lt in scene.lights if lt.kind == LIGHT_MESH and lt.uniform}  # MeshLightAPI
     users = np.bincount([i.mesh for i in scene.instances], minlength=len(scene.meshes))
-    analytic = analytic_shapes(scene)
+    analytic = analytic_shapes(realize_tessellations(scene))  # a stand-in that cannot be its shape is merged as
+    # the triangles it stands for
     merge, keep = [], []
     copied = 0
     for idx, inst in enumerate(scene.instances):
