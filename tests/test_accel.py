@@ -10,7 +10,8 @@ from renderer.shading.materials import Materials, upload_material_textures, uplo
 from renderer.accel.occlusion import hit_uv, transmittance
 from renderer.shading.textures import Textures
 from renderer.accel.build import build_bvh
-from renderer.accel.upload import instance_key_bounds, upload_geometry
+from renderer.accel.instance_bounds import instance_key_bounds
+from renderer.accel.upload import upload_geometry
 from renderer.motion.transform import make_transform, matrix_at
 from renderer.scene.model import Camera, Instance, Material, Mesh, MotionTransform, Scene
 

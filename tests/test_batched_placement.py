@@ -6,7 +6,7 @@ import numpy as np
 from pxr import Usd, UsdGeom
 
 from renderer.accel.build import build_bvh
-from renderer.accel.upload import instance_key_bounds
+from renderer.accel.instance_bounds import instance_key_bounds
 from renderer.motion.transform import make_transform, matrices_at, matrix_at, place_boxes
 from renderer.usd.importer import load_scene
 from renderer.usd.motion import motion_transform

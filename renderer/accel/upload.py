@@ -1,7 +1,8 @@
 """Uploading a Scene's meshes and instances into the two-level, time-keyed hierarchy of ``accel``.
 
-Builds one bottom-level BVH per mesh (bounds per point key; binned SAH, then collapsed to four-wide nodes), the instances' world bounds on a uniform grid of
-top-level time keys (padded so that the blend between two keys contains the curved path in between), and the
+Builds one bottom-level BVH per mesh (bounds per point key; binned SAH, then collapsed to four-wide nodes), the
+instances' world bounds on a uniform grid of top-level time keys (``instance_bounds``: placed from a cut of the
+mesh's hierarchy, padded so that the blend between two keys contains the curved path in between), and the
 top-level BVH over them.
 """
 from __future__ import annotations
@@ -13,18 +14,18 @@ import warp as wp
 
 from renderer.accel.build import Bvh, build_bvh
 from renderer.accel.csg import OPERATIONS as CSG_OPERATIONS
+from renderer.accel.instance_bounds import box_cut, cut_size, instance_key_bounds, still_world_boxes
 from renderer.accel.intersect import Geometry
 from renderer.accel.wide import WideBvh, collapse
 from renderer.accel.triangle_kernels import leaf_triangles, triangle_boxes
 from renderer.motion.kernels import upload_keys
-from renderer.motion.transform import matrices_at, matrix_at, place_boxes
+from renderer.motion.transform import matrices_at
 from renderer.scene.analytic import (CLOUD_KINDS, SHAPE_BOX_PAD, analytic_shapes, realize_tessellations,
                                      shape_bounds, shape_table, shape_world_boxes)
 from renderer.scene.mesh_facts import is_closed
-from renderer.scene.model import Instance, Mesh, MotionTransform, Scene
+from renderer.scene.model import Mesh, MotionTransform, Scene
 
 MAX_TLAS_KEYS = 33  # top-level time keys for moving scenes (32 segments over the shutter)
-SUBSTEPS = 8  # samples per top-level segment when measuring how far curved motion leaves the linear blend
 # Bottom-level leaves of up to 4 triangles, SAH node cost 2 triangle tests: for the four-wide walk, 5-13 % faster
 # than the 8 / 4 that suited the binary one (320x180, 16 spp, one thread, 2 runs each: heavy 2.10 vs 2.22 s,
 # cornell 1.67 vs 1.91, gloss 2.08 vs 2.19, motion 1.75 vs 1.80), at 59 instead of 50 bytes per triangle on the
@@ -56,60 +57,6 @@ def _mesh_prim_bounds(mesh: Mesh, device: str = "cpu") -> tuple[np.ndarray, np.n
         hi = np.nextafter((c + r).astype(np.float32), np.float32(np.inf))
         return np.ascontiguousarray(lo), np.ascontiguousarray(hi)
     return triangle_boxes(mesh.points, mesh.triangles, device)
-
-
-def _mesh_box_at(bvh: Bvh, times: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Root box of a mesh BVH at times s (n,), interpolated between its point keys."""
-    lo, hi = bvh.node_lower[0].astype(np.float64), bvh.node_upper[0].astype(np.float64)  # (P, 3)
-    if len(times) == 1:
-        return np.repeat(lo, len(s), 0), np.repeat(hi, len(s), 0)
-    idx = np.clip(np.searchsorted(times, s, side="right"), 1, len(times) - 1)
-    t0, t1 = times[idx - 1], times[idx]
-    u = np.clip((s - t0) / np.maximum(t1 - t0, 1e-30), 0.0, 1.0)[:, None]
-    return lo[idx - 1] * (1 - u) + lo[idx] * u, hi[idx - 1] * (1 - u) + hi[idx] * u
-
-
-def _world_box(xf: MotionTransform, lo: np.ndarray, hi: np.ndarray, s: np.ndarray):
-    """World boxes (n, 3) of object boxes lo/hi (n, 3) under xf at times s (n,)."""
-    return place_boxes(np.array([matrix_at(xf, float(si)) for si in s]), lo, hi)
-
-
-def instance_key_bounds(inst: Instance, mesh_bvh: Bvh, mesh_times: np.ndarray, nkeys: int):
-    """World boxes of an instance at ``nkeys`` uniform shutter times, padded for curved motion.
-
-    Between two keys the traversal blends the key boxes linearly; the true box at an intermediate time (a
-    rotation, an arc) may poke out of that blend. We measure the excess at SUBSTEPS times per segment and grow
-    both keys of the segment by it, plus a curvature bound for the motion between measured times.
-    """
-    if nkeys == 1 or (inst.transform.num_keys == 1 and len(mesh_times) == 1):
-        lo, hi = _mesh_box_at(mesh_bvh, mesh_times, np.zeros(1))
-        wlo, whi = _world_box(inst.transform, lo, hi, np.zeros(1))
-        return np.repeat(wlo, nkeys, 0), np.repeat(whi, nkeys, 0)
-    key_t = np.linspace(0.0, 1.0, nkeys)
-    lo, hi = _mesh_box_at(mesh_bvh, mesh_times, key_t)
-    klo, khi = _world_box(inst.transform, lo, hi, key_t)
-    nseg = nkeys - 1
-    frac = (np.arange(1, SUBSTEPS) / SUBSTEPS)
-    sub_t = (key_t[:-1, None] + frac[None, :] / nseg).reshape(-1)
-    slo, shi = _mesh_box_at(mesh_bvh, mesh_times, sub_t)
-    wlo, whi = _world_box(inst.transform, slo, shi, sub_t)
-    wlo = wlo.reshape(nseg, SUBSTEPS - 1, 3)
-    whi = whi.reshape(nseg, SUBSTEPS - 1, 3)
-    f = frac[None, :, None]
-    blend_lo = klo[:-1, None] * (1 - f) + klo[1:, None] * f
-    blend_hi = khi[:-1, None] * (1 - f) + khi[1:, None] * f
-    # all measured boxes of a segment, its two ends included: their second differences bound how far the
-    # path can bulge between measured times (a chord of a curve with |f''| h^2 = D2 deviates by <= D2 / 8;
-    # we take D2 / 2). Straight-line motion has none, so a fast linear mover stays exactly as tight.
-    seq_lo = np.concatenate([klo[:-1, None], wlo, klo[1:, None]], 1)
-    seq_hi = np.concatenate([khi[:-1, None], whi, khi[1:, None]], 1)
-    d2 = np.maximum(np.abs(np.diff(seq_lo, 2, axis=1)).max(1), np.abs(np.diff(seq_hi, 2, axis=1)).max(1))
-    pad_seg = np.maximum((blend_lo - wlo).max(1), (whi - blend_hi).max(1))
-    pad_seg = np.maximum(pad_seg, 0.0) + 0.5 * d2  # (nseg, 3)
-    pad = np.zeros((nkeys, 3))
-    pad[:-1] = np.maximum(pad[:-1], pad_seg)
-    pad[1:] = np.maximum(pad[1:], pad_seg)
-    return klo - pad, khi + pad
 
 
 def _tlas_key_count(scene: Scene) -> int:
@@ -276,22 +223,30 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     o2w = matrices_at([inst.transform for inst in scene.instances], 0.0) if ninst else np.eye(4)[None]
     still = np.array([nk == 1 or (inst.transform.num_keys == 1 and len(scene.meshes[inst.mesh].point_times) == 1)
                       for inst in scene.instances], bool)
-    if still.any():  # instance_key_bounds of the still instances in one batch: their box at time 0 at every key
+    cuts = {}  # mesh -> the node boxes its instances are placed from (instance_bounds)
+
+    def cut(mi: int) -> np.ndarray:
+        if mi not in cuts:
+            cuts[mi] = box_cut(blas[mi], cut_size(ninst))
+        return cuts[mi]
+
+    if still.any():  # instance_key_bounds of the still instances in batches: their box at time 0 at every key
         idx = np.nonzero(still)[0]
         mesh_of = np.array([scene.instances[i].mesh for i in idx], np.int64)
-        root = np.array([[b.node_lower[0, 0], b.node_upper[0, 0]] for b in blas], np.float64)[mesh_of]  # (n, 2, 3)
-        wlo, whi = place_boxes(o2w[idx], root[:, 0], root[:, 1])
-        for mi in np.unique(mesh_of):  # an exact shape: the box of the shape itself, not of its box's corners
+        wlo, whi = np.empty((len(idx), 3)), np.empty((len(idx), 3))
+        for mi in np.unique(mesh_of):
+            j = np.nonzero(mesh_of == mi)[0]
+            wlo[j], whi[j] = still_world_boxes(o2w[idx[j]], blas[mi], cut(mi))
             shape = shapes[mi]
-            if shape is not None and shape.kind not in CLOUD_KINDS:
-                j = np.nonzero(mesh_of == mi)[0]
+            if shape is not None and shape.kind not in CLOUD_KINDS:  # an exact shape: the box of the shape itself
                 elo, ehi = shape_world_boxes(shape, o2w[idx[j]])
                 wlo[j], whi[j] = np.maximum(wlo[j], elo), np.minimum(whi[j], ehi)
         lo[:, idx], hi[:, idx] = wlo[None], whi[None]
     for i in np.nonzero(~still)[0]:
         inst = scene.instances[i]
         mesh = scene.meshes[inst.mesh]
-        klo, khi = instance_key_bounds(inst, blas[inst.mesh], mesh.point_times.astype(np.float64), nk)
+        klo, khi = instance_key_bounds(inst, blas[inst.mesh], mesh.point_times.astype(np.float64), nk,
+                                       cut(inst.mesh))
         lo[:, i], hi[:, i] = klo, khi
     direct = direct_instance(scene, lo[0], hi[0])  # walked outside the top level
     others = np.array([i for i in range(ninst) if i != direct], np.int64)
