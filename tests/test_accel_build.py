@@ -311,6 +311,43 @@ def test_sah_beats_naive_trees():
         assert ours < 0.05 * shuffled, (ours, shuffled)
 
 
+@pytest.mark.parametrize("k", [1, 3])
+def test_sampled_binning_keeps_every_invariant(k):
+    """Large nodes choose their split from a strided sample (``sample_target``): forced down to 8 here so that
+    nearly every node samples, on random boxes, identical boxes, points in a plane and coincident centroids,
+    the tree is still a valid one (each primitive in one leaf, boxes contain, depth capped)."""
+    rng = np.random.default_rng(12)
+    cases = [random_boxes(3000, k, seed=31)]
+    ident = np.broadcast_to(np.float32([1.0, 2.0, 3.0]), (k, 600, 3)).copy()
+    cases.append((ident, ident + 0.5))
+    pts = np.repeat(rng.random((1, 1500, 3)).astype(np.float32), k, 0)
+    pts[:, :700, 2] = 0.5
+    cases.append((pts, pts.copy()))
+    half = np.repeat(rng.uniform(0.0, 10.0, (1, 400, 1)).astype(np.float32), k, 0)
+    cases.append((-half * np.ones(3, np.float32), half * np.ones(3, np.float32)))
+    for lower, upper in cases:
+        bvh = build_bvh(lower, upper, max_leaf=4, sample_target=8)
+        check_bvh(bvh, lower, upper, max_leaf=4)
+        assert bvh.depth() <= 48
+
+
+def test_sampled_binning_costs_little():
+    """The default sample target: SAH cost within 1 % of binning every primitive on 40 000 random and clustered
+    boxes (measured on the scenes of the shared assets, peer references and bench: at most +0.5 %, mean
+    +0.03 %), and meshes below twice the target build exactly as before."""
+    from renderer.accel.build import SAMPLE_TARGET
+
+    for lower, upper in (random_boxes(40_000, 1, seed=18), clustered_boxes(40_000, seed=19)):
+        full = build_bvh(lower, upper, max_leaf=4, sample_target=0)
+        sampled = build_bvh(lower, upper, max_leaf=4)
+        cost = [sah_cost(b.node_lower[:, 0], b.node_upper[:, 0], b.node_a, b.node_b) for b in (full, sampled)]
+        assert cost[1] < 1.01 * cost[0], cost
+    lower, upper = random_boxes(2 * SAMPLE_TARGET - 1, 1, seed=20)
+    a = build_bvh(lower, upper, sample_target=0)
+    b = build_bvh(lower, upper)
+    assert np.array_equal(a.prim_order, b.prim_order) and np.array_equal(a.node_a, b.node_a)
+
+
 def refit(bvh: Bvh, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Node boxes of bvh's topology for primitive boxes lo, hi (N, 3)."""
     m = bvh.num_nodes

@@ -29,7 +29,13 @@ SAH constants: ``C_TRAV = 1`` for visiting an inner node (two lerped child-box s
 moving-triangle test) and ``C_ISECT = 1`` per primitive; a node with ``n <= max_leaf`` primitives stays a leaf
 when ``C_ISECT * n <= C_TRAV + C_ISECT * (A_l n_l + A_r n_r) / A`` (key-averaged half surface areas); larger
 nodes are always split. ``NUM_BINS = 16`` per axis (``min(16, n)`` for a node of n primitives), all
-three axes.
+three axes. A node of n >= 2 ``SAMPLE_TARGET`` primitives chooses its split from every (n // SAMPLE_TARGET)-th
+of them (the partition still moves all): binning is half of a build, and the top levels bin every primitive
+once per level. At 4096 the 1M-triangle heavy scene builds 17 % faster (0.66 -> 0.55 s, ``build_topology``
+alone) with its SAH cost unchanged (4.28 -> 4.29); over the 25 meshes of at least 2048 triangles in the shared
+assets, peer references and bench scenes the SAH cost moved +0.03 % on average, +0.5 % at most. (1024 was
+faster still, 0.52 s, but cost a 540k-triangle layout 3.4 %; 512 cost the gloss scene's 4k triangles 12 %:
+a few large triangles a sparse sample misses weigh on the top split.)
 
 Degenerate inputs terminate: coincident centroids split by equal counts, zero-area nodes (points) split at the
 most balanced bin boundary, and the tree depth (nodes on the longest root-to-leaf path) is kept
@@ -54,6 +60,7 @@ NUM_BINS = 16
 C_TRAV = 1.0
 C_ISECT = 1.0
 MAX_DEPTH = 48
+SAMPLE_TARGET = 4096
 EMPTY = 3.4e38  # empty box: lower = +EMPTY, upper = -EMPTY
 
 
@@ -144,6 +151,7 @@ def build_bvh(
     max_depth: int = MAX_DEPTH,
     c_trav: float = C_TRAV,
     c_isect: float = C_ISECT,
+    sample_target: int = SAMPLE_TARGET,
 ) -> Bvh:
     """Binned-SAH BVH over primitives with boxes ``lower, upper (K, N, 3)`` at K time keys (``(N, 3)`` means
     K = 1). Returns NumPy arrays in the layout of ``Bvh``; runs as four single-thread Warp launches on ``device``
@@ -200,6 +208,7 @@ def build_bvh(
         params.num_bins = int(num_bins)
         params.c_trav = float(c_trav)
         params.c_isect = float(c_isect)
+        params.sample_target = int(sample_target)
 
         bins = K_.BinScratch()
         bins.lo = wp.empty(3 * num_bins * nkeys, dtype=wp.vec3)

@@ -33,6 +33,7 @@ class BuildParams:
     num_bins: int  # SAH bins per axis
     c_trav: float  # SAH cost of visiting an inner node (two child-box tests), in units of one primitive test
     c_isect: float  # SAH cost of one primitive test
+    sample_target: int  # a node of n >= 2 * sample_target primitives bins every (n // sample_target)-th only
 
 
 @wp.struct
@@ -294,8 +295,14 @@ def build_topology(
                 reset_boxes(bins.lo, bins.hi, 0, 3 * nb * nk)
                 for j in range(3 * nb):
                     bins.count[j] = 0
+                # a large node's split from a strided sample of its primitives (the partition below still moves
+                # every one; a sweep only takes bins with samples on both sides, so neither child is empty)
+                step = int(1)
+                if p.sample_target > 0:
+                    step = wp.max(1, n // p.sample_target)
+                binned = (n + step - 1) // step
                 if nk == 1:  # the still case, without the per-key loops
-                    for i in range(start, end):
+                    for i in range(start, end, step):
                         c = cen[i]
                         lo = box_lo[i]
                         hi = box_hi[i]
@@ -315,7 +322,7 @@ def build_topology(
                             bins.lo[j2] = wp.min(bins.lo[j2], lo)
                             bins.hi[j2] = wp.max(bins.hi[j2], hi)
                 else:
-                    for i in range(start, end):
+                    for i in range(start, end, step):
                         c = cen[i]
                         if s0 > 0.0:
                             j0 = bin_of(c[0], clo[0], s0, nb)
@@ -366,11 +373,11 @@ def build_topology(
                         ws = s2
                     if ws > 0.0:
                         wcnt = int(0)
-                        best_imbalance = int(n + 1)
+                        best_imbalance = int(binned + 1)
                         for b in range(1, nb):
                             wcnt += bins.count[wa * nb + b - 1]
-                            if wcnt > 0 and wcnt < n:
-                                imbalance = wp.abs(2 * wcnt - n)
+                            if wcnt > 0 and wcnt < binned:
+                                imbalance = wp.abs(2 * wcnt - binned)
                                 if imbalance < best_imbalance:
                                     best_imbalance = imbalance
                                     best_axis = wa
