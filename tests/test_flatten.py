@@ -44,3 +44,22 @@ def test_merged_mesh_keeps_per_triangle_solidity_lights_and_positions():
     assert merged.material_ids[4:6].tolist() == [1, 1]
     mover = flat.instances[1]
     assert mover.transform.num_keys == 2 and flat.meshes[mover.mesh].name == "quad"
+
+
+def test_shared_meshes_stay_instanced():
+    """Only meshes used once are merged: copies of a shared mesh (a PointInstancer's rocks) stay instances of it,
+    however small, so that a scatter of 10^5 copies neither builds a hierarchy over 10^7 copied triangles nor
+    renders slower for it (see the module docstring's figures)."""
+    meshes = [tetrahedron(), quad(0), quad(1)]
+    instances = [Instance(0, MotionTransform.static(translate(x))) for x in (0, 3, 6)]  # three of one mesh
+    instances += [Instance(m, MotionTransform.static(translate(x))) for m, x in ((1, -3), (2, -6))]
+    scene = Scene(meshes, instances, [Material("a"), Material("b")], [],
+                  Camera("c", MotionTransform.static(np.eye(4))), 0, 0, 1)
+    flat = flatten_still_instances(scene)
+    assert len(flat.instances) == 4  # the two used-once quads merged, the three tetrahedra as they were
+    merged = flat.meshes[flat.instances[0].mesh]
+    assert len(merged.triangles) == 4 and merged.material_ids.tolist() == [0, 0, 1, 1]
+    np.testing.assert_allclose(merged.points[0][:, 0].min(), -6)
+    tets = flat.instances[1:]
+    assert {flat.meshes[i.mesh].name for i in tets} == {"tet"} and len({i.mesh for i in tets}) == 1
+    assert [float(i.transform.translation[0][0]) for i in tets] == [0.0, 3.0, 6.0]

@@ -2,8 +2,15 @@
 
 A ray pays for every instance it visits: a top-level leaf, a transform into object space, a separate
 bottom-level walk. Geometry that does not move gains nothing from that, so still instances whose mesh is not
-shared (or is small) are transformed into world space once and merged into a single mesh with one BVH. Moving
-and deforming instances, and big meshes instanced many times (PointInstancer forests), stay instanced.
+shared are transformed into world space once and merged into a single mesh with one BVH. Moving and deforming
+instances, and every mesh used by more than one instance, stay instanced.
+
+Shared meshes were copied too, up to 1024 triangles each and 8 M in all. Measured (``drt`` kernels, 640x360,
+16 spp, 2 threads, merged against instanced in one process): a PointInstancer of 100 000 rocks of 192 triangles
+prepared in 17.8 s instead of 2.3 s (an 8.4 M-triangle merged mesh and its hierarchy, 3 GB) and rendered in
+10.3 s instead of 8.5 s; 10 000 rocks 3.6 s / 4.4 s against 0.5 s / 4.1 s; 100 000 eight-triangle pieces 11.0
+s / 8.1 s against 2.1 s / 6.7 s; 30 rocks on a ground and 10 000 pieces within the noise. A small shared
+mesh's hierarchy stays in cache, the merged one's does not; copies never paid.
 Emissive instances keep lighting: their light is redirected to the range of merged triangles they became.
 """
 from __future__ import annotations
@@ -16,9 +23,6 @@ from renderer.motion.transform import matrix_at
 from renderer.scene.analytic import analytic_shapes, realize_tessellations
 from renderer.scene.mesh_facts import is_closed
 from renderer.scene.model import LIGHT_MESH, Instance, Mesh, MotionTransform, Scene
-
-SHARED_COPY_LIMIT = 1024  # triangles: shared meshes up to this size are copied into the merged mesh
-MERGED_LIMIT = 1 << 23  # triangles the merged mesh may reach through copies of shared meshes
 
 
 def _is_still(scene: Scene, inst: Instance, analytic: list) -> bool:
@@ -39,13 +43,8 @@ def flatten_still_instances(scene: Scene) -> Scene:
     analytic = analytic_shapes(realize_tessellations(scene))  # a stand-in that cannot be its shape is merged as
     # the triangles it stands for
     merge, keep = [], []
-    copied = 0
     for idx, inst in enumerate(scene.instances):
-        ntri = len(scene.meshes[inst.mesh].triangles)
-        ok = idx not in one_sided and _is_still(scene, inst, analytic) and (users[inst.mesh] == 1 or
-                                         (ntri <= SHARED_COPY_LIMIT and copied + ntri <= MERGED_LIMIT))
-        if ok and users[inst.mesh] > 1:
-            copied += ntri
+        ok = idx not in one_sided and users[inst.mesh] == 1 and _is_still(scene, inst, analytic)
         (merge if ok else keep).append(idx)
     if len(merge) <= 1:
         return scene
@@ -55,7 +54,6 @@ def flatten_still_instances(scene: Scene) -> Scene:
     has_normals = any(scene.meshes[scene.instances[i].mesh].normals is not None for i in merge)
     has_uvs = any(scene.meshes[scene.instances[i].mesh].uvs is not None for i in merge)
     nvert = ntri = 0
-    closed: dict[int, bool] = {}  # mesh index -> is_closed
     for idx in merge:
         inst = scene.instances[idx]
         mesh = scene.meshes[inst.mesh]
@@ -65,9 +63,8 @@ def flatten_still_instances(scene: Scene) -> Scene:
         tris.append(mesh.triangles + nvert)
         mats.append(mesh.material_ids)
         t = len(mesh.triangles)
-        if mesh.solid is None and inst.mesh not in closed:  # once per mesh, not per copy
-            closed[inst.mesh] = is_closed(mesh.triangles, mesh.points[0])
-        solid.append(mesh.solid if mesh.solid is not None else np.full(t, closed[inst.mesh]))
+        closed = mesh.solid is None and is_closed(mesh.triangles, mesh.points[0])
+        solid.append(mesh.solid if mesh.solid is not None else np.full(t, closed))
         if has_normals:
             if mesh.normals is not None:
                 nm = np.linalg.inv(m[:3, :3]).T  # normals transform by the inverse transpose
