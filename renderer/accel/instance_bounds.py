@@ -9,7 +9,9 @@ root of) an instance it could not hit that much more often. A cut of 64 boxes br
 a cut lies in the root box, so the placed cut lies in the placed root box: never looser, and conservative by
 construction (each primitive lies in one of the cut's boxes).
 
-Moving instances are placed the same way at each time they are measured at (``instance_key_bounds``).
+Moving instances are placed the same way at each time they are measured at (``instance_key_bounds``). A scene
+places at most ``CUT_BUDGET`` boxes in all: a PointInstancer of 100 000 instances spent 0.5 s of its 2 s
+preparation placing 10 boxes each at a budget of 2^20; at 2^18 it places 2 each in 0.1 s.
 """
 from __future__ import annotations
 
@@ -23,7 +25,7 @@ from renderer.scene.model import MotionTransform
 
 SUBSTEPS = 8  # samples per top-level segment when measuring how far curved motion leaves the linear blend
 CUT_BOXES = 64  # node boxes per instance at most
-CUT_BUDGET = 1 << 20  # node boxes placed per scene at most: a million instances place their root boxes only
+CUT_BUDGET = 1 << 18  # node boxes placed per scene at most (0.1 s of NumPy): from 2^18 instances on, root boxes only
 _CORNERS = np.array([[(i >> a) & 1 for a in range(3)] for i in range(8)], bool)
 _CHUNK = 1 << 18  # corners placed per NumPy call at most (6 MB of float64 per array)
 
