@@ -1,14 +1,17 @@
 #!/usr/bin/env python3
 """Scenes ten times larger (issue 13): memory and time for a 10M-triangle mesh and a 100M-triangle instanced set.
 
-    python bench/scale_bench.py [--triangles 10e6] [--instanced 100e6] [--spp 4] [--keep DIR]
+    python bench/scale_bench.py [--triangles 10e6] [--instanced 100e6] [--scatter 1e6] [--spp 4] [--keep DIR]
 
 Each case runs in its own process (so its peak memory is its own) and prints: USD authoring size, scene load
 (USD read and triangulation), hierarchy build, render time at 320x180 and the process's peak resident memory,
 against this machine's 24 GiB. The scenes are generated:
 - ``mesh``: one displaced grid of ``--triangles`` triangles (a rough terrain) under a distant light and a dome;
 - ``instanced``: a PointInstancer placing copies of a 100k-triangle displaced sphere until ``--instanced``
-  triangles are in view (1000 copies for 100M): the prototype is stored once and the instances share its BVH.
+  triangles are in view (1000 copies for 100M): the prototype is stored once and the instances share its BVH;
+- ``scatter``: a PointInstancer of ``--scatter`` small rocks (three prototypes of 200 triangles, each instance
+  turned and scaled its own way) on a ground plane, the set dressing of a production shot: what it measures is
+  the cost per instance.
 Prints figures, asserts nothing.
 """
 from __future__ import annotations
@@ -116,6 +119,37 @@ def make_instanced_scene(path: pathlib.Path, triangles: float, per_prototype: in
     return count * 2 * n * n
 
 
+def make_scatter_scene(path: pathlib.Path, count: float) -> int:
+    import numpy as np
+    from pxr import Usd, UsdGeom, Vt
+
+    count = int(count)
+    rng = np.random.default_rng(1)
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.Xform.Define(stage, "/World")
+    pi = UsdGeom.PointInstancer.Define(stage, "/World/Rocks")
+    UsdGeom.Scope.Define(stage, "/World/Rocks/Prototypes")
+    pts, quads = _sphere(10)  # 200 triangles
+    protos = []
+    for k, squash in enumerate((0.5, 0.7, 0.9)):
+        protos.append(f"/World/Rocks/Prototypes/Rock{k}")
+        _write_mesh(stage, protos[-1], (pts * [0.3, 0.3 * squash, 0.25]).astype(np.float32), quads)
+    pi.CreatePrototypesRel().SetTargets(protos)
+    side = 2.0 * count ** 0.5  # a square of side x side, four rocks per square unit
+    pos = rng.uniform(-0.5, 0.5, (count, 3)) * [side, 0.0, side]
+    q = rng.normal(size=(count, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    pi.CreatePositionsAttr(Vt.Vec3fArray.FromNumpy(pos.astype(np.float32)))
+    pi.CreateOrientationsAttr(Vt.QuathArray.FromNumpy(q.astype(np.float16)))
+    pi.CreateScalesAttr(Vt.Vec3fArray.FromNumpy(rng.uniform(0.5, 1.5, (count, 3)).astype(np.float32)))
+    pi.CreateProtoIndicesAttr(Vt.IntArray.FromNumpy(rng.integers(0, 3, count).astype(np.int32)))
+    ground = np.array([[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]], np.float32) * [side, 0.0, side]
+    _write_mesh(stage, "/World/Ground", (ground - [0.0, 0.1, 0.0]).astype(np.float32), np.array([[0, 3, 2, 1]]))
+    _lights_and_camera(stage, (0.0, 6.0, side * 0.5 + 12.0), (0.0, 0.0, side * 0.5 - 10.0))
+    stage.Save()
+    return count * len(quads) * 2
+
+
 def run_case(path: str, spp: int) -> dict:
     """Load, build and render one scene in this process; the figures as a dict."""
     from renderer.render import RenderOptions, load_kernels, prepare, render_frame
@@ -137,6 +171,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--triangles", type=float, default=10e6)
     ap.add_argument("--instanced", type=float, default=100e6)
+    ap.add_argument("--scatter", type=float, default=1e6, help="instances of the scatter case")
     ap.add_argument("--spp", type=int, default=4)
     ap.add_argument("--keep", help="write the scenes here and keep them")
     ap.add_argument("--case", nargs=2, metavar=("SCENE", "SPP"), help=argparse.SUPPRESS)  # child process
@@ -150,7 +185,8 @@ def main() -> None:
     print(f"{'case':10} {'triangles':>11} {'stored':>10} {'usd MB':>7} {'make s':>7} {'load s':>7} {'build s':>7} "
           f"{'render s':>8} {'BVH B/tri':>9} {'peak GiB':>8}")
     for name, make, target in (("mesh", make_mesh_scene, args.triangles),
-                               ("instanced", make_instanced_scene, args.instanced)):
+                               ("instanced", make_instanced_scene, args.instanced),
+                               ("scatter", make_scatter_scene, args.scatter)):
         path = out / f"{name}.usdc"
         t = time.perf_counter()
         tris = make(path, target)
