@@ -60,11 +60,16 @@ def _mesh_prim_bounds(mesh: Mesh, device: str = "cpu") -> tuple[np.ndarray, np.n
 
 
 def _tlas_key_count(scene: Scene) -> int:
-    moving = [max(i.transform.num_keys, len(scene.meshes[i.mesh].point_times)) for i in scene.instances
-              if i.transform.num_keys > 1 or scene.meshes[i.mesh].deforming]
-    if not moving:
+    if not scene.instances:
         return 1
-    return int(min(MAX_TLAS_KEYS, max(3, max(moving))))
+    xf_keys = np.array([len(i.transform.times) for i in scene.instances], np.int64)
+    mesh_of = np.array([i.mesh for i in scene.instances], np.int64)
+    mesh_keys = np.array([len(m.point_times) for m in scene.meshes], np.int64)[mesh_of]
+    deforming = np.array([m.deforming for m in scene.meshes], bool)[mesh_of]
+    moving = (xf_keys > 1) | deforming
+    if not moving.any():
+        return 1
+    return int(min(MAX_TLAS_KEYS, max(3, int(np.maximum(xf_keys, mesh_keys)[moving].max()))))
 
 
 def _wp(a: np.ndarray, dtype, device):
@@ -132,12 +137,13 @@ def direct_instance(scene: Scene, lo: np.ndarray, hi: np.ndarray) -> int:
         return -1
     d = np.maximum(hi.astype(np.float64) - lo, 0.0)
     area = d[:, 0] * d[:, 1] + d[:, 1] * d[:, 2] + d[:, 2] * d[:, 0]
-    best, best_area = -1, -1.0
-    for i, inst in enumerate(scene.instances):
-        if (inst.transform.num_keys == 1 and inst.csg_group < 0 and inst.visible_from <= 0.0
-                and inst.visible_to >= 1.0 and area[i] > best_area):
-            best, best_area = i, area[i]
-    if best < 0 or best_area < area.sum() - best_area:
+    ok = np.array([len(i.transform.times) == 1 and i.csg_group < 0 and i.visible_from <= 0.0 and i.visible_to >= 1.0
+                   for i in scene.instances], bool)
+    if not ok.any():
+        return -1
+    best = int(np.argmax(np.where(ok, area, -1.0)))  # the first of the largest, as the loop this replaces
+    best_area = area[best]
+    if best_area < area.sum() - best_area:
         return -1
     return best
 

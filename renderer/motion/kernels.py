@@ -65,23 +65,21 @@ def keys_matrix(keys: MotionKeys, offset: int, count: int, s: float):
 
 def upload_keys(transforms, device: str = "cpu"):
     """Concatenate MotionTransforms into a MotionKeys struct. Returns (keys, offsets, counts) as numpy ints."""
-    offsets, counts = [], []
-    times, trans, rots, scales = [], [], [], []
-    n = 0
-    for xf in transforms:
-        offsets.append(n)
-        counts.append(xf.num_keys)
-        n += xf.num_keys
-        times.append(np.asarray(xf.times, np.float32))
-        trans.append(np.asarray(xf.translation, np.float32))
-        rots.append(np.asarray(xf.rotation, np.float32))
-        scales.append(np.asarray(xf.scale, np.float32))
-    if n == 0:  # Warp arrays may not be empty in a struct used by kernels: keep one identity key
-        times, trans = [np.zeros(1, np.float32)], [np.zeros((1, 3), np.float32)]
-        rots, scales = [np.array([[0, 0, 0, 1]], np.float32)], [np.eye(3, dtype=np.float32)[None]]
+    # one list and one concatenation per field (a per-transform loop of appends took 2.7 s for 10^6 instances)
+    transforms = list(transforms)
+    counts = np.array([len(xf.times) for xf in transforms], np.int64)
+    offsets = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64) if len(counts) else counts
+    if counts.sum() == 0:  # Warp arrays may not be empty in a struct used by kernels: keep one identity key
+        times, trans = np.zeros(1, np.float32), np.zeros((1, 3), np.float32)
+        rots, scales = np.array([[0, 0, 0, 1]], np.float32), np.eye(3, dtype=np.float32)[None]
+    else:
+        times = np.concatenate([xf.times for xf in transforms]).astype(np.float32, copy=False)
+        trans = np.concatenate([xf.translation for xf in transforms]).astype(np.float32, copy=False)
+        rots = np.concatenate([xf.rotation for xf in transforms]).astype(np.float32, copy=False)
+        scales = np.concatenate([xf.scale for xf in transforms]).astype(np.float32, copy=False)
     keys = MotionKeys()
-    keys.times = wp.array(np.concatenate(times), dtype=wp.float32, device=device)
-    keys.translation = wp.array(np.concatenate(trans), dtype=wp.vec3, device=device)
-    keys.rotation = wp.array(np.concatenate(rots), dtype=wp.quat, device=device)
-    keys.scale = wp.array(np.concatenate(scales), dtype=wp.mat33, device=device)
-    return keys, np.array(offsets, np.int32), np.array(counts, np.int32)
+    keys.times = wp.array(times, dtype=wp.float32, device=device)
+    keys.translation = wp.array(np.ascontiguousarray(trans.reshape(-1, 3)), dtype=wp.vec3, device=device)
+    keys.rotation = wp.array(np.ascontiguousarray(rots.reshape(-1, 4)), dtype=wp.quat, device=device)
+    keys.scale = wp.array(np.ascontiguousarray(scales.reshape(-1, 3, 3)), dtype=wp.mat33, device=device)
+    return keys, offsets.astype(np.int32), counts.astype(np.int32)
