@@ -5,7 +5,7 @@ hold every primitive (the root, then repeatedly the inner node of largest half a
 children). The eight corners of the root box alone, placed under a rotation, give a box up to sqrt 3 wider per
 axis than the placed mesh: the usd-wg teapot layout's 1000 teapots, turned about their vertical axis, had top-level
 boxes of 1.56x the surface area of their exact ones, and a ray entered (transformed into, tested against the
-root of) an instance it could not hit that much more often. A cut of 64 boxes brings that to 1.09x. Every box of
+root of) an instance it could not hit that much more often. A cut of 64 boxes brings that to 1.08x. Every box of
 a cut lies in the root box, so the placed cut lies in the placed root box: never looser, and conservative by
 construction (each primitive lies in one of the cut's boxes).
 
