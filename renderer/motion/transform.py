@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 
-@dataclass
+@dataclass(slots=True)  # no __dict__: a scene may hold a million of them
 class MotionTransform:
     """Object-to-world transform over the shutter, as K decomposed keys.
 

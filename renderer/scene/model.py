@@ -109,7 +109,7 @@ class Mesh:
         return self
 
 
-@dataclass
+@dataclass(slots=True)  # no __dict__: a PointInstancer may make a million of them
 class Instance:
     """One placement of a mesh in the world, with its motion over the shutter."""
 
