@@ -214,6 +214,8 @@ def motion_transforms(times, rows: np.ndarray) -> list[MotionTransform]:
     key_times = np.where(same[:, None], np.float32(0.0), times[None]).astype(np.float32)  # (n, k): [0] when still
     for a in (key_times, t32, q32, s32):
         a.flags.writeable = False
+    if same.all():  # all still: the row views made by NumPy's iterator, faster than slicing one by one
+        return [MotionTransform(*f) for f in zip(*(list(a[:, :1]) for a in (key_times, t32, q32, s32)))]
     nkeys = np.where(same, 1, k).tolist()
     return [MotionTransform(key_times[i, :kk], t32[i, :kk], q32[i, :kk], s32[i, :kk]) for i, kk in enumerate(nkeys)]
 
