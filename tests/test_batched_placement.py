@@ -96,3 +96,33 @@ def test_importer_places_every_prim_with_its_own_transform(tmp_path):
         for a, b in ((xf.times, want.times), (xf.translation, want.translation), (xf.rotation, want.rotation),
                      (xf.scale, want.scale)):
             assert np.array_equal(a, b), path
+
+
+def test_placed_extent_is_the_bounds_of_every_placed_box_bit_for_bit():
+    """``placed_extent`` places only the boxes that can hold an extreme; its bounds must equal those of all the
+    placed boxes exactly: random affine maps, many boxes tied at the extremes, huge coordinates, a NaN box."""
+    from renderer.motion.transform import placed_extent
+
+    rng = np.random.default_rng(21)
+    for case in range(6):
+        n = 3000
+        ms = np.array([_random_matrix(rng) for _ in range(n)])
+        lo = rng.uniform(-2, 0, (n, 3))
+        hi = lo + rng.uniform(0, 3, (n, 3))
+        if case == 1:  # every box the same and in the same place: all tie
+            ms[:] = ms[0]
+            lo[:], hi[:] = lo[0], hi[0]
+        if case == 2:  # a few distinct places, many boxes on each
+            ms = ms[rng.integers(0, 5, n)]
+        if case == 3:
+            ms[:, :3, 3] *= 1e7
+        if case == 4:
+            lo[17, 1] = np.nan
+        if case == 5:
+            n = 1
+            ms, lo, hi = ms[:1], lo[:1], hi[:1]
+        wlo, whi = place_boxes(ms, lo, hi)
+        want = wlo.min(0), whi.max(0)
+        got = placed_extent(ms, lo, hi)
+        for g, w in zip(got, want):
+            assert np.array_equal(g, w, equal_nan=True), case

@@ -22,7 +22,7 @@ from renderer.lights.linking import Links, upload_links
 from renderer.lights.select import SelectEstimate, Selection, upload_selection
 from renderer.lights.shaping import mean_shaping
 from renderer.motion.kernels import MotionKeys, upload_keys
-from renderer.motion.transform import matrices_at, matrix_at, place_boxes
+from renderer.motion.transform import matrices_at, matrix_at, placed_extent
 from renderer.scene.analytic import object_box
 from renderer.scene.model import (
     LIGHT_CYLINDER,
@@ -97,8 +97,7 @@ def scene_sphere(scene: Scene) -> tuple[np.ndarray, float]:
     if not insts:
         return np.zeros(3), 1.0
     b = boxes[[i.mesh for i in insts]]  # (N, 2, 3)
-    wlo, whi = place_boxes(matrices_at([i.transform for i in insts], 0.0), b[:, 0], b[:, 1])
-    lo, hi = wlo.min(0), whi.max(0)
+    lo, hi = placed_extent(matrices_at([i.transform for i in insts], 0.0), b[:, 0], b[:, 1])
     if not np.isfinite(lo).all():
         return np.zeros(3), 1.0
     return (lo + hi) / 2, float(max(0.5 * np.linalg.norm(hi - lo), 1e-6))

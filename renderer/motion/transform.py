@@ -148,6 +148,27 @@ def place_boxes(m: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarr
     return w.min(1), w.max(1)
 
 
+def placed_extent(m: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The bounds (lo, hi), (3,) each, of all the world boxes ``place_boxes(m, lo, hi)`` gives, with the same bits,
+    placing the corners only of the boxes that can reach an extreme. Each box's exact world extent is its placed
+    centre +- |A| half-extent; only boxes within a generous rounding margin of the best bound on an axis are
+    placed corner by corner (a scatter of 10^6 instances: a handful instead of 1.3 s of corners)."""
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    a = m[:, :3, :3]
+    wc = np.einsum("nij,nj->ni", a, 0.5 * (lo + hi)) + m[:, :3, 3]
+    wh = np.einsum("nij,nj->ni", np.abs(a), 0.5 * (hi - lo))
+    slack = 1e-7 * (np.abs(wc) + wh + np.abs(m[:, :3, 3])) + 1e-300
+    low, high = wc - wh, wc + wh
+    if not (np.isfinite(low).all() and np.isfinite(high).all()):
+        pick = np.arange(len(m))  # a NaN or infinite box: place them all, as place_boxes would
+    else:
+        near_lo = low - slack <= (low + slack).min(0)  # (N, 3): could hold the minimum on that axis
+        near_hi = high + slack >= (high - slack).max(0)
+        pick = np.nonzero(near_lo.any(1) | near_hi.any(1))[0]
+    wlo, whi = place_boxes(m[pick], lo[pick], hi[pick])
+    return wlo.min(0), whi.max(0)
+
+
 def matrices_at(xfs, s: float) -> np.ndarray:
     """``matrix_at(xf, s)`` of many MotionTransforms: (N, 4, 4). The still ones (one key) in one vectorised
     pass, bit-identical to ``matrix_at``; the moving ones through it. Scenes of 10^4 instances spent seconds of
