@@ -20,14 +20,12 @@ import heapq
 import numpy as np
 
 from renderer.accel.build import Bvh
-from renderer.motion.transform import matrix_at
+from renderer.motion.transform import matrix_at, place_boxes
 from renderer.scene.model import MotionTransform
 
 SUBSTEPS = 8  # samples per top-level segment when measuring how far curved motion leaves the linear blend
 CUT_BOXES = 64  # node boxes per instance at most
 CUT_BUDGET = 1 << 18  # node boxes placed per scene at most (0.1 s of NumPy): from 2^18 instances on, root boxes only
-_CORNERS = np.array([[(i >> a) & 1 for a in range(3)] for i in range(8)], bool)
-_CHUNK = 1 << 18  # corners placed per NumPy call at most (6 MB of float64 per array)
 
 
 def cut_size(num_instances: int) -> int:
@@ -72,17 +70,11 @@ def cut_boxes_at(bvh: Bvh, nodes: np.ndarray, times: np.ndarray, s: np.ndarray) 
 
 def place_cut(m: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """World boxes (n, 3) of the unions of boxes lo/hi (n, C, 3) (or (1, C, 3), shared) under column-vector
-    matrices m (n, 4, 4): the bounds of all their corners placed."""
+    matrices m (n, 4, 4): the bounds of all their corners placed (``place_boxes``, each box under its matrix)."""
     n, c = len(m), lo.shape[1]
-    corners = np.where(_CORNERS[None, None], hi[:, :, None], lo[:, :, None]).reshape(len(lo), c * 8, 3)
-    out_lo, out_hi = np.empty((n, 3)), np.empty((n, 3))
-    step = max(1, _CHUNK // (c * 8))
-    for a in range(0, n, step):
-        b = min(n, a + step)
-        pts = corners if len(corners) == 1 else corners[a:b]
-        w = np.matmul(pts, np.swapaxes(m[a:b, :3, :3], 1, 2)) + m[a:b, None, :3, 3]
-        out_lo[a:b], out_hi[a:b] = w.min(1), w.max(1)
-    return out_lo, out_hi
+    wlo, whi = place_boxes(np.repeat(m, c, axis=0), np.broadcast_to(lo, (n, c, 3)).reshape(-1, 3),
+                           np.broadcast_to(hi, (n, c, 3)).reshape(-1, 3))
+    return wlo.reshape(n, c, 3).min(1), whi.reshape(n, c, 3).max(1)
 
 
 def still_world_boxes(m: np.ndarray, bvh: Bvh, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
