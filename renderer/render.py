@@ -21,7 +21,7 @@ import numpy as np
 import warp as wp
 
 from renderer import integrator, kernel_cache
-from renderer.accel import build_kernels, triangle_kernels, wide
+from renderer.accel import build_kernels, quantize, triangle_kernels, wide
 from renderer.accel.upload import GeometryStats, upload_geometry
 from renderer.camera import CameraSetup, ndc_matrix, setup_camera
 from renderer.device import init_warp
@@ -95,7 +95,7 @@ def resolve_resolution(scene: Scene, options: RenderOptions) -> tuple[int, int]:
 
 
 # every Warp module a render launches kernels of (hierarchy build, integrator, film)
-RENDER_MODULES = (build_kernels, triangle_kernels, wide, integrator, film)
+RENDER_MODULES = (build_kernels, triangle_kernels, wide, quantize, integrator, film)
 
 
 def load_kernels(device: str = "cpu") -> dict[str, str]:

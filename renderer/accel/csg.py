@@ -34,7 +34,8 @@ from renderer.accel.intersect import (
     mesh_keys_at,
     safe_inverse,
 )
-from renderer.accel.wide import entries, leaf_range, wide_stack_t
+from renderer.accel.quantize import q_entries
+from renderer.accel.wide import leaf_range, wide_stack_t
 from renderer.shading.materials import Materials, eval_opacity
 from renderer.shading.textures import Textures
 
@@ -62,7 +63,6 @@ def mesh_next_hit(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmin: float, 
     k0, k1, u = mesh_keys_at(geo, m, s)
     nk = geo.mesh_nkeys[m]
     noff = geo.mesh_node_off[m]
-    boff = geo.mesh_bound_off[m]
     poff = geo.mesh_prim_off[m]
     inv_d = safe_inverse(rd)
     stack = wide_stack_t()  # scratch: not zeroed, read below sp only
@@ -87,8 +87,7 @@ def mesh_next_hit(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmin: float, 
                     hb1 = b1
                     hb2 = b2
         else:
-            c = geo.blas_child[noff + ref]
-            d = entries(geo.blas_box, boff + ref * nk * 6, c, k0, k1, u, ro, inv_d, t_best)
+            d, c = q_entries(geo.blas_node, noff + ref * nk, k0, k1, u, ro, inv_d, t_best)
             for j in range(4):
                 if d[j] < BIG:
                     stack[sp] = c[j]
@@ -102,7 +101,6 @@ def mesh_crossings(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, s: float):
     k0, k1, u = mesh_keys_at(geo, m, s)
     nk = geo.mesh_nkeys[m]
     noff = geo.mesh_node_off[m]
-    boff = geo.mesh_bound_off[m]
     poff = geo.mesh_prim_off[m]
     inv_d = safe_inverse(rd)
     stack = wide_stack_t()  # scratch: not zeroed, read below sp only
@@ -119,8 +117,7 @@ def mesh_crossings(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, s: float):
                 if t < BIG:
                     crossed += 1
         else:
-            c = geo.blas_child[noff + ref]
-            d = entries(geo.blas_box, boff + ref * nk * 6, c, k0, k1, u, ro, inv_d, float(BIG))
+            d, c = q_entries(geo.blas_node, noff + ref * nk, k0, k1, u, ro, inv_d, float(BIG))
             for j in range(4):
                 if d[j] < BIG:
                     stack[sp] = c[j]

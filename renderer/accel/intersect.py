@@ -22,6 +22,7 @@ from __future__ import annotations
 import warp as wp
 
 from renderer.accel.analytic import SHAPE_DISCS, is_cloud, shape_hits, sphere_roots
+from renderer.accel.quantize import QNode, q_entries
 from renderer.accel.wide import dist_stack_t, entries, far_to_near, leaf_range, wide_stack_t
 from renderer.motion.kernels import MotionKeys, find_segment, keys_matrix
 from renderer.struct_refs import by_reference
@@ -45,10 +46,9 @@ class Geometry:
     mesh_normal_off: wp.array(dtype=wp.int32)
     uvs: wp.array(dtype=wp.vec2)
     mesh_uv_off: wp.array(dtype=wp.int32)
-    # four-wide node boxes (``wide``): node n of mesh m, key k, coordinate c at mesh_bound_off[m] + (n * K + k) * 6
-    # + c; its child references at blas_child[mesh_node_off[m] + n]
-    blas_box: wp.array(dtype=wp.vec4)
-    blas_child: wp.array(dtype=wp.vec4i)
+    # four-wide nodes in 64-byte records (``quantize``): node n of mesh m at key k is record
+    # mesh_node_off[m] + n * K + k
+    blas_node: wp.array(dtype=QNode)
     blas_prim: wp.array(dtype=wp.int32)  # local triangle index per leaf slot
     # Still meshes (one point key): each leaf slot's triangle as a vertex and two edges, contiguous in leaf
     # order, so a leaf's triangle tests read consecutive memory instead of gathering indexed vertices. A point
@@ -58,7 +58,6 @@ class Geometry:
     leaf_e1: wp.array(dtype=wp.vec3)
     leaf_e2: wp.array(dtype=wp.vec3)
     mesh_node_off: wp.array(dtype=wp.int32)
-    mesh_bound_off: wp.array(dtype=wp.int32)
     mesh_prim_off: wp.array(dtype=wp.int32)
     mesh_tri_off: wp.array(dtype=wp.int32)
     mesh_vert_off: wp.array(dtype=wp.int32)
@@ -292,7 +291,6 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float, s
     k0, k1, u = mesh_keys_at(geo, m, s)
     nk = geo.mesh_nkeys[m]
     noff = geo.mesh_node_off[m]
-    boff = geo.mesh_bound_off[m]
     poff = geo.mesh_prim_off[m]
     inv_d = safe_inverse(rd)
     stack = wide_stack_t()  # scratch: not zeroed, read below sp only
@@ -337,8 +335,8 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float, s
                             best.b1 = b1
                             best.b2 = b2
             else:
-                c = geo.blas_child[noff + ref]
-                d, c = far_to_near(entries(geo.blas_box, boff + ref * nk * 6, c, k0, k1, u, ro, inv_d, t_best), c)
+                d, c = q_entries(geo.blas_node, noff + ref * nk, k0, k1, u, ro, inv_d, t_best)
+                d, c = far_to_near(d, c)
                 for j in range(4):
                     if d[j] < BIG:
                         stack[sp] = c[j]

@@ -23,6 +23,7 @@ from renderer.accel.intersect import (
     tlas_keys_at,
 )
 from renderer.accel.analytic import is_cloud, shape_hits
+from renderer.accel.quantize import q_entries
 from renderer.accel.wide import entries, leaf_range, wide_stack_t
 from renderer.shading.materials import Materials, eval_opacity
 from renderer.shading.textures import Textures
@@ -44,7 +45,6 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
     k0, k1, u = mesh_keys_at(geo, m, s)
     nk = geo.mesh_nkeys[m]
     noff = geo.mesh_node_off[m]
-    boff = geo.mesh_bound_off[m]
     poff = geo.mesh_prim_off[m]
     inv_d = safe_inverse(rd)
     stack = wide_stack_t()  # scratch: not zeroed, read below sp only
@@ -82,8 +82,7 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
                         opacity = eval_opacity(mats, tex, geo.tri_material[tri], hit_uv(geo, m, tri, b1, b2), s)
                         tr = tr * (1.0 - opacity)
         else:
-            c = geo.blas_child[noff + ref]
-            d = entries(geo.blas_box, boff + ref * nk * 6, c, k0, k1, u, ro, inv_d, tmax)
+            d, c = q_entries(geo.blas_node, noff + ref * nk, k0, k1, u, ro, inv_d, tmax)
             for j in range(4):
                 if d[j] < BIG:
                     stack[sp] = c[j]

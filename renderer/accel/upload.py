@@ -16,6 +16,7 @@ from renderer.accel.build import Bvh, build_bvh
 from renderer.accel.csg import OPERATIONS as CSG_OPERATIONS
 from renderer.accel.instance_bounds import box_cut, cut_size, instance_key_bounds, still_world_boxes
 from renderer.accel.intersect import Geometry
+from renderer.accel.quantize import QNODE_DTYPE, QNode, quantize
 from renderer.accel.wide import WideBvh, collapse
 from renderer.accel.triangle_kernels import leaf_triangles, triangle_boxes
 from renderer.motion.kernels import upload_keys
@@ -166,8 +167,9 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
         wide.append(collapse(blas[-1], device))
 
     g = Geometry()
+    nodes = [quantize(w, device) for w in wide]
     n_nodes = np.cumsum([0] + [w.num_nodes for w in wide])
-    n_bounds = np.cumsum([0] + [len(w.box) for w in wide])
+    n_records = np.cumsum([0] + [len(q) for q in nodes])
     n_tris = np.cumsum([0] + [len(m.triangles) for m in scene.meshes])
     n_verts = np.cumsum([0] + [m.points.shape[0] * m.points.shape[1] for m in scene.meshes])
     n_keys = np.cumsum([0] + [len(m.point_times) for m in scene.meshes])
@@ -184,8 +186,7 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     g.normals, g.mesh_normal_off = _corner_table([m.normals for m in scene.meshes], 3, wp.vec3, device)
     g.uvs, g.mesh_uv_off = _corner_table([m.uvs for m in scene.meshes], 2, wp.vec2, device)
     g.colors, g.mesh_color_off = _corner_table([m.colors for m in scene.meshes], 3, wp.vec3, device)
-    g.blas_box = _wp(cat([w.box for w in wide], (1, 4), np.float32), wp.vec4, device)
-    g.blas_child = _wp(cat([w.child for w in wide], (1, 4), np.int32), wp.vec4i, device)
+    g.blas_node = _wp(np.concatenate(nodes) if nodes else np.zeros(1, QNODE_DTYPE), QNode, device)
     g.blas_prim = _i32(cat([b.prim_order for b in blas], (1,), np.int32), device)
     v0, e1, e2 = [], [], []
     for mesh, b, shape in zip(scene.meshes, blas, shapes):
@@ -205,8 +206,7 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     g.leaf_e1 = _v3(cat(e1, (1, 3), np.float32), device)
     g.leaf_e2 = _v3(cat(e2, (1, 3), np.float32), device)
     prim_off = np.cumsum([0] + [len(b.prim_order) for b in blas])
-    g.mesh_node_off = _i32(n_nodes[:-1], device)
-    g.mesh_bound_off = _i32(n_bounds[:-1], device)
+    g.mesh_node_off = _i32(n_records[:-1], device)
     g.mesh_prim_off = _i32(prim_off[:-1], device)
     g.mesh_tri_off = _i32(n_tris[:-1], device)
     g.mesh_vert_off = _i32(n_verts[:-1], device)
@@ -279,7 +279,7 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     upload_csg(g, scene, device)
 
     leaf_bytes = 3 * 12 * sum(len(x) for x in v0)  # the leaf-ordered still triangles
-    nbytes = sum(w.nbytes for w in wide) + tlas.nbytes + leaf_bytes
+    nbytes = sum(q.nbytes for q in nodes) + sum(b.prim_order.nbytes for b in blas) + tlas.nbytes + leaf_bytes
     stats = GeometryStats(
         triangles=int(n_tris[-1]),
         blas_nodes=int(n_nodes[-1]),

@@ -190,11 +190,26 @@ def _slabs(lo: wp.vec4, hi: wp.vec4, o: float, inv: float):
 
 
 @wp.func
+def box_entries(lx: wp.vec4, ly: wp.vec4, lz: wp.vec4, hx: wp.vec4, hy: wp.vec4, hz: wp.vec4, c: wp.vec4i,
+                ro: wp.vec3, inv_d: wp.vec3, tmax: float):
+    """Entry distances of the ray into four boxes (one per lane; ``c`` their child references), BIG for a box it
+    misses before tmax or an unused slot. A slab test made robust for flat boxes by 2 ulp of slack (Ize 2013)."""
+    nx, fx = _slabs(lx, hx, ro[0], inv_d[0])
+    ny, fy = _slabs(ly, hy, ro[1], inv_d[1])
+    nz, fz = _slabs(lz, hz, ro[2], inv_d[2])
+    tn = wp.max(wp.max(nx, ny), wp.max(nz, wp.vec4(0.0)))
+    tf = wp.min(wp.min(fx, fy), wp.min(fz, wp.vec4(tmax))) * 1.00000024  # robust for flat boxes (Ize 2013)
+    return wp.vec4(wp.where(tn[0] <= tf[0] and c[0] != 0, tn[0], BIG),
+                   wp.where(tn[1] <= tf[1] and c[1] != 0, tn[1], BIG),
+                   wp.where(tn[2] <= tf[2] and c[2] != 0, tn[2], BIG),
+                   wp.where(tn[3] <= tf[3] and c[3] != 0, tn[3], BIG))
+
+
+@wp.func
 def entries(box: wp.array(dtype=wp.vec4), base: int, c: wp.vec4i, k0: int, k1: int, u: float, ro: wp.vec3,
             inv_d: wp.vec3, tmax: float):
     """Entry distances of the ray into the four child boxes of a node (keys starting at ``base``, blended
-    between keys k0 and k1; ``c`` its child references), BIG for a child it misses before tmax or an unused
-    slot. A slab test made robust for flat boxes by 2 ulp of slack (Ize 2013)."""
+    between keys k0 and k1; ``c`` its child references): ``box_entries``."""
     b0 = base + k0 * 6
     lx = box[b0 + 0]
     ly = box[b0 + 1]
@@ -210,15 +225,7 @@ def entries(box: wp.array(dtype=wp.vec4), base: int, c: wp.vec4i, k0: int, k1: i
         hx = wp.lerp(hx, box[b1 + 3], u)
         hy = wp.lerp(hy, box[b1 + 4], u)
         hz = wp.lerp(hz, box[b1 + 5], u)
-    nx, fx = _slabs(lx, hx, ro[0], inv_d[0])
-    ny, fy = _slabs(ly, hy, ro[1], inv_d[1])
-    nz, fz = _slabs(lz, hz, ro[2], inv_d[2])
-    tn = wp.max(wp.max(nx, ny), wp.max(nz, wp.vec4(0.0)))
-    tf = wp.min(wp.min(fx, fy), wp.min(fz, wp.vec4(tmax))) * 1.00000024  # robust for flat boxes (Ize 2013)
-    return wp.vec4(wp.where(tn[0] <= tf[0] and c[0] != 0, tn[0], BIG),
-                   wp.where(tn[1] <= tf[1] and c[1] != 0, tn[1], BIG),
-                   wp.where(tn[2] <= tf[2] and c[2] != 0, tn[2], BIG),
-                   wp.where(tn[3] <= tf[3] and c[3] != 0, tn[3], BIG))
+    return box_entries(lx, ly, lz, hx, hy, hz, c, ro, inv_d, tmax)
 
 
 @wp.func
