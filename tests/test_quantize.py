@@ -126,3 +126,20 @@ def test_walk_decodes_as_numpy(keys):
     np.testing.assert_array_equal(dq, df)
     np.testing.assert_array_equal(child.numpy(), tree.child[np.arange(n) % tree.num_nodes])
     assert (dq < 1e30).any() and (dq > 1e30).any()  # rays both enter and miss boxes
+
+
+def test_uploaded_records_are_cache_lines():
+    """The uploaded records start on a 64-byte boundary, so each is one cache line (a wrapped NumPy buffer is
+    only 16-byte aligned: every record would straddle two)."""
+    from renderer.accel.upload import upload_geometry
+    from renderer.scene.model import Camera, Instance, Material, Mesh, MotionTransform, Scene
+
+    rng = np.random.default_rng(3)
+    pts = rng.random((1, 3000, 3)).astype(np.float32)
+    tris = rng.integers(0, 3000, size=(5000, 3)).astype(np.int32)
+    mesh = Mesh(name="/m", point_times=np.zeros(1, np.float32), points=pts, triangles=tris,
+                material_ids=np.zeros(5000, np.int32))
+    still = MotionTransform.static(np.eye(4))
+    scene = Scene([mesh], [Instance(0, still)], [Material("m")], [], Camera("cam", still), 0, 0, 1)
+    g, _ = upload_geometry(scene)
+    assert g.blas_node.ptr % 64 == 0 and g.blas_node.strides == (64,)

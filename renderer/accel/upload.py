@@ -1,9 +1,9 @@
 """Uploading a Scene's meshes and instances into the two-level, time-keyed hierarchy of ``accel``.
 
-Builds one bottom-level BVH per mesh (bounds per point key; binned SAH, then collapsed to four-wide nodes), the
-instances' world bounds on a uniform grid of top-level time keys (``instance_bounds``: placed from a cut of the
-mesh's hierarchy, padded so that the blend between two keys contains the curved path in between), and the
-top-level BVH over them.
+Builds one bottom-level BVH per mesh (bounds per point key; binned SAH, then collapsed to four-wide nodes, stored
+as ``quantize``'s 64-byte records), the instances' world bounds on a uniform grid of top-level time keys
+(``instance_bounds``: placed from a cut of the mesh's hierarchy, padded so that the blend between two keys contains
+the curved path in between), and the top-level BVH over them.
 """
 from __future__ import annotations
 
@@ -186,7 +186,10 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     g.normals, g.mesh_normal_off = _corner_table([m.normals for m in scene.meshes], 3, wp.vec3, device)
     g.uvs, g.mesh_uv_off = _corner_table([m.uvs for m in scene.meshes], 2, wp.vec2, device)
     g.colors, g.mesh_color_off = _corner_table([m.colors for m in scene.meshes], 3, wp.vec3, device)
-    g.blas_node = _wp(np.concatenate(nodes) if nodes else np.zeros(1, QNODE_DTYPE), QNode, device)
+    # Warp's own allocation, 64-byte aligned, so that each record is one cache line (a NumPy buffer, which ``_wp``
+    # would wrap, is only 16-byte aligned)
+    g.blas_node = wp.array(np.concatenate(nodes) if nodes else np.zeros(1, QNODE_DTYPE), dtype=QNode, device=device,
+                           copy=True)
     g.blas_prim = _i32(cat([b.prim_order for b in blas], (1,), np.int32), device)
     v0, e1, e2 = [], [], []
     for mesh, b, shape in zip(scene.meshes, blas, shapes):

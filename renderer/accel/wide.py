@@ -13,6 +13,9 @@ Layout (``WideBvh``; node 0 is the root; K time keys as in ``build``)::
                                0 for an unused slot (the root is nobody's child)
     prim_order                 as in ``build``: a leaf's primitives are prim_order[first : first + count]
 
+The top level is walked in this form; the bottom level is uploaded as ``quantize``'s 64-byte records of the same
+nodes (boxes in 8 bits per coordinate, child references inside).
+
 Collapse (top-down, one thread): a wide node starts from a binary node's two children and repeatedly opens the
 inner child of largest key-averaged surface area (the child a ray is most likely to enter) until it has four
 children or only leaves. Boxes stay the binary tree's per-key boxes, so they are as tight at every time.
