@@ -33,16 +33,20 @@ def walk(w: wide.WideBvh):
     return seen, leaves
 
 
-@pytest.mark.parametrize("n,keys", [(1, 1), (5, 1), (3000, 1), (2000, 3)])
-def test_the_collapse_keeps_every_primitive_once_and_every_box(n, keys):
+@pytest.mark.parametrize("n,keys,merge", [(1, 1, 0), (5, 1, 0), (3000, 1, 0), (2000, 3, 0), (5, 1, 6),
+                                          (3000, 1, 6), (2000, 3, 15)])
+def test_the_collapse_keeps_every_primitive_once_and_every_box(n, keys, merge):
     lo, hi = random_boxes(n, keys)
-    binary = build_bvh(lo, hi, max_leaf=8, c_trav=4.0)
-    w = wide.collapse(binary)
+    binary = build_bvh(lo, hi, max_leaf=4 if merge else 8, c_trav=2.0 if merge else 4.0)
+    w = wide.collapse(binary, merge_leaf=merge)
     nodes, leaves = walk(w)
     assert sorted(nodes) == list(range(w.num_nodes))  # every node reached exactly once
     prims = np.concatenate([binary.prim_order[f:f + c] for f, c in leaves])
     assert sorted(prims) == list(range(n))  # every primitive in exactly one leaf
-    assert max(c for _, c in leaves) <= 8
+    assert max(c for _, c in leaves) <= max(8 if not merge else 4, merge)
+    if merge and n >= 100:  # merging makes fewer, fuller nodes than the plain collapse of the same tree
+        plain = wide.collapse(binary)
+        assert w.num_nodes < plain.num_nodes and max(c for _, c in leaves) > 4
     inner = int((binary.node_a >= 0).sum())
     assert w.num_nodes <= max(1, inner)
     if n >= 100:  # wide nodes are mostly full: only leaves stop a node from opening children
@@ -147,3 +151,9 @@ def test_far_to_near_sorts_four_children():
     assert np.all(np.diff(od, axis=1) <= 0)
     for i in range(200):  # the same pairs, reordered
         assert sorted(zip(od[i], oc[i])) == sorted(zip(d[i], c[i]))
+
+
+def test_merging_is_bounded_by_the_leaf_reference():
+    lo, hi = random_boxes(50, 1)
+    with pytest.raises(ValueError):
+        wide.collapse(build_bvh(lo, hi), merge_leaf=16)

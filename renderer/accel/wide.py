@@ -18,7 +18,7 @@ nodes (boxes in 8 bits per coordinate, child references inside).
 
 Collapse (top-down, one thread): a wide node starts from a binary node's two children and repeatedly opens the
 inner child of largest key-averaged surface area (the child a ray is most likely to enter) until it has four
-children or only leaves. Boxes stay the binary tree's per-key boxes, so they are as tight at every time.
+children or only leaves; with ``merge_leaf``, a subtree of that many primitives or fewer counts as one leaf. Boxes stay the binary tree's per-key boxes, so they are as tight at every time.
 """
 from __future__ import annotations
 
@@ -78,10 +78,37 @@ def half_area(lo: wp.vec3, hi: wp.vec3):
 
 
 @wp.kernel
+def subtree_ranges_kernel(node_a: wp.array(dtype=wp.int32), node_b: wp.array(dtype=wp.int32),
+                          first: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32)):
+    """Per binary node the slot range of its subtree's primitives (contiguous: a node's children split its
+    range), one thread, children before parents (they follow them in pre-order)."""
+    n = node_a.shape[0] - 1
+    while n >= 0:
+        a = node_a[n]
+        if a < 0:
+            first[n] = -(a + 1)
+            count[n] = node_b[n]
+        else:
+            b = node_b[n]
+            first[n] = wp.min(first[a], first[b])
+            count[n] = count[a] + count[b]
+        n -= 1
+
+
+@wp.func
+def is_leaf(node_a: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32), n: int, merge_leaf: int):
+    """A binary node the wide tree keeps as one leaf: a leaf, or a subtree of at most ``merge_leaf`` primitives."""
+    return node_a[n] < 0 or count[n] <= merge_leaf
+
+
+@wp.kernel
 def collapse_kernel(
     num_keys: int,
+    merge_leaf: int,
     node_a: wp.array(dtype=wp.int32),
     node_b: wp.array(dtype=wp.int32),
+    sub_first: wp.array(dtype=wp.int32),  # per binary node its subtree's first slot and primitive count
+    sub_count: wp.array(dtype=wp.int32),
     node_lo: wp.array(dtype=wp.vec3),  # binary node n, key k at n * K + k
     node_hi: wp.array(dtype=wp.vec3),
     pending: wp.array(dtype=wp.int32),  # scratch: binary nodes waiting to become wide nodes (one per wide node)
@@ -102,7 +129,7 @@ def collapse_kernel(
             best_area = float(-1.0)
             for j in range(nc):
                 cj = c[j]
-                if node_a[cj] >= 0:
+                if not is_leaf(node_a, sub_count, cj, merge_leaf):
                     area = float(0.0)
                     for k in range(num_keys):
                         area += half_area(node_lo[cj * num_keys + k], node_hi[cj * num_keys + k])
@@ -119,9 +146,8 @@ def collapse_kernel(
         for j in range(4):
             if j < nc:
                 cj = c[j]
-                if node_a[cj] < 0:
-                    first = -(node_a[cj] + 1)
-                    refs[j] = -((first << LEAF_BITS) | node_b[cj]) - 1
+                if is_leaf(node_a, sub_count, cj, merge_leaf):
+                    refs[j] = -((sub_first[cj] << LEAF_BITS) | sub_count[cj]) - 1
                 else:
                     pending[nw] = cj
                     refs[j] = nw
@@ -154,8 +180,9 @@ def collapse_kernel(
     count[0] = nw
 
 
-def collapse(bvh: Bvh, device: str = "cpu") -> WideBvh:
-    """The four-wide form of a binary ``Bvh`` (same primitive order, same per-key boxes)."""
+def collapse(bvh: Bvh, device: str = "cpu", merge_leaf: int = 0) -> WideBvh:
+    """The four-wide form of a binary ``Bvh`` (same primitive order, same per-key boxes). A subtree of at most
+    ``merge_leaf`` primitives becomes one leaf (its primitives are contiguous in the order; its box is its root's)."""
     m, k = bvh.num_nodes, bvh.num_keys
     if bvh.num_prims > MAX_FIRST:
         raise ValueError(f"{bvh.num_prims} primitives in one mesh: at most {MAX_FIRST}")
@@ -170,14 +197,21 @@ def collapse(bvh: Bvh, device: str = "cpu") -> WideBvh:
             box[:, :, 0] = 3.0e38
         child = np.array([[leaf_ref(-(int(bvh.node_a[0]) + 1), int(bvh.node_b[0])), 0, 0, 0]], np.int32)
         return WideBvh(box=box.reshape(-1, 4), child=child, prim_order=bvh.prim_order, num_keys=k)
+    if merge_leaf >= 1 << LEAF_BITS:
+        raise ValueError(f"leaves of up to {(1 << LEAF_BITS) - 1} primitives, asked to merge {merge_leaf}")
     with wp.ScopedDevice(device):
         inner = int((bvh.node_a >= 0).sum())
+        node_a = wp.array(bvh.node_a, dtype=wp.int32)
+        node_b = wp.array(bvh.node_b, dtype=wp.int32)
+        sub_first = wp.empty(m, dtype=wp.int32)
+        sub_count = wp.empty(m, dtype=wp.int32)
+        wp.launch(subtree_ranges_kernel, dim=1, inputs=[node_a, node_b, sub_first, sub_count])
         pending = wp.zeros(max(1, inner), dtype=wp.int32)
         box = wp.empty(max(1, inner) * k * 6, dtype=wp.vec4)
         child = wp.empty(max(1, inner), dtype=wp.vec4i)
         count = wp.zeros(1, dtype=wp.int32)
         wp.launch(collapse_kernel, dim=1,
-                  inputs=[k, wp.array(bvh.node_a, dtype=wp.int32), wp.array(bvh.node_b, dtype=wp.int32),
+                  inputs=[k, int(merge_leaf), node_a, node_b, sub_first, sub_count,
                           wp.array(bvh.node_lower.reshape(-1, 3), dtype=wp.vec3),
                           wp.array(bvh.node_upper.reshape(-1, 3), dtype=wp.vec3), pending, box, child, count])
         nw = int(count.numpy()[0])
