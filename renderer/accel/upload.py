@@ -37,7 +37,7 @@ BLAS_TRAVERSAL_COST = 2.0
 # children (leaves at the bottom). Heavy hierarchy 51.0 -> 47.0 bytes per triangle (gloss 51.5 -> 48.2). Its cost
 # is within the noise: four runs in one process against no merging (320x180, 16 spp, one thread, 3-8 rounds)
 # gave heavy 1.09, 1.09, 0.98 and 0.95x the time, gloss 1.00; callgrind counts 0.8 % more instructions and L1
-# misses. Up to 8 triangles: 45.3 bytes, heavy 1.08x in the one run measured.
+# misses. Up to 8 triangles: 45.3 bytes, heavy 1.08-1.26x in two runs.
 BLAS_MERGE_LEAF = 6
 
 

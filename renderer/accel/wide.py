@@ -18,7 +18,8 @@ nodes (boxes in 8 bits per coordinate, child references inside).
 
 Collapse (top-down, one thread): a wide node starts from a binary node's two children and repeatedly opens the
 inner child of largest key-averaged surface area (the child a ray is most likely to enter) until it has four
-children or only leaves; with ``merge_leaf``, a subtree of that many primitives or fewer counts as one leaf. Boxes stay the binary tree's per-key boxes, so they are as tight at every time.
+children or only leaves; with ``merge_leaf``, a subtree of that many primitives or fewer counts as one leaf.
+Boxes stay the binary tree's per-key boxes, so they are as tight at every time.
 """
 from __future__ import annotations
 
