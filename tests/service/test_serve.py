@@ -301,6 +301,8 @@ def test_abuse_against_drt_serve(servers, card, tmp_path):
     cpu0, t0 = _cpu_seconds(workers), time.monotonic()
     time.sleep(2.0)
     busy = (_cpu_seconds(workers) - cpu0) / (time.monotonic() - t0)
-    assert busy < min(0.15, before / 3), f"{busy:.2f} cores busy in the workers after the delete, {before:.2f} before"
+    # idle workers still heartbeat and collect garbage: 0.155 cores once on the loaded 2-core machine; one tile
+    # still rendering would be 0.5 or more
+    assert busy < min(0.25, before / 3), f"{busy:.2f} cores busy in the workers after the delete, {before:.2f} before"
     assert server.http.get(job["url"], headers=auth).status_code == 404
     assert not (tmp_path / "data" / "jobs" / job["id"]).exists()
