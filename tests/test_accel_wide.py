@@ -93,7 +93,8 @@ def box_entry(lo: wp.vec3, hi: wp.vec3, ro: wp.vec3, inv_d: wp.vec3, tmax: float
 
 
 @wp.kernel
-def _entries_kernel(box: wp.array(dtype=wp.vec4), child: wp.array(dtype=wp.vec4i), nodes: int,
+def _entries_kernel(box: wp.array(dtype=wp.vec4), rec: wp.array(dtype=wide.WideBoxes),
+                    child: wp.array(dtype=wp.vec4i), nodes: int,
                     ro: wp.array(dtype=wp.vec3), rd: wp.array(dtype=wp.vec3), tmax: float,
                     wide_out: wp.array(dtype=wp.vec4), binary_out: wp.array(dtype=wp.vec4)):
     i = wp.tid()
@@ -101,7 +102,7 @@ def _entries_kernel(box: wp.array(dtype=wp.vec4), child: wp.array(dtype=wp.vec4i
     r = i // nodes
     inv = safe_inverse(rd[r])
     base = node * 6
-    wide_out[i] = wide.entries(box, base, child[node], 0, 0, 0.0, ro[r], inv, tmax)
+    wide_out[i] = wide.entries(rec, node, child[node], 0, 0, 0.0, ro[r], inv, tmax)
     out = wp.vec4(0.0)
     for j in range(4):
         lo = wp.vec3(box[base + 0][j], box[base + 1][j], box[base + 2][j])
@@ -121,7 +122,8 @@ def test_the_four_box_slab_test_is_the_binary_one(scale):
     rd[:10, 1:] = 0.0  # axis-parallel rays
     n = w.num_nodes * len(ro)
     got, want = wp.zeros(n, dtype=wp.vec4), wp.zeros(n, dtype=wp.vec4)
-    wp.launch(_entries_kernel, dim=n, inputs=[wp.array(w.box, dtype=wp.vec4), wp.array(w.child, dtype=wp.vec4i),
+    wp.launch(_entries_kernel, dim=n, inputs=[wp.array(w.box, dtype=wp.vec4), wide.box_records(w.box),
+                                              wp.array(w.child, dtype=wp.vec4i),
                                               w.num_nodes, wp.array(ro, dtype=wp.vec3), wp.array(rd, dtype=wp.vec3),
                                               3.4e38, got, want])
     got, want = got.numpy(), want.numpy()

@@ -8,7 +8,7 @@ import warp as wp
 
 from renderer.accel.build import build_bvh
 from renderer.accel.quantize import LIMIT, STEPS, QNode, decode, q_entries, quantize
-from renderer.accel.wide import WideBvh, collapse, entries
+from renderer.accel.wide import WideBoxes, WideBvh, box_records, collapse, entries
 
 
 def _random_tree(rng, nodes: int, keys: int, spread: tuple[int, int] = (-3, 3)):
@@ -92,7 +92,7 @@ def test_empty_mesh_root():
 
 
 @wp.kernel
-def _both_entries(q: wp.array(dtype=QNode), box: wp.array(dtype=wp.vec4), keys: int, u: float,
+def _both_entries(q: wp.array(dtype=QNode), box: wp.array(dtype=WideBoxes), keys: int, u: float,
                   ro: wp.array(dtype=wp.vec3), rd: wp.array(dtype=wp.vec3), out_q: wp.array(dtype=wp.vec4),
                   out_f: wp.array(dtype=wp.vec4), child: wp.array(dtype=wp.vec4i)):
     i = wp.tid()
@@ -102,7 +102,7 @@ def _both_entries(q: wp.array(dtype=QNode), box: wp.array(dtype=wp.vec4), keys: 
     d, c = q_entries(q, node * keys, 0, k1, u, ro[i], inv, 1.0e30)
     out_q[i] = d
     child[i] = c
-    out_f[i] = entries(box, node * keys * 6, c, 0, k1, u, ro[i], inv, 1.0e30)
+    out_f[i] = entries(box, node * keys, c, 0, k1, u, ro[i], inv, 1.0e30)
 
 
 @pytest.mark.parametrize("keys", [1, 2])
@@ -119,7 +119,7 @@ def test_walk_decodes_as_numpy(keys):
     rd = rng.normal(size=(n, 3)).astype(np.float32)
     outs = [wp.zeros(n, dtype=wp.vec4) for _ in range(2)]
     child = wp.zeros(n, dtype=wp.vec4i)
-    wp.launch(_both_entries, dim=n, inputs=[wp.array(q, dtype=QNode), wp.array(fbox, dtype=wp.vec4), keys, 0.375,
+    wp.launch(_both_entries, dim=n, inputs=[wp.array(q, dtype=QNode), box_records(fbox), keys, 0.375,
                                             wp.array(ro, dtype=wp.vec3), wp.array(rd, dtype=wp.vec3), outs[0],
                                             outs[1], child])
     dq, df = outs[0].numpy(), outs[1].numpy()

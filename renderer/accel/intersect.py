@@ -23,7 +23,7 @@ import warp as wp
 
 from renderer.accel.analytic import SHAPE_DISCS, is_cloud, shape_hits, sphere_roots
 from renderer.accel.quantize import QNode, q_entries
-from renderer.accel.wide import dist_stack_t, entries, far_to_near, leaf_range, wide_stack_t
+from renderer.accel.wide import WideBoxes, dist_stack_t, entries, far_to_near, leaf_range, wide_stack_t
 from renderer.motion.kernels import MotionKeys, find_segment, keys_matrix
 from renderer.struct_refs import by_reference
 
@@ -76,9 +76,9 @@ class Geometry:
     mesh_shape_axis: wp.array(dtype=wp.int32)
     mesh_shape_param: wp.array(dtype=wp.vec4)
     # --- top level
-    # four-wide nodes as the bottom level's: node n, key k (uniform key times k / (K - 1)), coordinate c at
-    # (n * tlas_nkeys + k) * 6 + c
-    tlas_box: wp.array(dtype=wp.vec4)
+    # four-wide nodes as the bottom level's, in float: node n, key k (uniform key times k / (K - 1)) at record
+    # n * tlas_nkeys + k
+    tlas_box: wp.array(dtype=WideBoxes)
     tlas_child: wp.array(dtype=wp.vec4i)
     tlas_prim: wp.array(dtype=wp.int32)  # instance index per leaf slot
     tlas_nkeys: int
@@ -398,7 +398,7 @@ def intersect_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, tmax: float, s: f
                         best = blas_closest(geo, geo.inst_mesh[inst], ro_o, rd_o, best.t, s, best, inst)
             else:
                 c = geo.tlas_child[ref]
-                d, c = far_to_near(entries(geo.tlas_box, ref * nk * 6, c, k0, k1, u, ro, inv_d, best.t), c)
+                d, c = far_to_near(entries(geo.tlas_box, ref * nk, c, k0, k1, u, ro, inv_d, best.t), c)
                 for j in range(4):
                     if d[j] < BIG:
                         stack[sp] = c[j]

@@ -122,7 +122,7 @@ def transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd
                                             wp.transform_vector(w2o, rd), tmax, s, tr)
         else:
             c = geo.tlas_child[ref]
-            d = entries(geo.tlas_box, ref * nk * 6, c, k0, k1, u, ro, inv_d, tmax)
+            d = entries(geo.tlas_box, ref * nk, c, k0, k1, u, ro, inv_d, tmax)
             for j in range(4):
                 if d[j] < BIG:
                     stack[sp] = c[j]

@@ -17,7 +17,7 @@ from renderer.accel.csg import OPERATIONS as CSG_OPERATIONS
 from renderer.accel.instance_bounds import box_cut, cut_size, instance_key_bounds, still_world_boxes
 from renderer.accel.intersect import Geometry
 from renderer.accel.quantize import QNODE_DTYPE, QNode, quantize
-from renderer.accel.wide import WideBvh, collapse
+from renderer.accel.wide import WideBvh, box_records, collapse
 from renderer.accel.triangle_kernels import leaf_triangles, triangle_boxes
 from renderer.motion.kernels import upload_keys
 from renderer.motion.transform import matrices_at
@@ -268,7 +268,7 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     # one instance per leaf: visiting an instance (its transform, its mesh's root) costs far more than a box test,
     # so each gets its own box in its parent (demo scene 4 % faster, production and motion within noise)
     tlas = collapse(build_bvh(lo[:, others], hi[:, others], max_leaf=1), device)
-    g.tlas_box = wp.array(tlas.box, dtype=wp.vec4, device=device)
+    g.tlas_box = box_records(tlas.box, device)
     g.tlas_child = wp.array(tlas.child, dtype=wp.vec4i, device=device)
     g.tlas_prim = _i32(others[tlas.prim_order] if len(tlas.prim_order) else [0], device)  # instance indices
     g.tlas_nkeys = nk
