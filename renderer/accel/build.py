@@ -30,12 +30,12 @@ moving-triangle test) and ``C_ISECT = 1`` per primitive; a node with ``n <= max_
 when ``C_ISECT * n <= C_TRAV + C_ISECT * (A_l n_l + A_r n_r) / A`` (key-averaged half surface areas); larger
 nodes are always split. ``NUM_BINS = 16`` per axis (``min(16, n // 2)``, at least 2, for a node of n
 primitives), all three axes. A node of n >= 2 ``SAMPLE_TARGET`` primitives chooses its split from every
-(n // SAMPLE_TARGET)-th of them (the partition still moves all): binning is half of a build, and the top levels bin every primitive
-once per level. At 4096 the 1M-triangle heavy scene builds 17 % faster (0.66 -> 0.55 s, ``build_topology``
-alone) with its SAH cost unchanged (4.28 -> 4.29); over the 25 meshes of at least 2048 triangles in the shared
-assets, peer references and bench scenes the SAH cost moved +0.03 % on average, +0.5 % at most. (1024 was
-faster still, 0.52 s, but cost a 540k-triangle layout 3.4 %; 512 cost the gloss scene's 4k triangles 12 %:
-a few large triangles a sparse sample misses weigh on the top split.)
+(n // SAMPLE_TARGET)-th of them (the partition still moves all): binning is half of a build, and the top levels
+bin every primitive once per level. At 4096 the 1M-triangle heavy scene builds 17 % faster (0.66 -> 0.55 s,
+``build_topology`` alone) with its SAH cost unchanged (4.28 -> 4.29); over the 25 meshes of at least 2048
+triangles in the shared assets, peer references and bench scenes the SAH cost moved +0.03 % on average, +0.5 %
+at most. (1024 was faster still, 0.52 s, but cost a 540k-triangle layout 3.4 %; 512 cost the gloss scene's 4k
+triangles 12 %: a few large triangles a sparse sample misses weigh on the top split.)
 
 Degenerate inputs terminate: coincident centroids split by equal counts, zero-area nodes (points) split at the
 most balanced bin boundary, and the tree depth (nodes on the longest root-to-leaf path) is kept
