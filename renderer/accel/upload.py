@@ -270,6 +270,10 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     tlas = collapse(build_bvh(lo[:, others], hi[:, others], max_leaf=1), device)
     g.tlas_box = box_records(tlas.box, device)
     g.tlas_child = wp.array(tlas.child, dtype=wp.vec4i, device=device)
+    root = np.empty((nk, 2, 3), np.float32)  # the root's box per key (``root_entered``); empty without instances
+    root[:, 0] = lo[:, others].min(1) if len(others) else 3.4e38
+    root[:, 1] = hi[:, others].max(1) if len(others) else -3.4e38
+    g.tlas_root = _v3(root.reshape(-1, 3), device)
     g.tlas_prim = _i32(others[tlas.prim_order] if len(tlas.prim_order) else [0], device)  # instance indices
     g.tlas_nkeys = nk
     g.direct_inst = direct

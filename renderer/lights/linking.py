@@ -19,6 +19,7 @@ from renderer.accel.intersect import (
     Geometry,
     instance_visible,
     instance_world_to_object,
+    root_entered,
     safe_inverse,
     tlas_keys_at,
 )
@@ -104,6 +105,8 @@ def caster_transmittance(geo: Geometry, mats: Materials, tex: Textures, links: L
     stack = wide_stack_t()  # scratch: not zeroed, read below sp only
     stack[0] = 0  # the root
     sp = int(1)
+    if not root_entered(geo, k0, k1, u, ro, inv_d, tmax):
+        sp = 0  # the ray passes by every instance of the top level
     tr = float(1.0)
     while sp > 0 and tr > 0.0:
         sp -= 1
