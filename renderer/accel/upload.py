@@ -270,10 +270,16 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     tlas = collapse(build_bvh(lo[:, others], hi[:, others], max_leaf=1), device)
     g.tlas_box = box_records(tlas.box, device)
     g.tlas_child = wp.array(tlas.child, dtype=wp.vec4i, device=device)
-    root = np.empty((nk, 2, 3), np.float32)  # the root's box per key (``root_entered``); empty without instances
-    root[:, 0] = lo[:, others].min(1) if len(others) else 3.4e38
-    root[:, 1] = hi[:, others].max(1) if len(others) else -3.4e38
-    g.tlas_root = _v3(root.reshape(-1, 3), device)
+    # the root's box per key (``root_entered``; empty without instances), grown by 2^-20 of its largest coordinate:
+    # a float lerp between keys is monotone only to an ulp, and the root must hold every child's blended box
+    root = np.empty((nk, 2, 3), np.float64)
+    if len(others):
+        rlo, rhi = lo[:, others].min(1).astype(np.float64), hi[:, others].max(1).astype(np.float64)
+        pad = np.maximum(np.abs(rlo), np.abs(rhi)).max(1, keepdims=True) * 2.0**-20
+        root[:, 0], root[:, 1] = rlo - pad, rhi + pad
+    else:
+        root[:, 0], root[:, 1] = 3.4e38, -3.4e38
+    g.tlas_root = _v3(np.clip(root, -3.4e38, 3.4e38).astype(np.float32).reshape(-1, 3), device)
     g.tlas_prim = _i32(others[tlas.prim_order] if len(tlas.prim_order) else [0], device)  # instance indices
     g.tlas_nkeys = nk
     g.direct_inst = direct
