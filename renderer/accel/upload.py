@@ -267,14 +267,15 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     others = np.array([i for i in range(ninst) if i != direct], np.int64)
     # one instance per leaf: visiting an instance (its transform, its mesh's root) costs far more than a box test,
     # so each gets its own box in its parent (demo scene 4 % faster, production and motion within noise)
-    tlas = collapse(build_bvh(lo[:, others], hi[:, others], max_leaf=1), device)
+    olo, ohi = lo[:, others], hi[:, others]  # (K, len(others), 3)
+    tlas = collapse(build_bvh(olo, ohi, max_leaf=1), device)
     g.tlas_box = box_records(tlas.box, device)
     g.tlas_child = wp.array(tlas.child, dtype=wp.vec4i, device=device)
     # the root's box per key (``root_entered``; empty without instances), grown by 2^-20 of its largest coordinate:
     # a float lerp between keys is monotone only to an ulp, and the root must hold every child's blended box
     root = np.empty((nk, 2, 3), np.float64)
     if len(others):
-        rlo, rhi = lo[:, others].min(1).astype(np.float64), hi[:, others].max(1).astype(np.float64)
+        rlo, rhi = olo.min(1).astype(np.float64), ohi.max(1).astype(np.float64)
         pad = np.maximum(np.abs(rlo), np.abs(rhi)).max(1, keepdims=True) * 2.0**-20
         root[:, 0], root[:, 1] = rlo - pad, rhi + pad
     else:
