@@ -159,3 +159,107 @@ def test_merging_is_bounded_by_the_leaf_reference():
     lo, hi = random_boxes(50, 1)
     with pytest.raises(ValueError):
         wide.collapse(build_bvh(lo, hi), merge_leaf=16)
+
+
+@wp.kernel
+def _root_kernel(root: wp.array(dtype=wp.vec3), rec: wp.array(dtype=wide.WideBoxes),
+                 child: wp.array(dtype=wp.vec4i), nodes: int, nkeys: int,
+                 ro: wp.array(dtype=wp.vec3), rd: wp.array(dtype=wp.vec3), s: wp.array(dtype=float),
+                 tmax: wp.array(dtype=float), root_out: wp.array(dtype=int), child_out: wp.array(dtype=int)):
+    r = wp.tid()
+    k0 = int(0)
+    k1 = int(0)
+    u = float(0.0)
+    if nkeys > 1:  # as the walks choose their keys (intersect.tlas_keys_at)
+        x = s[r] * float(nkeys - 1)
+        k0 = wp.min(int(x), nkeys - 2)
+        k1 = k0 + 1
+        u = x - float(k0)
+    inv = safe_inverse(rd[r])
+    root_out[r] = int(wide.root_entered(root, k0, k1, u, ro[r], inv, tmax[r]))
+    entered = int(0)
+    for node in range(nodes):
+        e = wide.entries(rec, node * nkeys, child[node], k0, k1, u, ro[r], inv, tmax[r])
+        for j in range(4):
+            if e[j] < wide.BIG:
+                entered = 1
+    child_out[r] = entered
+
+
+def _blended(lo, hi, s):
+    """Each box of (K, N, 3) blended at normalised times s (one per ray): (R, N, 3) lo and hi, in float64."""
+    k = lo.shape[0]
+    if k == 1:
+        return np.broadcast_to(lo[0], (len(s),) + lo.shape[1:]), np.broadcast_to(hi[0], (len(s),) + hi.shape[1:])
+    x = s * (k - 1)
+    k0 = np.minimum(x.astype(int), k - 2)
+    u = (x - k0)[:, None, None]
+    return (lo[k0] * (1 - u) + lo[k0 + 1] * u), (hi[k0] * (1 - u) + hi[k0 + 1] * u)
+
+
+@pytest.mark.parametrize("keys,scale,count", [(1, 1.0, 60), (3, 1.0, 60), (9, 1.0, 60), (3, 1e-3, 60), (3, 1e4, 60),
+                                              (1, 1.0, 1), (3, 1.0, 1)])
+def test_the_root_box_holds_every_child_at_every_time(keys, scale, count):
+    """A ray that enters any box of the top level at its time enters the root box (``root_entered`` never drops
+    a hit), while rays that pass by every instance are spared; aimed at points on the instances' blended faces and
+    corners, so that many graze them."""
+    rng = np.random.default_rng(keys)
+    lo, hi = random_boxes(count, keys, seed=keys)
+    flat = rng.integers(0, 3, count // 3 + 1)
+    hi[:, np.arange(len(flat)), flat] = lo[:, np.arange(len(flat)), flat]  # a third flat on an axis (a ground quad)
+    lo, hi = lo * np.float32(scale), hi * np.float32(scale)
+    w = wide.collapse(build_bvh(lo, hi, max_leaf=1))
+    root = wide.root_boxes(lo, hi)
+    assert np.all(root[0::2] <= lo.min(1)) and np.all(root[1::2] >= hi.max(1))
+    n = 6000
+    s = rng.uniform(0, 1, n)
+    s[:200] = np.linspace(0, 1, 200)  # key times themselves included
+    blo, bhi = _blended(lo.astype(np.float64), hi.astype(np.float64), s)
+    pick = rng.integers(0, lo.shape[1], n)
+    tlo, thi = blo[np.arange(n), pick], bhi[np.arange(n), pick]
+    f = rng.uniform(0, 1, (n, 3))
+    f[: n // 3] = np.round(f[: n // 3])  # corners
+    face = rng.integers(0, 3, n)
+    f[np.arange(n // 3, 2 * n // 3), face[n // 3: 2 * n // 3]] = rng.integers(0, 2, n // 3)  # faces
+    target = tlo + f * (thi - tlo)
+    ro = rng.uniform(-14, 14, (n, 3)) * scale
+    rd = target - ro
+    rd[-n // 6:] = rng.normal(size=(n // 6, 3))  # random directions: most pass by every box
+    axis = rng.integers(0, 3, 300)
+    rd[:300] = 0.0
+    rd[np.arange(300), axis] = 1.0  # axis-parallel rays through a box face's plane
+    ro[:300] = target[:300]
+    ro[np.arange(300), axis] -= 20 * scale
+    rd /= np.linalg.norm(rd, axis=1, keepdims=True)
+    tmax = np.where(rng.uniform(0, 1, n) < 0.2, rng.uniform(0, 20, n) * scale, 3.4e38)
+    got_root, got_child = wp.zeros(n, dtype=int), wp.zeros(n, dtype=int)
+    wp.launch(_root_kernel, dim=n, inputs=[
+        wp.array(root, dtype=wp.vec3), wide.box_records(w.box), wp.array(w.child, dtype=wp.vec4i), w.num_nodes,
+        keys, wp.array(ro.astype(np.float32), dtype=wp.vec3), wp.array(rd.astype(np.float32), dtype=wp.vec3),
+        wp.array(s.astype(np.float32), dtype=float), wp.array(tmax.astype(np.float32), dtype=float),
+        got_root, got_child])
+    got_root, got_child = got_root.numpy().astype(bool), got_child.numpy().astype(bool)
+    assert got_child.mean() > 0.5  # most rays do enter a box
+    assert not np.any(got_child & ~got_root), np.nonzero(got_child & ~got_root)[0][:10]
+    assert (~got_root[-n // 6:]).mean() > 0.3  # and the random ones are mostly spared the walk
+
+
+def test_an_empty_root_is_never_entered():
+    """A top level without instances: no ray of unit direction enters its root."""
+    root = wide.root_boxes(np.zeros((2, 0, 3), np.float32), np.zeros((2, 0, 3), np.float32))
+    rng = np.random.default_rng(3)
+    n = 500
+    ro = rng.uniform(-1e3, 1e3, (n, 3)).astype(np.float32)
+    rd = rng.normal(size=(n, 3))
+    rd[:20] = 1.0  # diagonal, toward the far point
+    rd[20:40] = np.eye(3)[rng.integers(0, 3, 20)]  # axis-parallel
+    rd = (rd / np.linalg.norm(rd, axis=1, keepdims=True)).astype(np.float32)
+    lo, hi = random_boxes(1, 2)
+    w = wide.collapse(build_bvh(lo, hi, max_leaf=1))
+    got_root, got_child = wp.zeros(n, dtype=int), wp.zeros(n, dtype=int)
+    wp.launch(_root_kernel, dim=n, inputs=[
+        wp.array(root, dtype=wp.vec3), wide.box_records(w.box), wp.array(w.child, dtype=wp.vec4i), w.num_nodes,
+        2, wp.array(ro, dtype=wp.vec3), wp.array(rd, dtype=wp.vec3), wp.array(rng.uniform(0, 1, n).astype(np.float32),
+                                                                             dtype=float),
+        wp.array(np.full(n, 3.4e38, np.float32), dtype=float), got_root, got_child])
+    assert not got_root.numpy().any()

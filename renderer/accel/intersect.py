@@ -23,7 +23,8 @@ import warp as wp
 
 from renderer.accel.analytic import SHAPE_DISCS, is_cloud, shape_hits, sphere_roots
 from renderer.accel.quantize import QNode, q_entries
-from renderer.accel.wide import WideBoxes, dist_stack_t, entries, far_to_near, leaf_range, wide_stack_t
+from renderer.accel.wide import (WideBoxes, dist_stack_t, entries, far_to_near, leaf_range, root_entered,
+                                 wide_stack_t)
 from renderer.motion.kernels import MotionKeys, find_segment, keys_matrix
 from renderer.struct_refs import by_reference
 
@@ -358,23 +359,6 @@ def tlas_keys_at(geo: Geometry, s: float):
 
 
 @wp.func
-def root_entered(geo: Geometry, k0: int, k1: int, u: float, ro: wp.vec3, inv_d: wp.vec3, tmax: float):
-    """Whether the ray enters the top level's root box (blended between keys k0 and k1) before tmax: one slab
-    test that spares a ray passing by every instance the root's four-lane test. A blurred scene's still prims are
-    one mesh walked directly, its movers instances under a top level: the motion scene's integrator 206.6 -> 197.4 M
-    instructions (callgrind, 64x64, 4 spp), the still scene 187.1 M."""
-    lo = wp.lerp(geo.tlas_root[2 * k0], geo.tlas_root[2 * k1], u)
-    hi = wp.lerp(geo.tlas_root[2 * k0 + 1], geo.tlas_root[2 * k1 + 1], u)
-    t0 = wp.cw_mul(lo - ro, inv_d)
-    t1 = wp.cw_mul(hi - ro, inv_d)
-    near = wp.min(t0, t1)
-    far = wp.max(t0, t1)
-    tn = wp.max(wp.max(near[0], near[1]), wp.max(near[2], 0.0))
-    tf = wp.min(wp.min(far[0], far[1]), wp.min(far[2], tmax)) * 1.00000024  # robust for flat boxes (Ize 2013)
-    return tn <= tf
-
-
-@wp.func
 def instance_visible(geo: Geometry, inst: int, s: float):
     return s >= geo.inst_vis_from[inst] and s <= geo.inst_vis_to[inst]
 
@@ -397,7 +381,7 @@ def intersect_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, tmax: float, s: f
     k0, k1, u = tlas_keys_at(geo, s)
     nk = geo.tlas_nkeys
     inv_d = safe_inverse(rd)
-    if not root_entered(geo, k0, k1, u, ro, inv_d, best.t):
+    if not root_entered(geo.tlas_root, k0, k1, u, ro, inv_d, best.t):
         return best
     stack = wide_stack_t()  # scratch: not zeroed, read below sp only
     dist = dist_stack_t()

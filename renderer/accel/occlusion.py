@@ -19,13 +19,12 @@ from renderer.accel.intersect import (
     leaf_hit,
     mesh_keys_at,
     point_hit,
-    root_entered,
     safe_inverse,
     tlas_keys_at,
 )
 from renderer.accel.analytic import is_cloud, shape_hits
 from renderer.accel.quantize import q_entries
-from renderer.accel.wide import entries, leaf_range, wide_stack_t
+from renderer.accel.wide import entries, leaf_range, root_entered, wide_stack_t
 from renderer.shading.materials import Materials, eval_opacity
 from renderer.shading.textures import Textures
 
@@ -110,7 +109,7 @@ def transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd
     stack = wide_stack_t()  # scratch: not zeroed, read below sp only
     stack[0] = 0  # the root
     sp = int(1)
-    if not root_entered(geo, k0, k1, u, ro, inv_d, tmax):
+    if not root_entered(geo.tlas_root, k0, k1, u, ro, inv_d, tmax):
         sp = 0  # the ray passes by every instance of the top level
     while sp > 0 and tr > 0.0:
         sp -= 1

@@ -17,7 +17,7 @@ from renderer.accel.csg import OPERATIONS as CSG_OPERATIONS
 from renderer.accel.instance_bounds import box_cut, cut_size, instance_key_bounds, still_world_boxes
 from renderer.accel.intersect import Geometry
 from renderer.accel.quantize import QNODE_DTYPE, QNode, quantize
-from renderer.accel.wide import WideBvh, box_records, collapse
+from renderer.accel.wide import WideBvh, box_records, collapse, root_boxes
 from renderer.accel.triangle_kernels import leaf_triangles, triangle_boxes
 from renderer.motion.kernels import upload_keys
 from renderer.motion.transform import matrices_at
@@ -271,16 +271,7 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     tlas = collapse(build_bvh(olo, ohi, max_leaf=1), device)
     g.tlas_box = box_records(tlas.box, device)
     g.tlas_child = wp.array(tlas.child, dtype=wp.vec4i, device=device)
-    # the root's box per key (``root_entered``; empty without instances), grown by 2^-20 of its largest coordinate:
-    # a float lerp between keys is monotone only to an ulp, and the root must hold every child's blended box
-    root = np.empty((nk, 2, 3), np.float64)
-    if len(others):
-        rlo, rhi = olo.min(1).astype(np.float64), ohi.max(1).astype(np.float64)
-        pad = np.maximum(np.abs(rlo), np.abs(rhi)).max(1, keepdims=True) * 2.0**-20
-        root[:, 0], root[:, 1] = rlo - pad, rhi + pad
-    else:
-        root[:, 0], root[:, 1] = 3.4e38, -3.4e38
-    g.tlas_root = _v3(np.clip(root, -3.4e38, 3.4e38).astype(np.float32).reshape(-1, 3), device)
+    g.tlas_root = _v3(root_boxes(olo, ohi), device)  # its slab test spares a ray that passes by every instance
     g.tlas_prim = _i32(others[tlas.prim_order] if len(tlas.prim_order) else [0], device)  # instance indices
     g.tlas_nkeys = nk
     g.direct_inst = direct

@@ -43,6 +43,9 @@ STACK_SIZE = 160
 wide_stack_t = scratch(wp.types.vector(length=STACK_SIZE, dtype=wp.int32))  # read below the top only
 dist_stack_t = scratch(wp.types.vector(length=STACK_SIZE, dtype=wp.float32))
 BIG = 3.4e38
+# A slab test compares its entry with its exit grown by 2 ulp, so that a flat box (lo == hi on an axis) and a ray
+# grazing a face are still entered despite the rounding of (bound - origin) * inv_d (Ize 2013)
+SLAB_SLACK = wp.constant(1.00000024)
 
 
 @wp.struct
@@ -261,7 +264,7 @@ def box_entries(lx: wp.vec4, ly: wp.vec4, lz: wp.vec4, hx: wp.vec4, hy: wp.vec4,
     ny, fy = _slabs(ly, hy, ro[1], inv_d[1])
     nz, fz = _slabs(lz, hz, ro[2], inv_d[2])
     tn = wp.max(wp.max(nx, ny), wp.max(nz, wp.vec4(0.0)))
-    tf = wp.min(wp.min(fx, fy), wp.min(fz, wp.vec4(tmax))) * 1.00000024  # robust for flat boxes (Ize 2013)
+    tf = wp.min(wp.min(fx, fy), wp.min(fz, wp.vec4(tmax))) * SLAB_SLACK
     return wp.vec4(wp.where(tn[0] <= tf[0] and c[0] != 0, tn[0], BIG),
                    wp.where(tn[1] <= tf[1] and c[1] != 0, tn[1], BIG),
                    wp.where(tn[2] <= tf[2] and c[2] != 0, tn[2], BIG),
@@ -289,6 +292,42 @@ def entries(box: wp.array(dtype=WideBoxes), rec: int, c: wp.vec4i, k0: int, k1: 
         hy = wp.lerp(hy, b1.hy, u)
         hz = wp.lerp(hz, b1.hz, u)
     return box_entries(lx, ly, lz, hx, hy, hz, c, ro, inv_d, tmax)
+
+
+def root_boxes(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """The top level's root box per key for ``root_entered``: the union of the (K, N, 3) instance boxes, as (K * 2,
+    3) float32 rows lo, hi. It is grown by 2^-20 of its largest coordinate: the root and a child are blended
+    between keys by separate lerps, which the compiler may contract differently (an ulp apart), and the root must
+    hold every child's blended box. Without instances it is a point far away (as an unused child slot's box): its
+    slab distances overflow, so no ray of unit direction from within the scene enters it before a finite tmax (an
+    inverted box would not do: the slab test orders each axis's two distances, so lo > hi is entered everywhere)."""
+    k = lo.shape[0]
+    root = np.empty((k, 2, 3), np.float64)
+    if lo.shape[1]:
+        rlo, rhi = lo.min(1).astype(np.float64), hi.max(1).astype(np.float64)
+        pad = np.maximum(np.abs(rlo), np.abs(rhi)).max(1, keepdims=True) * 2.0**-20
+        root[:, 0], root[:, 1] = rlo - pad, rhi + pad
+    else:
+        root[:] = EMPTY
+    return np.clip(root, -BIG, BIG).astype(np.float32).reshape(-1, 3)
+
+
+@wp.func
+def root_entered(root: wp.array(dtype=wp.vec3), k0: int, k1: int, u: float, ro: wp.vec3, inv_d: wp.vec3,
+                 tmax: float):
+    """Whether the ray enters the root box (``root_boxes``, blended between keys k0 and k1) before tmax: one slab
+    test that spares a ray passing by every instance the root's four-lane test. A blurred scene's still prims are
+    one mesh walked directly, its movers instances under a top level: the motion scene's integrator 206.6 -> 197.4 M
+    instructions (callgrind, 64x64, 4 spp), the still scene 187.1 M."""
+    lo = wp.lerp(root[2 * k0], root[2 * k1], u)
+    hi = wp.lerp(root[2 * k0 + 1], root[2 * k1 + 1], u)
+    t0 = wp.cw_mul(lo - ro, inv_d)
+    t1 = wp.cw_mul(hi - ro, inv_d)
+    near = wp.min(t0, t1)
+    far = wp.max(t0, t1)
+    tn = wp.max(wp.max(near[0], near[1]), wp.max(near[2], 0.0))
+    tf = wp.min(wp.min(far[0], far[1]), wp.min(far[2], tmax)) * SLAB_SLACK
+    return tn <= tf
 
 
 @wp.func

@@ -19,12 +19,11 @@ from renderer.accel.intersect import (
     Geometry,
     instance_visible,
     instance_world_to_object,
-    root_entered,
     safe_inverse,
     tlas_keys_at,
 )
 from renderer.accel.occlusion import blas_transmittance, transmittance
-from renderer.accel.wide import entries, leaf_range, wide_stack_t
+from renderer.accel.wide import entries, leaf_range, root_entered, wide_stack_t
 from renderer.shading.materials import Materials
 from renderer.shading.textures import Textures
 from renderer.struct_refs import by_reference
@@ -105,7 +104,7 @@ def caster_transmittance(geo: Geometry, mats: Materials, tex: Textures, links: L
     stack = wide_stack_t()  # scratch: not zeroed, read below sp only
     stack[0] = 0  # the root
     sp = int(1)
-    if not root_entered(geo, k0, k1, u, ro, inv_d, tmax):
+    if not root_entered(geo.tlas_root, k0, k1, u, ro, inv_d, tmax):
         sp = 0  # the ray passes by every instance of the top level
     tr = float(1.0)
     while sp > 0 and tr > 0.0:
