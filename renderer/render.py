@@ -180,6 +180,7 @@ def render_tile(prep: PreparedScene, tile: Tile,
     sw, sh = sx1 - sx0, sy1 - sy0
     targets = (ex1 - ex0) * (ey1 - ey0)
     directions = borders.directions(margin)
+    aov_sums = int(film.needs_aov_sums(opts.aovs, opts.denoise))
     waves = film.wave_schedule(opts.spp)
     max_wave = max(e - s for s, e in waves)
     dev = prep.device
@@ -226,7 +227,7 @@ def render_tile(prep: PreparedScene, tile: Tile,
                   inputs=[buf, kind, float(film.FILTER_RADIUS[kind])])
         wp.launch(film.gather_kernel, dim=targets, device=dev,
                   inputs=[buf, acc, wave, sx0, sy0, sw, sh, wp.array(slot_of, dtype=wp.int32, device=dev),
-                          ex0, ey0, ex1 - ex0, margin])
+                          ex0, ey0, ex1 - ex0, margin, aov_sums])
         rgb = None
         if conv.enabled:
             rgb = buf.rgba.numpy()[:pixels.size * wave].reshape(pixels.size, wave, 4)[..., :3]

@@ -167,3 +167,20 @@ def test_the_kernels_axis_weights_make_the_filter(name):
         for p in (-1, 0, 1):
             want = film.filter_weight_np(kind, u[:, 0] - 0.5 - o, u[:, 1] - 0.5 - p)
             np.testing.assert_allclose(wx[:, o + 1] * wy[:, p + 1], want, rtol=1e-5, atol=1e-6)
+
+
+def test_the_colour_does_not_depend_on_which_aovs_are_asked_for(scene):
+    """The gather adds depth, normal and albedo only for a render that asks for one of them (or denoises): the
+    colour and weight sums are the same bits either way, and each AOV's sums are the same whichever set asks."""
+    plain = render_frame(prepare(scene, RenderOptions(width=24, height=16, spp=4)), tile_size=8).sums
+    every = render_frame(prepare(scene, RenderOptions(width=24, height=16, spp=4,
+                                                      aovs=("depth", "normal", "albedo"))), tile_size=8).sums
+    normal = render_frame(prepare(scene, RenderOptions(width=24, height=16, spp=4, aovs=("normal",))),
+                          tile_size=8).sums
+    for k in ("rgba", "weight"):
+        assert np.array_equal(plain[k], every[k]) and np.array_equal(plain[k], normal[k]), k
+    assert np.abs(every["normal"]).sum() > 0 and np.array_equal(every["normal"], normal["normal"])
+    assert np.array_equal(every["depth"], normal["depth"])  # any one of them gathers all three
+    assert not plain["depth"].any() and not plain["normal"].any()  # the work that is skipped
+    assert film.needs_aov_sums((), True) and film.needs_aov_sums(("albedo",), False)
+    assert not film.needs_aov_sums(("spp",), False)
