@@ -81,7 +81,8 @@ class Geometry:
     # n * tlas_nkeys + k
     tlas_box: wp.array(dtype=WideBoxes)
     tlas_child: wp.array(dtype=wp.vec4i)
-    # the root's own box (the union of the top level's instances) per key: lo, hi at 2 k, 2 k + 1
+    # the root's own box (the union of the top level's instances) per segment between keys: lo, hi at 2 k, 2 k + 1
+    # (``wide.root_boxes``)
     tlas_root: wp.array(dtype=wp.vec3)
     tlas_prim: wp.array(dtype=wp.int32)  # instance index per leaf slot
     tlas_nkeys: int
@@ -381,7 +382,7 @@ def intersect_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, tmax: float, s: f
     k0, k1, u = tlas_keys_at(geo, s)
     nk = geo.tlas_nkeys
     inv_d = safe_inverse(rd)
-    if not root_entered(geo.tlas_root, k0, k1, u, ro, inv_d, best.t):
+    if not root_entered(geo.tlas_root, k0, ro, inv_d, best.t):
         return best
     stack = wide_stack_t()  # scratch: not zeroed, read below sp only
     dist = dist_stack_t()

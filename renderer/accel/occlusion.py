@@ -109,7 +109,7 @@ def transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd
     stack = wide_stack_t()  # scratch: not zeroed, read below sp only
     stack[0] = 0  # the root
     sp = int(1)
-    if not root_entered(geo.tlas_root, k0, k1, u, ro, inv_d, tmax):
+    if not root_entered(geo.tlas_root, k0, ro, inv_d, tmax):
         sp = 0  # the ray passes by every instance of the top level
     while sp > 0 and tr > 0.0:
         sp -= 1

@@ -295,16 +295,20 @@ def entries(box: wp.array(dtype=WideBoxes), rec: int, c: wp.vec4i, k0: int, k1: 
 
 
 def root_boxes(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """The top level's root box per key for ``root_entered``: the union of the (K, N, 3) instance boxes, as (K * 2,
-    3) float32 rows lo, hi. It is grown by 2^-20 of its largest coordinate: the root and a child are blended
-    between keys by separate lerps, which the compiler may contract differently (an ulp apart), and the root must
-    hold every child's blended box. Without instances it is a point far away (as an unused child slot's box): its
-    slab distances overflow, so no ray of unit direction from within the scene enters it before a finite tmax (an
+    """The top level's root box per segment between time keys, for ``root_entered``: the union of the (K, N, 3)
+    instance boxes at keys k and k + 1 (at key 0 alone when K = 1), as (max(K - 1, 1) * 2, 3) float32 rows lo, hi.
+    An instance's box blended at any time between two keys lies in the union of its two key boxes, so a walk tests
+    the root without blending it. Grown by 2^-20 of its largest coordinate, since a float lerp between keys may
+    round an ulp outside them. Without instances it is a point far away (as an unused child slot's box): its slab
+    distances overflow, so no ray of unit direction from within the scene enters it before a finite tmax (an
     inverted box would not do: the slab test orders each axis's two distances, so lo > hi is entered everywhere)."""
     k = lo.shape[0]
-    root = np.empty((k, 2, 3), np.float64)
+    segments = max(k - 1, 1)
+    root = np.empty((segments, 2, 3), np.float64)
     if lo.shape[1]:
-        rlo, rhi = lo.min(1).astype(np.float64), hi.max(1).astype(np.float64)
+        rlo, rhi = lo.min(1).astype(np.float64), hi.max(1).astype(np.float64)  # (K, 3) per key
+        if k > 1:
+            rlo, rhi = np.minimum(rlo[:-1], rlo[1:]), np.maximum(rhi[:-1], rhi[1:])
         pad = np.maximum(np.abs(rlo), np.abs(rhi)).max(1, keepdims=True) * 2.0**-20
         root[:, 0], root[:, 1] = rlo - pad, rhi + pad
     else:
@@ -313,14 +317,8 @@ def root_boxes(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 
 @wp.func
-def root_entered(root: wp.array(dtype=wp.vec3), k0: int, k1: int, u: float, ro: wp.vec3, inv_d: wp.vec3,
-                 tmax: float):
-    """Whether the ray enters the root box (``root_boxes``, blended between keys k0 and k1) before tmax: one slab
-    test that spares a ray passing by every instance the root's four-lane test. A blurred scene's still prims are
-    one mesh walked directly, its movers instances under a top level: the motion scene's integrator 206.6 -> 197.4 M
-    instructions (callgrind, 64x64, 4 spp), the still scene 187.1 M."""
-    lo = wp.lerp(root[2 * k0], root[2 * k1], u)
-    hi = wp.lerp(root[2 * k0 + 1], root[2 * k1 + 1], u)
+def box_entered(lo: wp.vec3, hi: wp.vec3, ro: wp.vec3, inv_d: wp.vec3, tmax: float):
+    """Whether the ray enters the box [lo, hi] before tmax: the slab test of ``box_entries`` for one box."""
     t0 = wp.cw_mul(lo - ro, inv_d)
     t1 = wp.cw_mul(hi - ro, inv_d)
     near = wp.min(t0, t1)
@@ -328,6 +326,15 @@ def root_entered(root: wp.array(dtype=wp.vec3), k0: int, k1: int, u: float, ro: 
     tn = wp.max(wp.max(near[0], near[1]), wp.max(near[2], 0.0))
     tf = wp.min(wp.min(far[0], far[1]), wp.min(far[2], tmax)) * SLAB_SLACK
     return tn <= tf
+
+
+@wp.func
+def root_entered(root: wp.array(dtype=wp.vec3), k0: int, ro: wp.vec3, inv_d: wp.vec3, tmax: float):
+    """Whether the ray enters the root box of the segment from key k0 (``root_boxes``) before tmax: one slab test
+    that spares a ray passing by every instance the root's four-lane test. A blurred scene's still prims are one
+    mesh walked directly, its movers instances under a top level: the motion scene's integrator 206.6 -> 197.4 M
+    instructions (callgrind, 64x64, 4 spp) with the root blended to the ray's time, the still scene 187.1 M."""
+    return box_entered(root[2 * k0], root[2 * k0 + 1], ro, inv_d, tmax)
 
 
 @wp.func

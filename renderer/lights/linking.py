@@ -104,7 +104,7 @@ def caster_transmittance(geo: Geometry, mats: Materials, tex: Textures, links: L
     stack = wide_stack_t()  # scratch: not zeroed, read below sp only
     stack[0] = 0  # the root
     sp = int(1)
-    if not root_entered(geo.tlas_root, k0, k1, u, ro, inv_d, tmax):
+    if not root_entered(geo.tlas_root, k0, ro, inv_d, tmax):
         sp = 0  # the ray passes by every instance of the top level
     tr = float(1.0)
     while sp > 0 and tr > 0.0:
