@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import warp as wp
 
 from renderer.accel.intersect import Geometry, instance_object_to_world, instance_world_to_object, intersect_closest
@@ -279,15 +280,16 @@ def _equals_top_level_walk_and_brute_force(scene, ro, rd, times):
     return geo, direct
 
 
-def test_a_lone_still_instance_is_walked_without_the_top_level_and_finds_what_the_top_level_walk_finds():
+@pytest.mark.parametrize("identity", [False, True])
+def test_a_lone_still_instance_is_walked_without_the_top_level_and_finds_what_the_top_level_walk_finds(identity):
     """One still instance (every still scene, flattened): closest hits and shadows go straight to its mesh and the
-    top level is not walked."""
+    top level is not walked. A flattened scene's merged mesh is in world space: its rays skip the matrix."""
     rng = np.random.default_rng(11)
     scene = make_scene(rng)
-    scene.instances = [Instance(0, MotionTransform.static(rot_y(30, (0.5, 0, -1))))]
+    scene.instances = [Instance(0, MotionTransform.static(np.eye(4) if identity else rot_y(30, (0.5, 0, -1))))]
     ro, rd = _rays(rng, 400)
     geo, _ = _equals_top_level_walk_and_brute_force(scene, ro, rd, np.full(400, 0.3, np.float32))
-    assert (geo.direct_inst, geo.tlas_others) == (0, 0)
+    assert (geo.direct_inst, geo.tlas_others, geo.direct_identity) == (0, 0, int(identity))
 
 
 def test_a_dominant_still_instance_is_walked_first_and_the_movers_through_the_top_level():

@@ -14,6 +14,7 @@ from renderer.accel.intersect import (
     BIG,
     Geometry,
     corner_index,
+    direct_ray,
     instance_visible,
     instance_world_to_object,
     leaf_hit,
@@ -98,9 +99,8 @@ def transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd
     direct = geo.direct_inst  # walked first, outside the top level (``Geometry.direct_inst``)
     if direct >= 0:
         if instance_visible(geo, direct, s):
-            w2o = geo.inst_w2o[direct]
-            tr = blas_transmittance(geo, mats, tex, geo.inst_mesh[direct], wp.transform_point(w2o, ro),
-                                    wp.transform_vector(w2o, rd), tmax, s, tr)
+            ro_o, rd_o = direct_ray(geo, ro, rd)
+            tr = blas_transmittance(geo, mats, tex, geo.inst_mesh[direct], ro_o, rd_o, tmax, s, tr)
         if geo.tlas_others == 0:
             return tr
     k0, k1, u = tlas_keys_at(geo, s)
