@@ -151,7 +151,8 @@ AOV_SUMS = ("depth", "normal", "albedo")  # what the gather's depth, hit-weight,
 
 def needs_aov_sums(aovs, denoise: bool) -> bool:
     """Whether a render must gather the depth, normal and albedo sums: an AOV of them, or the denoiser (which
-    takes albedo and normal). Without, the gather adds colour and weight only (about half its work)."""
+    takes albedo and normal). Without, the gather adds colour and weight only (a cornell render's gather 2.7 ->
+    2.3 % of its time)."""
     return denoise or any(a in AOV_SUMS for a in aovs)
 
 
