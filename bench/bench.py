@@ -4,7 +4,8 @@
 For the scenes in ../shared/bench/scenes (640x360, ANCHORS.md settings): samples/s and rays/s at 2 threads
 against Blender Cycles' and Mitsuba 3 LLVM's figures on the same machine kind (ANCHORS.md); a production scene
 from ../shared/usd-assets (the usd-wg teapot layout: 494 instanced, subdivided teapots) with its USD load and
-flatten/build times, against live Cycles when $BPY names a Python with Blender's bpy; scaling from 1 to 2 threads;
+flatten/build times, against live Cycles when $BPY names a Python with Blender's bpy; scaling from 1 to 2 threads
+on each scene (in turn, best of 3);
 the cost of motion blur (motion scene vs the same scene still; and 10x faster motion vs the scene's own) and of
 depth of field (vs the pinhole), each pair rendered in turn, best of 3; BVH build
 time and bytes per triangle of the 1M-triangle scene (and its CPU time on one thread beside Warp's own SAH
@@ -13,7 +14,8 @@ the host-tuned compile per Warp module (``drt warmup``, or a stale prebuilt). Ta
 least 2x Cycles on every scene; motion blur at most +5 % (10x faster motion too), depth of field at most +3 %;
 2 threads >= 1.95x one;
 the 1M-triangle hierarchy <= 0.5 s on one thread and <= 48 bytes/triangle; compilation <= 5 s over a warm run.
-Noise between runs on a shared 2-core machine is large: compare the ratios printed in one run.
+Noise between runs on a shared 2-core machine is large: compare the ratios printed in one run, and count the costs
+of blur and lens with ``bench/instructions.py`` (callgrind: the same figures from run to run).
 """
 from __future__ import annotations
 
@@ -137,6 +139,19 @@ def paired_seconds(variants: dict, *, spp: int, threads: int = 2, rounds: int = 
     return best
 
 
+def thread_scaling(scene, *, spp: int, rounds: int = 3) -> float:
+    """One thread's best render seconds over two threads', the two rendered in turn ``rounds`` times (one prepared
+    scene, 64-pixel tiles: 60 tiles at 640x360, so the last tile's tail is small)."""
+    from renderer.render import RenderOptions, prepare, render_frame
+
+    prep = prepare(scene, RenderOptions(width=640, height=360, spp=spp))
+    best = {1: float("inf"), 2: float("inf")}
+    for _ in range(rounds):
+        for threads in best:
+            best[threads] = min(best[threads], render_frame(prep, tile_size=64, threads=threads).seconds)
+    return best[1] / best[2]
+
+
 def gloss_noise_at_equal_time(scenes, cycles_sps: float, reference_spp: int = 1024):
     """RMSE of the gloss scene rendered for as long as Cycles takes at 64 spp, against a high-spp reference.
 
@@ -244,6 +259,7 @@ def main() -> None:
     ap.add_argument("--skip-noise", action="store_true", help="skip the equal-time noise study (slow reference)")
     ap.add_argument("--production-spp", type=int, default=16, help="samples per pixel of the production scene")
     ap.add_argument("--skip-production", action="store_true")
+    ap.add_argument("--skip-scaling", action="store_true", help="skip 1 -> 2 thread scaling per scene")
     args = ap.parse_args()
     from renderer.device import init_warp
 
@@ -286,10 +302,13 @@ def main() -> None:
         st = results["heavy"]["stats"]
         print(f"\nheavy: hierarchy build {st.build_seconds:.2f} s (both levels, incl. upload), "
               f"{st.nbytes / max(st.triangles, 1):.1f} bytes/triangle for the BVHs")
-    if "cornell" in results:
-        one = render(scenes / "cornell.usda", spp=spp, threads=1, repeats=args.repeats)
-        print(f"scaling cornell 1 -> 2 threads: {results['cornell']['sps'] / one['sps']:.2f}x (target >= 1.95x)")
     from renderer.usd.importer import load_scene
+
+    if results and not args.skip_scaling:
+        spp_s = max(1, spp // 4)
+        parts = ", ".join(f"{name} {thread_scaling(load_scene(scenes / f'{name}.usda'), spp=spp_s):.2f}x"
+                          for name in results)
+        print(f"scaling 1 -> 2 threads ({spp_s} spp, best of 3 in turn): {parts} (target >= 1.95x each)")
 
     if "motion" in results:
         blurred = load_scene(scenes / "motion.usda")
