@@ -5,8 +5,9 @@ Timed on a shared 2-core machine, a render swings by 10-25 % from minute to minu
 13 (motion blur at most +5 % over the same scene still, 10x faster motion at most +5 % over the scene's own, depth
 of field at most +3 % over the pinhole). So this script counts what a render executes: each variant's
 ``render_frame`` (one thread, 64x64 pixels, 4 spp by default) runs under valgrind's callgrind, instrumented only
-around the path tracing kernel's launches, then around the whole call, and the script prints instructions, simulated cache misses (32 KB L1, a 32 MB last level) and
-mispredicted branches per variant, and each cost as the ratio of instructions, of the kernel and of the frame.
+around the path tracing kernel's launches, then around the whole call, and the script prints instructions,
+simulated cache misses (32 KB L1, a 32 MB last level) and mispredicted branches per variant, and each cost as the
+ratio of instructions, of the kernel and of the frame.
 The frame adds what both variants of a pair share (the film's filter and gather kernels, Python per wave and
 tile), a larger share of a small test frame (about a third at 64x64, 4 spp) than of a full one (about a tenth
 at 640x360, 64 spp), so the kernel's ratio is the cost to set against the goals. The counts are the same from run
@@ -14,7 +15,8 @@ to run (within a few parts in 10^5), so they show a change of 1 % that no timing
 miss or a mispredicted branch costs several instructions' time, so the misses are printed beside them.
 
 Needs valgrind and a C compiler (Debian: ``apt install valgrind gcc``); the callgrind client requests that switch
-instrumentation on and off come from a 3-line C library compiled into a temporary directory. Each variant takes
+instrumentation on and off come from a C library of four one-line functions, compiled into a temporary
+directory. Each variant takes
 3-5 minutes (most of it the Python start under valgrind); two run at once.
 """
 from __future__ import annotations
