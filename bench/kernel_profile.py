@@ -97,22 +97,37 @@ class Perf:
 
     def __init__(self, tmp: pathlib.Path, freq: int):
         self.data, ctl, ack = tmp / "perf.data", tmp / "ctl", tmp / "ack"
+        # perf writes a line per command to stderr: a file, since an unread pipe fills and blocks it
+        self.log_path = tmp / "perf.log"
+        self.log = open(self.log_path, "wb")
         os.mkfifo(ctl), os.mkfifo(ack)
         self.proc = subprocess.Popen([tool("perf"), "record", "-e", "cpu-clock", "-F", str(freq), "-p",
                                       str(os.getpid()), "-D", "-1", "--control", f"fifo:{ctl},{ack}", "-o",
-                                      str(self.data)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                                      str(self.data)], stdout=subprocess.DEVNULL, stderr=self.log)
         self.ctl, self.ack = os.open(ctl, os.O_RDWR), os.open(ack, os.O_RDWR)  # O_RDWR: opening never blocks
+        self.pending = b""
 
     def command(self, cmd: str) -> None:
         os.write(self.ctl, cmd.encode() + b"\n")
-        if not select.select([self.ack], [], [], 30)[0] or not os.read(self.ack, 16).startswith(b"ack"):
-            self.proc.kill()
-            raise SystemExit(f"perf record did not answer {cmd!r}:\n{self.proc.communicate()[1].decode()}")
+        # one "ack\n" per command, however the reads split or merge them
+        while b"ack\n" not in self.pending:
+            if not select.select([self.ack], [], [], 30)[0]:
+                self.proc.kill()
+                self.proc.wait()
+                raise SystemExit(f"perf record did not answer {cmd!r}:\n{self.errors()}")
+            self.pending += os.read(self.ack, 64)
+        self.pending = self.pending.split(b"ack\n", 1)[1]
+
+    def errors(self) -> str:
+        self.log.close()
+        return "".join(line for line in self.log_path.read_text(errors="replace").splitlines(keepends=True)
+                       if not line.startswith("Events "))
 
     def samples(self) -> list[tuple[int, str]]:
         """Stop perf; (ip, 'dso symbol') of every sample."""
         self.proc.send_signal(signal.SIGINT)
-        err = self.proc.communicate()[1].decode(errors="replace")
+        self.proc.wait()
+        err = self.errors()
         if not self.data.exists():
             raise SystemExit(f"perf record failed:\n{err}")
         out = subprocess.run([tool("perf"), "script", "-i", str(self.data), "-F", "ip,sym,dso"],

@@ -135,6 +135,67 @@ def test_the_four_box_slab_test_is_the_binary_one(scale):
     assert unused.any() and np.all(got.reshape(len(ro), -1)[:, unused] >= 3.4e38)  # never entered
 
 
+@wp.kernel
+def _native_and_reference_kernel(lo: wp.array(dtype=wp.vec4), hi: wp.array(dtype=wp.vec4),
+                                 c: wp.array(dtype=wp.vec4i), ro: wp.array(dtype=wp.vec3),
+                                 inv: wp.array(dtype=wp.vec3), tmax: wp.array(dtype=wp.float32),
+                                 native: wp.array(dtype=wp.vec4), reference: wp.array(dtype=wp.vec4)):
+    i = wp.tid()
+    native[i] = wide.box_entries(lo[3 * i], lo[3 * i + 1], lo[3 * i + 2], hi[3 * i], hi[3 * i + 1], hi[3 * i + 2],
+                                 c[i], ro[i], inv[i], tmax[i])
+    reference[i] = wide.box_entries_reference(lo[3 * i], lo[3 * i + 1], lo[3 * i + 2], hi[3 * i], hi[3 * i + 1],
+                                              hi[3 * i + 2], c[i], ro[i], inv[i], tmax[i])
+
+
+def test_the_native_slab_test_gives_the_bits_of_the_warp_one():
+    """``box_entries`` (native vector code) against ``box_entries_reference`` (Warp's scalar arithmetic), bit for
+    bit: flat boxes, rays starting inside and on faces, axis-parallel rays (safe_inverse's 1e30), unused slots,
+    negative zeros, tmax at 0, short and unbounded; NaN origins give numbers."""
+    rng = np.random.default_rng(11)
+    n = 60000
+    a = rng.uniform(-1, 1, (n, 3, 4)).astype(np.float32)
+    b = rng.uniform(-1, 1, (n, 3, 4)).astype(np.float32)
+    b = np.where(rng.random((n, 3, 4)) < 0.2, a, b)  # flat on an axis
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    ro = rng.uniform(-2, 2, (n, 3)).astype(np.float32)
+    on_face = rng.random(n) < 0.1
+    ro[on_face] = lo[on_face, :, 0]  # the origin on a corner of lane 0's box
+    ro[rng.random((n, 3)) < 0.005] = np.nan  # a broken path's ray
+    d = rng.normal(size=(n, 3))
+    d[rng.random((n, 3)) < 0.15] = 0.0
+    d[rng.random((n, 3)) < 0.05] = -0.0
+    scale = rng.choice([1e-3, 1.0, 1e3], size=(n, 1))
+    inv = np.ones((n, 3), np.float32)
+    for i in range(0, n, 5000):  # the walks' own reciprocal
+        inv[i:i + 5000] = _inverse((d * scale)[i:i + 5000].astype(np.float32))
+    c = rng.integers(-3, 3, (n, 4)).astype(np.int32)  # 0: an unused slot
+    tmax = rng.choice(np.array([0.0, 0.5, 3.0, 3.4e38], np.float32), size=n)
+    native, reference = wp.zeros(n, dtype=wp.vec4), wp.zeros(n, dtype=wp.vec4)
+    wp.launch(_native_and_reference_kernel, dim=n,
+              inputs=[wp.array(lo.reshape(-1, 4), dtype=wp.vec4),
+                      wp.array(hi.reshape(-1, 4), dtype=wp.vec4), wp.array(c, dtype=wp.vec4i),
+                      wp.array(ro, dtype=wp.vec3), wp.array(inv, dtype=wp.vec3), wp.array(tmax, dtype=wp.float32),
+                      native, reference])
+    got, want = native.numpy(), reference.numpy()
+    entered = want < 3.4e38
+    assert 0.01 < entered.mean() < 0.95 and (got[c == 0] >= 3.4e38).all()  # thousands of lanes entered
+    numbers = np.isfinite(ro).all(1)
+    assert (~numbers).sum() > 500 and not np.isnan(got).any()  # broken rays: numbers still (may differ)
+    np.testing.assert_array_equal(got[numbers].view(np.uint32), want[numbers].view(np.uint32))
+
+
+@wp.kernel
+def _inverse_kernel(d: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
+    i = wp.tid()
+    out[i] = safe_inverse(d[i])
+
+
+def _inverse(d: np.ndarray) -> np.ndarray:
+    out = wp.zeros(len(d), dtype=wp.vec3)
+    wp.launch(_inverse_kernel, dim=len(d), inputs=[wp.array(d, dtype=wp.vec3), out])
+    return out.numpy()
+
+
 def test_far_to_near_sorts_four_children():
     @wp.kernel
     def k(d: wp.array(dtype=wp.vec4), c: wp.array(dtype=wp.vec4i), od: wp.array(dtype=wp.vec4),
