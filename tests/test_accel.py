@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 import warp as wp
 
-from renderer.accel.intersect import Geometry, instance_object_to_world, instance_world_to_object, intersect_closest
+from renderer.accel.intersect import (Geometry, instance_object_to_world, instance_world_to_object, intersect_closest,
+                                      leaf_closest, leaf_four, triangle_hit_edges)
 from renderer.motion.kernels import keys_matrix
 from renderer.shading.materials import Materials, upload_material_textures, upload_materials
 from renderer.accel.occlusion import hit_uv, transmittance
@@ -323,3 +324,69 @@ def test_no_instance_is_walked_directly_when_none_dominates_the_only_one_moves_o
     assert upload_geometry(alone)[0].direct_inst == -1  # the linked shadow walk goes through the top level only
     scene.instances = [scene.instances[1]]  # one, moving
     assert upload_geometry(scene)[0].direct_inst == -1
+
+
+@wp.kernel
+def _leaf_tests_kernel(v0: wp.array(dtype=wp.vec3), e1: wp.array(dtype=wp.vec3), e2: wp.array(dtype=wp.vec3),
+                       first: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32),
+                       ro: wp.array(dtype=wp.vec3), rd: wp.array(dtype=wp.vec3), tmax: wp.array(dtype=wp.float32),
+                       native: wp.array(dtype=wp.vec4), scalar: wp.array(dtype=wp.vec4),
+                       four_wrong: wp.array(dtype=wp.int32)):
+    i = wp.tid()
+    native[i] = leaf_closest(v0, e1, e2, first[i], count[i], ro[i], rd[i], tmax[i])
+    best = wp.vec4(tmax[i], 0.0, 0.0, -1.0)  # the walk's loop before the leaf was vector code
+    for k in range(count[i]):
+        s = first[i] + k
+        t, b1, b2 = triangle_hit_edges(v0[s], e1[s], e2[s], ro[i], rd[i], best[0])
+        if t < best[0]:
+            best = wp.vec4(t, b1, b2, float(k))
+    scalar[i] = best
+    # the any-hit walk's four at a time: each lane the scalar test's t at the same tmax (BIG past the count)
+    four = leaf_four(v0, e1, e2, first[i], count[i], ro[i], rd[i], tmax[i])
+    for k in range(4):
+        want = float(3.4e38)
+        if k < count[i]:
+            s = first[i] + k
+            want, b1, b2 = triangle_hit_edges(v0[s], e1[s], e2[s], ro[i], rd[i], tmax[i])
+        if not (four[k] == want or (four[k] != four[k] and want != want)):  # NaN for NaN
+            wp.atomic_add(four_wrong, 0, 1)
+
+
+def test_a_still_leaf_tested_four_triangles_at_a_time_gives_the_scalar_loops_bits():
+    """``leaf_closest`` and ``leaf_four`` (native vector code) against ``triangle_hit_edges`` in slot order, bit
+    for bit (``leaf_four``: the same t as a number, BIG for a miss): leaves of
+    1 to 15 triangles, rays through shared edges and vertices of a fan (ties between triangles), triangles seen
+    edge-on and degenerate ones (det 0), parallel rays, hits at tmax and behind the origin, NaN rays."""
+    rng = np.random.default_rng(21)
+    tris = 6000
+    v0 = rng.uniform(-1, 1, (tris, 3)).astype(np.float32)
+    e1 = rng.uniform(-1, 1, (tris, 3)).astype(np.float32)
+    e2 = rng.uniform(-1, 1, (tris, 3)).astype(np.float32)
+    fan = np.arange(0, tris, 7)  # triangles sharing vertex 0 and an edge with the next slot: ties
+    v0[fan[:-1] + 1] = v0[fan[:-1]]
+    e1[fan[:-1] + 1] = e2[fan[:-1]]
+    degenerate = rng.random(tris) < 0.05
+    e2[degenerate] = 2.0 * e1[degenerate]
+    n = 40000
+    count = rng.integers(1, 16, n).astype(np.int32)
+    first = rng.integers(0, tris - 15, n).astype(np.int32)
+    ro = rng.uniform(-2, 2, (n, 3)).astype(np.float32)
+    # aim at a point of the leaf's first triangle: at a vertex, on an edge or inside
+    pick = rng.choice([0.0, 0.5, 1.0], size=(n, 2)) * (rng.random((n, 1)) < 0.3) + rng.random((n, 2)) * 0.5
+    target = v0[first] + pick[:, :1] * e1[first] + pick[:, 1:] * e2[first]
+    rd = (target - ro).astype(np.float32)
+    rd[::13] = rng.normal(size=(len(rd[::13]), 3))  # random directions too
+    rd[::29, 1:] = 0.0  # parallel to an axis
+    ro[::501] = np.nan
+    tmax = rng.choice(np.array([0.5, 1.0, 3.4e38], np.float32), size=n)
+    a = [wp.array(x, dtype=wp.vec3) for x in (v0, e1, e2)]
+    native, scalar = wp.zeros(n, dtype=wp.vec4), wp.zeros(n, dtype=wp.vec4)
+    four_wrong = wp.zeros(1, dtype=wp.int32)
+    wp.launch(_leaf_tests_kernel, dim=n, inputs=a + [wp.array(first, dtype=wp.int32), wp.array(count, dtype=wp.int32),
+                                                   wp.array(ro, dtype=wp.vec3), wp.array(rd, dtype=wp.vec3),
+                                                   wp.array(tmax, dtype=wp.float32), native, scalar, four_wrong])
+    got, want = native.numpy(), scalar.numpy()
+    hits = want[:, 3] >= 0
+    assert 0.2 < hits.mean() < 0.9 and (want[hits, 3] > 0).sum() > 1000  # hits beyond the first lane too
+    np.testing.assert_array_equal(got.view(np.uint32), want.view(np.uint32))
+    assert four_wrong.numpy()[0] == 0

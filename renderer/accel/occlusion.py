@@ -17,6 +17,7 @@ from renderer.accel.intersect import (
     direct_ray,
     instance_visible,
     instance_world_to_object,
+    leaf_four,
     leaf_hit,
     mesh_keys_at,
     point_hit,
@@ -67,6 +68,16 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
         ref = stack[sp]
         if ref < 0:
             first, count = leaf_range(ref)
+            if nk == 1 and not is_cloud(kind):  # a still leaf: which triangles are crossed, four at a time
+                for g in range(0, count, 4):
+                    ts = leaf_four(geo.leaf_v0, geo.leaf_e1, geo.leaf_e2, poff + first + g, count - g, ro, rd, tmax)
+                    for j in range(4):
+                        if ts[j] < BIG and tr > 0.0:  # the scalar test's own t: its b1, b2 and triangle
+                            t, b1, b2, lt = leaf_hit(geo, m, poff + first + g + j, nk, k0, k1, u, ro, rd, tmax)
+                            tri = geo.mesh_tri_off[m] + lt
+                            opacity = eval_opacity(mats, tex, geo.tri_material[tri], hit_uv(geo, m, tri, b1, b2), s)
+                            tr = tr * (1.0 - opacity)
+                count = 0
             for i in range(count):
                 if is_cloud(kind):  # a sphere or disc of a point cloud: each crossing at its point's opacity
                     tp, nq, lp = point_hit(geo, m, kind, poff + first + i, nk, k0, k1, u, ro, rd, tmax)
