@@ -27,6 +27,7 @@ from renderer.accel.wide import (WideBoxes, dist_stack_t, entries, far_to_near, 
                                  wide_stack_t)
 from renderer.motion.kernels import MotionKeys, find_segment, keys_matrix
 from renderer.struct_refs import by_reference
+from renderer.vector_code import VECTOR_TYPES_CPP
 
 BIG = 3.4e38
 
@@ -158,28 +159,20 @@ def triangle_hit_edges(p0: wp.vec3, e1: wp.vec3, e2: wp.vec3, ro: wp.vec3, rd: w
     return t, b1, b2
 
 
-# ``triangle_hit_edges`` on four of a still leaf's triangles at once (clang vector types; Warp's vec3 code compiles
-# to scalar instructions), then the nearest taken in slot order: the triangle tests were 13 % of a Cornell-box
+# ``triangle_hit_edges`` on four of a still leaf's triangles at once (``vector_code``; Warp's vec3 code compiles to
+# scalar instructions), then the nearest taken in slot order: the triangle tests were 13 % of a Cornell-box
 # sample, the hottest leaf of the profile. Every lane computes what the scalar test computes, expression for
-# expression as Warp writes ``cross`` and ``dot`` (so the compiler contracts the same products into the same fused
-# multiply-adds), and a lane stands for a hit where the scalar test would not have returned a miss. So a leaf gives
+# expression as Warp writes ``cross`` and ``dot`` (so that a compiler contracting products into fused multiply-adds
+# would contract the same ones), and a lane stands for a hit where the scalar test would not have returned a miss. So a leaf gives
 # the bits of the scalar loop: tested against it, and renders are unchanged.
-LEAF_LANES_CPP = r"""
-    typedef float v4f __attribute__((vector_size(16)));
-    typedef int v4i __attribute__((vector_size(16)));
+LEAF_LANES_CPP = VECTOR_TYPES_CPP + r"""
     struct Lanes { v4f t, b1, b2; v4i miss; };
     /* triangle_hit_edges on the slots first + k .. first + k + 3 of arrays v0, e1, e2 (a lane past ``lanes``
        repeats the last); ``miss`` where the scalar test returns a miss */
     auto four_lanes = [&](int k, int lanes) {
-        const v4f ox = {ro.c[0], ro.c[0], ro.c[0], ro.c[0]};
-        const v4f oy = {ro.c[1], ro.c[1], ro.c[1], ro.c[1]};
-        const v4f oz = {ro.c[2], ro.c[2], ro.c[2], ro.c[2]};
-        const v4f dx = {rd.c[0], rd.c[0], rd.c[0], rd.c[0]};
-        const v4f dy = {rd.c[1], rd.c[1], rd.c[1], rd.c[1]};
-        const v4f dz = {rd.c[2], rd.c[2], rd.c[2], rd.c[2]};
-        const v4f zero = {0.0f, 0.0f, 0.0f, 0.0f};
-        const v4f one = {1.0f, 1.0f, 1.0f, 1.0f};
-        const v4f far_limit = {tmax, tmax, tmax, tmax};
+        const v4f ox = splat(ro.c[0]), oy = splat(ro.c[1]), oz = splat(ro.c[2]);
+        const v4f dx = splat(rd.c[0]), dy = splat(rd.c[1]), dz = splat(rd.c[2]);
+        const v4f zero = splat(0.0f), one = splat(1.0f);
         v4f px, py, pz, ax, ay, az, bx, by, bz;  /* vertex 0, edge 1, edge 2 of each lane's triangle */
         for (int l = 0; l < 4; ++l) {
             const int slot = first + k + (l < lanes ? l : lanes - 1);
@@ -214,7 +207,7 @@ LEAF_LANES_CPP = r"""
         const v4f b12 = r.b1 + r.b2;
         /* the scalar test's misses; a NaN passes them as it does there, and then loses every comparison */
         r.miss = (det == zero) | (r.b1 < zero) | (r.b1 > one) | (r.b2 < zero) | (b12 > one) | (r.t <= zero) |
-                 (r.t >= far_limit);
+                 (r.t >= splat(tmax));
         return r;
     };
 """
@@ -238,9 +231,8 @@ _LEAF_CLOSEST_CPP = LEAF_LANES_CPP + r"""
 _LEAF_FOUR_CPP = LEAF_LANES_CPP + r"""
     const int lanes = count < 4 ? count : 4;
     const Lanes r = four_lanes(0, lanes);
-    const v4f big = {3.4e38f, 3.4e38f, 3.4e38f, 3.4e38f};
     const v4i past = (v4i){0, 1, 2, 3} >= (v4i){lanes, lanes, lanes, lanes};
-    const v4f t = (r.miss | past) ? big : r.t;
+    const v4f t = (r.miss | past) ? splat(3.4e38f) : r.t;
     return wp::vec_t<4, wp::float32>(t[0], t[1], t[2], t[3]);
 """
 

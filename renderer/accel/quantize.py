@@ -212,10 +212,10 @@ def q_boxes(n: QNode):
 # vectors. The decode is exact (module docstring), so these are the bits of the Warp functions (tested).
 _Q_BOX_ENTRIES_CPP = SLAB_TEST_CPP + r"""
     typedef unsigned char v4b __attribute__((vector_size(4)));
-    auto axis = [](wp::vec_t<4, wp::uint8> q, float origin, float scale) {
+    auto axis = [&](wp::vec_t<4, wp::uint8> q, float origin, float scale) {
         const v4f steps = __builtin_convertvector((v4b){q.c[0], q.c[1], q.c[2], q.c[3]}, v4f);
-        const v4f scaled = steps * (v4f){scale, scale, scale, scale};
-        return scaled + (v4f){origin, origin, origin, origin};
+        const v4f scaled = steps * splat(scale);
+        return scaled + splat(origin);
     };
     const wp::vec_t<3, wp::float32> o = n.origin;
     const wp::vec_t<3, wp::float32> s = n.scale;

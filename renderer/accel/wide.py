@@ -30,6 +30,7 @@ import warp as wp
 
 from renderer.accel.build import Bvh
 from renderer.struct_refs import scratch
+from renderer.vector_code import VECTOR_TYPES_CPP
 
 wp.set_module_options({"enable_backward": False})
 
@@ -249,44 +250,32 @@ def collapse(bvh: Bvh, device: str = "cpu", merge_leaf: int = 0) -> WideBvh:
 
 
 # The four slab tests as one vector computation. Warp's vec4 arithmetic compiles to scalar instructions (the
-# kernel's code had 7 vminps against 175 vminss), so the box test is written with the compiler's vector types,
+# kernel's code had 7 vminps against 175 vminss), so the box test is written in vector types (``vector_code``),
 # lane for lane the operations of the Warp code it replaced: (bound - origin) * inv per axis, min and max as Warp
 # defines them for numbers (-0 and +0 included), the same order of reductions. Its results are the same bits as
 # ``box_entries_reference`` for every ray of numbers (tested); the production shot's walks spent 28 % of the kernel
 # in this test, scalar. For a broken ray with a NaN coordinate the two may differ (Warp's min and max skip a NaN
 # operand, these keep their first): neither is meaningful, and both return numbers.
-# Clang's generic vector types (``vector_size``) lower to SSE/AVX on x86 and NEON on ARM; Warp compiles every CPU
-# module with its own clang.
-SLAB_TEST_CPP = r"""
-    typedef float v4f __attribute__((vector_size(16)));
-    typedef int v4i __attribute__((vector_size(16)));
+SLAB_TEST_CPP = VECTOR_TYPES_CPP + r"""
     /* Warp's float min and max (builtin.h) for numbers, a <= b ? a : b and a >= b ? a : b (also which zero they
        pick), written so that each is one minps / maxps; with a NaN they give their first operand */
     auto vmin = [](v4f a, v4f b) { return b < a ? b : a; };
     auto vmax = [](v4f a, v4f b) { return b > a ? b : a; };
     /* the four boxes' lanes lx_, ly_, lz_, hx_, hy_, hz_ (v4f), the children c_ (v4i), the ray ro, inv_d, tmax */
     auto slab_test = [&](v4f lx_, v4f ly_, v4f lz_, v4f hx_, v4f hy_, v4f hz_, v4i c_) {
-        const v4f ox = {ro.c[0], ro.c[0], ro.c[0], ro.c[0]};
-        const v4f oy = {ro.c[1], ro.c[1], ro.c[1], ro.c[1]};
-        const v4f oz = {ro.c[2], ro.c[2], ro.c[2], ro.c[2]};
-        const v4f ix = {inv_d.c[0], inv_d.c[0], inv_d.c[0], inv_d.c[0]};
-        const v4f iy = {inv_d.c[1], inv_d.c[1], inv_d.c[1], inv_d.c[1]};
-        const v4f iz = {inv_d.c[2], inv_d.c[2], inv_d.c[2], inv_d.c[2]};
+        const v4f ox = splat(ro.c[0]), oy = splat(ro.c[1]), oz = splat(ro.c[2]);
+        const v4f ix = splat(inv_d.c[0]), iy = splat(inv_d.c[1]), iz = splat(inv_d.c[2]);
         const v4f ax = (lx_ - ox) * ix;
         const v4f bx = (hx_ - ox) * ix;
         const v4f ay = (ly_ - oy) * iy;
         const v4f by = (hy_ - oy) * iy;
         const v4f az = (lz_ - oz) * iz;
         const v4f bz = (hz_ - oz) * iz;
-        const v4f zero = {0.0f, 0.0f, 0.0f, 0.0f};
-        const v4f far_limit = {tmax, tmax, tmax, tmax};
-        const v4f tn = vmax(vmax(vmin(ax, bx), vmin(ay, by)), vmax(vmin(az, bz), zero));
-        const v4f f_xyz = vmin(vmin(vmax(ax, bx), vmax(ay, by)), vmin(vmax(az, bz), far_limit));
-        const v4f slack = {1.00000024f, 1.00000024f, 1.00000024f, 1.00000024f};  /* SLAB_SLACK */
-        const v4f tf = f_xyz * slack;
+        const v4f tn = vmax(vmax(vmin(ax, bx), vmin(ay, by)), vmax(vmin(az, bz), splat(0.0f)));
+        const v4f f_xyz = vmin(vmin(vmax(ax, bx), vmax(ay, by)), vmin(vmax(az, bz), splat(tmax)));
+        const v4f tf = f_xyz * splat(1.00000024f);  /* SLAB_SLACK */
         const v4i used = c_ != (v4i){0, 0, 0, 0};
-        const v4f big = {3.4e38f, 3.4e38f, 3.4e38f, 3.4e38f};
-        const v4f d = ((tn <= tf) & used) ? tn : big;
+        const v4f d = ((tn <= tf) & used) ? tn : splat(3.4e38f);
         return wp::vec_t<4, wp::float32>(d[0], d[1], d[2], d[3]);
     };
 """

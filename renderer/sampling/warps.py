@@ -56,6 +56,8 @@ from typing import NamedTuple
 import numpy as np
 import warp as wp
 
+from renderer.vector_code import VECTOR_TYPES_CPP
+
 PI = wp.constant(math.pi)
 TWO_PI = wp.constant(2.0 * math.pi)
 INV_PI = wp.constant(1.0 / math.pi)
@@ -321,13 +323,12 @@ def _rect_local(p_ref: wp.vec3, corner: wp.vec3, edge_u: wp.vec3, edge_v: wp.vec
 
 
 # The four edge-plane normals' radii and the four internal angles of ``_sph_rect_angles`` side by side in vector
-# lanes (clang vector types): four square roots, four divisions and four ``_safe_acos`` polynomials at once, each
+# lanes (``vector_code``): four square roots, four divisions and four ``_safe_acos`` polynomials at once, each
 # lane operation for operation what the scalar code computes (constants rounded as Warp rounds them, double to
 # float), so the same bits (tested against ``_sph_rect_angles_reference``). The angles were a quarter of the
 # rectangle light's sampling, itself 16 % of a gloss sample.
-_SPH_RECT_CPP = r"""
-    typedef float v4f __attribute__((vector_size(16)));
-    const v4f zz = {z0 * z0, z0 * z0, z0 * z0, z0 * z0};
+_SPH_RECT_CPP = VECTOR_TYPES_CPP + r"""
+    const v4f zz = splat(z0 * z0);
     const v4f w = {y0, x1, y1, x0};  /* r0 .. r3 */
     const v4f ww = w * w;
     const v4f r = __builtin_elementwise_sqrt(zz + ww);
@@ -338,10 +339,10 @@ _SPH_RECT_CPP = r"""
     const v4f den = r * r_next;
     const v4f x = num / den;
     /* _safe_acos: Warp's min(|x|, 1) takes 1 for a NaN */
-    const v4f one = {1.0f, 1.0f, 1.0f, 1.0f};
+    const v4f one = splat(1.0f);
     const v4f ax = __builtin_elementwise_abs(x);
     const v4f a = ax <= one ? ax : one;
-    auto c = [](double v) { const float f = (float)v; return (v4f){f, f, f, f}; };
+    auto c = [&](double v) { return splat((float)v); };
     v4f p = c(-0.0012624911);
     v4f m;
     m = p * a; p = m + c(0.0066700901);
@@ -352,8 +353,7 @@ _SPH_RECT_CPP = r"""
     m = p * a; p = m - c(0.2145988016);
     m = p * a; p = m + c(1.5707963050);
     const v4f rr = __builtin_elementwise_sqrt(one - a) * p;
-    const v4f zero = {0.0f, 0.0f, 0.0f, 0.0f};
-    const v4f g = x < zero ? c(3.141592653589793) - rr : rr;
+    const v4f g = x < splat(0.0f) ? c(3.141592653589793) - rr : rr;
     return wp::vec_t<4, wp::float32>(g[0] + g[1], g[2] + g[3], r[0], r[2]);
 """
 
