@@ -327,3 +327,39 @@ def test_an_empty_root_is_never_entered():
                                                                              dtype=float),
         wp.array(np.full(n, 3.4e38, np.float32), dtype=float), got_root, got_child])
     assert not got_root.numpy().any()
+
+
+@wp.kernel
+def _blend_kernel(rec: wp.array(dtype=wide.WideBoxes), child: wp.array(dtype=wp.vec4i), nodes: int, keys: int,
+                  ro: wp.array(dtype=wp.vec3), inv: wp.array(dtype=wp.vec3), s: wp.array(dtype=wp.float32),
+                  native: wp.array(dtype=wp.vec4), reference: wp.array(dtype=wp.vec4)):
+    i = wp.tid()
+    node = i % nodes
+    x = wp.clamp(s[i], 0.0, 1.0) * float(keys - 1)
+    k0 = wp.min(int(x), keys - 2)
+    u = x - float(k0)
+    native[i] = wide.entries(rec, node * keys, child[node], k0, k0 + 1, u, ro[i], inv[i], 1.0e30)
+    reference[i] = wide.entries_reference(rec, node * keys, child[node], k0, k0 + 1, u, ro[i], inv[i], 1.0e30)
+
+
+@pytest.mark.parametrize("keys", [2, 5])
+def test_blended_top_level_boxes_give_the_bits_of_the_warp_blend(keys):
+    """``entries`` between two keys (the blend and the slab test in native vector code) against
+    ``entries_reference`` (``wp.lerp`` and Warp's slab test), bit for bit, at random shutter times and at the keys."""
+    lo, hi = random_boxes(300, keys, seed=4)
+    w = wide.collapse(build_bvh(lo, hi, max_leaf=4, c_trav=2.0))
+    rng = np.random.default_rng(9)
+    n = 40000
+    ro = rng.uniform(-12, 12, (n, 3)).astype(np.float32)
+    d = rng.normal(size=(n, 3))
+    d[::17, :2] = 0.0
+    s = rng.random(n).astype(np.float32)
+    s[::5] = np.round(s[::5] * (keys - 1)) / (keys - 1)  # at a key
+    out = [wp.zeros(n, dtype=wp.vec4), wp.zeros(n, dtype=wp.vec4)]
+    wp.launch(_blend_kernel, dim=n, inputs=[wide.box_records(w.box), wp.array(w.child, dtype=wp.vec4i), w.num_nodes,
+                                            keys, wp.array(ro, dtype=wp.vec3),
+                                            wp.array(_inverse(d.astype(np.float32)), dtype=wp.vec3),
+                                            wp.array(s, dtype=wp.float32)] + out)
+    got, want = out[0].numpy(), out[1].numpy()
+    assert 0.001 < (want < 3.4e38).mean() < 0.9
+    np.testing.assert_array_equal(got.view(np.uint32), want.view(np.uint32))
