@@ -163,8 +163,8 @@ def triangle_hit_edges(p0: wp.vec3, e1: wp.vec3, e2: wp.vec3, ro: wp.vec3, rd: w
 # scalar instructions), then the nearest taken in slot order: the triangle tests were 13 % of a Cornell-box
 # sample, the hottest leaf of the profile. Every lane computes what the scalar test computes, expression for
 # expression as Warp writes ``cross`` and ``dot`` (so that a compiler contracting products into fused multiply-adds
-# would contract the same ones), and a lane stands for a hit where the scalar test would not have returned a miss. So a leaf gives
-# the bits of the scalar loop: tested against it, and renders are unchanged.
+# would contract the same ones), and a lane stands for a hit where the scalar test would not have returned a miss.
+# So a leaf gives the bits of the scalar loop: tested against it, and renders are unchanged.
 LEAF_LANES_CPP = VECTOR_TYPES_CPP + r"""
     struct Lanes { v4f t, b1, b2; v4i miss; };
     /* triangle_hit_edges on the slots first + k .. first + k + 3 of arrays v0, e1, e2 (a lane past ``lanes``
