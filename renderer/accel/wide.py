@@ -425,7 +425,12 @@ def _order(da: float, ca: int, db: float, cb: int):
 
 @wp.func
 def far_to_near(d: wp.vec4, c: wp.vec4i):
-    """The four (distance, child) pairs sorted by decreasing distance (five compare-exchanges)."""
+    """The four (distance, child) pairs sorted by decreasing distance (five compare-exchanges). With one child
+    entered or none, as deep in a walk most often, the order is left: only that child is pushed."""
+    entered = wp.where(d[0] < BIG, 1, 0) + wp.where(d[1] < BIG, 1, 0) + wp.where(d[2] < BIG, 1, 0) + wp.where(
+        d[3] < BIG, 1, 0)
+    if entered < 2:
+        return d, c
     d0, c0, d1, c1 = _order(d[0], c[0], d[1], c[1])
     d2, c2, d3, c3 = _order(d[2], c[2], d[3], c[3])
     d0, c0, d2, c2 = _order(d0, c0, d2, c2)
