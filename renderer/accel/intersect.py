@@ -424,26 +424,26 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float, s
                         best.tri = geo.mesh_tri_off[m] + geo.blas_prim[poff + first + int(r[3])]
                         best.b1 = r[1]
                         best.b2 = r[2]
-                    count = 0
-                for i in range(count):
-                    if is_cloud(kind):  # a sphere or disc of a point cloud
-                        tp, np_, lp = point_hit(geo, m, kind, poff + first + i, nk, k0, k1, u, ro, rd, t_best)
-                        if tp < t_best:
-                            t_best = tp
-                            best.t = tp
-                            best.inst = inst
-                            best.tri = geo.mesh_tri_off[m] + lp
-                            best.b1 = 0.0
-                            best.b2 = 0.0
-                    else:
-                        t, b1, b2, lt = leaf_hit(geo, m, poff + first + i, nk, k0, k1, u, ro, rd, t_best)
-                        if t < t_best:
-                            t_best = t
-                            best.t = t
-                            best.inst = inst
-                            best.tri = geo.mesh_tri_off[m] + lt
-                            best.b1 = b1
-                            best.b2 = b2
+                else:
+                    for i in range(count):
+                        if is_cloud(kind):  # a sphere or disc of a point cloud
+                            tp, np_, lp = point_hit(geo, m, kind, poff + first + i, nk, k0, k1, u, ro, rd, t_best)
+                            if tp < t_best:
+                                t_best = tp
+                                best.t = tp
+                                best.inst = inst
+                                best.tri = geo.mesh_tri_off[m] + lp
+                                best.b1 = 0.0
+                                best.b2 = 0.0
+                        else:
+                            t, b1, b2, lt = leaf_hit(geo, m, poff + first + i, nk, k0, k1, u, ro, rd, t_best)
+                            if t < t_best:
+                                t_best = t
+                                best.t = t
+                                best.inst = inst
+                                best.tri = geo.mesh_tri_off[m] + lt
+                                best.b1 = b1
+                                best.b2 = b2
             else:
                 d, c = q_entries(geo.blas_node, noff + ref * nk, k0, k1, u, ro, inv_d, t_best)
                 d, c = far_to_near(d, c)

@@ -40,6 +40,13 @@ def hit_uv(geo: Geometry, m: int, tri: int, b1: float, b2: float):
     return geo.uvs[c] * (1.0 - b1 - b2) + geo.uvs[c + 1] * b1 + geo.uvs[c + 2] * b2
 
 
+@wp.func
+def crossing_opacity(geo: Geometry, mats: Materials, tex: Textures, m: int, lt: int, b1: float, b2: float, s: float):
+    """Opacity of local triangle lt of mesh m where a ray crosses it at (b1, b2), at time s."""
+    tri = geo.mesh_tri_off[m] + lt
+    return eval_opacity(mats, tex, geo.tri_material[tri], hit_uv(geo, m, tri, b1, b2), s)
+
+
 @wp.func(inline=True)  # one call site: no copy of the Geometry struct
 def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro: wp.vec3, rd: wp.vec3,
                        tmax: float, s: float, trans: float):
@@ -74,25 +81,21 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
                     for j in range(4):
                         if ts[j] < BIG and tr > 0.0:  # the scalar test's own t: its b1, b2 and triangle
                             t, b1, b2, lt = leaf_hit(geo, m, poff + first + g + j, nk, k0, k1, u, ro, rd, tmax)
-                            tri = geo.mesh_tri_off[m] + lt
-                            opacity = eval_opacity(mats, tex, geo.tri_material[tri], hit_uv(geo, m, tri, b1, b2), s)
-                            tr = tr * (1.0 - opacity)
-                count = 0
-            for i in range(count):
-                if is_cloud(kind):  # a sphere or disc of a point cloud: each crossing at its point's opacity
-                    tp, nq, lp = point_hit(geo, m, kind, poff + first + i, nk, k0, k1, u, ro, rd, tmax)
-                    if nq > 0 and tr > 0.0:
-                        trp = geo.mesh_tri_off[m] + lp
-                        op = eval_opacity(mats, tex, geo.tri_material[trp], hit_uv(geo, m, trp, 0.0, 0.0), s)
-                        tr = tr * (1.0 - op)
-                        if nq == 2:
+                            tr = tr * (1.0 - crossing_opacity(geo, mats, tex, m, lt, b1, b2, s))
+            else:
+                for i in range(count):
+                    if is_cloud(kind):  # a sphere or disc of a point cloud: each crossing at its point's opacity
+                        tp, nq, lp = point_hit(geo, m, kind, poff + first + i, nk, k0, k1, u, ro, rd, tmax)
+                        if nq > 0 and tr > 0.0:
+                            trp = geo.mesh_tri_off[m] + lp
+                            op = eval_opacity(mats, tex, geo.tri_material[trp], hit_uv(geo, m, trp, 0.0, 0.0), s)
                             tr = tr * (1.0 - op)
-                else:
-                    t, b1, b2, lt = leaf_hit(geo, m, poff + first + i, nk, k0, k1, u, ro, rd, tmax)
-                    if t < BIG and tr > 0.0:
-                        tri = geo.mesh_tri_off[m] + lt
-                        opacity = eval_opacity(mats, tex, geo.tri_material[tri], hit_uv(geo, m, tri, b1, b2), s)
-                        tr = tr * (1.0 - opacity)
+                            if nq == 2:
+                                tr = tr * (1.0 - op)
+                    else:
+                        t, b1, b2, lt = leaf_hit(geo, m, poff + first + i, nk, k0, k1, u, ro, rd, tmax)
+                        if t < BIG and tr > 0.0:
+                            tr = tr * (1.0 - crossing_opacity(geo, mats, tex, m, lt, b1, b2, s))
         else:
             d, c = q_entries(geo.blas_node, noff + ref * nk, k0, k1, u, ro, inv_d, tmax)
             for j in range(4):

@@ -342,7 +342,7 @@ _SPH_RECT_CPP = VECTOR_TYPES_CPP + r"""
     const v4f one = splat(1.0f);
     const v4f ax = __builtin_elementwise_abs(x);
     const v4f a = ax <= one ? ax : one;
-    auto c = [&](double v) { return splat((float)v); };
+    auto c = [&](double v) { return splat((float)v); };  /* _safe_acos's coefficients (the test holds them equal) */
     v4f p = c(-0.0012624911);
     v4f m;
     m = p * a; p = m + c(0.0066700901);
