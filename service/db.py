@@ -119,6 +119,17 @@ class IdempotencyRow(Base):
 _JOB_COLUMNS = tuple(c.name for c in JobRow.__table__.columns)
 _SELECT_JOB = f"SELECT {', '.join(_JOB_COLUMNS)} FROM jobs WHERE id = ?"
 _SELECT_FRAMES = "SELECT idx, time, tiles_done, done FROM frames WHERE job_id = ? ORDER BY idx"
+
+
+def _read_job(conn: sqlite3.Connection, job_id: str) -> JobRow:
+    """The job with its frames, detached, read on ``conn`` inside the caller's transaction."""
+    job = conn.execute(_SELECT_JOB, (job_id,)).fetchone()
+    if job is None:
+        raise JobNotFound(job_id)
+    row = JobRow(**dict(zip(_JOB_COLUMNS, job)))
+    row.frames = [FrameRow(job_id=job_id, idx=i, time=t, tiles_done=n, done=bool(d))
+                  for i, t, n, d in conn.execute(_SELECT_FRAMES, (job_id,))]
+    return row
 _INSERT_JOB = (f"INSERT INTO jobs ({', '.join(c for c in _JOB_COLUMNS if c != 'seq')}) "
                f"VALUES ({', '.join(':' + c for c in _JOB_COLUMNS if c != 'seq')})")
 _ACTIVE = f"({', '.join(repr(x.value) for x in sorted(sm.ACTIVE))})"  # ('queued', 'running')
@@ -292,7 +303,7 @@ class Store:
                           [(job_id, i, float(t)) for i, t in enumerate(frame_times)])
             if idempotency_key is not None:
                 c.execute("UPDATE idempotency SET job_id = ? WHERE key = ?", (job_id, idempotency_key))
-        return self.get_job(job_id)
+            return _read_job(c, job_id)  # as written: the coordinator may start it the moment this commits
 
     def get_job(self, job_id: str, *, wait: bool = True) -> JobRow:
         """The job with its frames, detached (a snapshot: both read in one transaction).
@@ -304,19 +315,13 @@ class Store:
         try:
             conn.execute("BEGIN")
             try:
-                job = conn.execute(_SELECT_JOB, (job_id,)).fetchone()
-                frames = conn.execute(_SELECT_FRAMES, (job_id,)).fetchall() if job is not None else []
+                return _read_job(conn, job_id)
             finally:
                 conn.execute("COMMIT")
         except sqlite3.OperationalError as e:
             if wait or (e.sqlite_errorcode & 0xFF) not in (sqlite3.SQLITE_BUSY, sqlite3.SQLITE_LOCKED):
                 raise
             raise StoreBusy(job_id) from e
-        if job is None:
-            raise JobNotFound(job_id)
-        row = JobRow(**dict(zip(_JOB_COLUMNS, job)))
-        row.frames = [FrameRow(job_id=job_id, idx=i, time=t, tiles_done=n, done=bool(d)) for i, t, n, d in frames]
-        return row
 
     def list_jobs(self, state: JobState | None, limit: int, before_seq: int | None) -> tuple[list[JobRow], int | None]:
         """Newest first. Returns (rows, seq to continue before, or None on the last page)."""
@@ -355,7 +360,8 @@ class Store:
                 raise sm.IllegalTransition(job_id, JobState(current[0]), target)
             if target == sm.QUEUED:  # failed attempts are forgotten, so that each tile has its retries again
                 c.execute("DELETE FROM tiles WHERE job_id = ? AND done = 0", (job_id,))
-        return self.get_job(job_id)
+            # the row as this transition left it: read after the commit, a retried job could already be running
+            return _read_job(c, job_id)
 
     def delete_job(self, job_id: str) -> JobRow:
         """Delete a finished job (cascading to frames, tiles and idempotency keys); JobActive if it is not."""

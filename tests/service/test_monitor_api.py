@@ -2,8 +2,10 @@
 shell and its headers, the token, and ``drt cancel/retry/delete``."""
 from __future__ import annotations
 
+import contextlib
 import json
 import signal
+import sqlite3
 import subprocess
 import sys
 import threading
@@ -108,6 +110,36 @@ def test_the_state_machine_allows_a_retry_of_failed_and_canceled_jobs_only(tmp_p
         with pytest.raises(sm.IllegalTransition):
             store.transition("a", JobState.queued)
     finally:
+        store.close()
+
+
+def test_a_write_answers_with_the_row_it_wrote_not_a_later_one(tmp_path):
+    """The coordinator (another process) may start a queued job the moment the submission or retry commits; the
+    answer must still be the row as written (a retried job read back after the commit was seen "running", with a
+    start time, in a retry's 200)."""
+    store = Store(tmp_path / "db.sqlite3")
+    other = sqlite3.connect(tmp_path / "db.sqlite3", isolation_level=None)
+    tx = store._tx
+
+    @contextlib.contextmanager
+    def then_started(*a, **kw):  # another writer claims the job right after each commit
+        with tx(*a, **kw) as c:
+            yield c
+        other.execute("UPDATE jobs SET state = 'running', started_at = 1.0 WHERE state = 'queued'")
+
+    store._tx = then_started
+    try:
+        row = store.create_job(job_id="a", priority=0, settings_json="{}", scene_sha256="s" * 64,
+                               scene_name="x.usda", scene_bytes=1, width=4, height=4, tile_size=2,
+                               tiles_per_frame=4, frame_times=[0.0], exposure_scale=1.0, warnings=[])
+        assert (row.state, row.started_at, len(row.frames)) == ("queued", None, 1)
+        assert store.get_job("a").state == "running"  # the other writer did run
+        store.transition("a", JobState.canceled)
+        row = store.transition("a", JobState.queued)
+        assert (row.state, row.started_at) == ("queued", None)
+        assert store.get_job("a").state == "running"
+    finally:
+        other.close()
         store.close()
 
 
