@@ -104,13 +104,27 @@ def test_a_prepared_scene_with_other_sampling_options_renders_as_if_prepared_wit
             with_options(base, changed)
 
 
-def test_wave_schedule_depends_on_spp_only():
+def test_wave_schedule_depends_on_spp_and_progressive_only():
     assert film.wave_schedule(1) == [(0, 1)]
     assert film.wave_schedule(8) == [(0, 1), (1, 2), (2, 4), (4, 8)]
-    waves = film.wave_schedule(1000)
-    assert waves[0][0] == 0 and waves[-1][1] == 1000
-    assert all(a[1] == b[0] for a, b in zip(waves, waves[1:]))
-    assert max(e - s for s, e in waves) <= film.MAX_WAVE
+    assert film.wave_schedule(8, progressive=False) == [(0, 8)]
+    assert film.wave_schedule(70, progressive=False) == [(0, 32), (32, 64), (64, 70)]
+    for progressive in (True, False):
+        waves = film.wave_schedule(1000, progressive)
+        assert waves[0][0] == 0 and waves[-1][1] == 1000
+        assert all(a[1] == b[0] for a, b in zip(waves, waves[1:]))
+        assert max(e - s for s, e in waves) <= film.MAX_WAVE
+
+
+def test_a_tile_is_the_same_bits_in_waves_of_any_size(scene):
+    """A time budget (never reached here) makes the tile sample in doubling waves, 1, 1, 2, 4, ...; without, in
+    waves of MAX_WAVE: the sums take each pixel's samples in the same order either way."""
+    prep = prepare(scene, RenderOptions(width=16, height=12, spp=40, aovs=("depth", "normal", "albedo")))
+    tile = Tile(0, 0, 16, 12)
+    a = render_tile(prep, tile).arrays
+    b = render_tile(prep, tile, time_budget=1.0e9).arrays
+    assert a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+    assert a["rgba"].any()
 
 
 @pytest.mark.parametrize("name", list(film.FILTERS))
@@ -135,10 +149,10 @@ def test_no_nan_reaches_the_image(scene):
 def test_progress_reaches_the_total_and_cancellation_stops_between_waves(scene):
     from renderer.errors import Cancelled
 
-    prep = prepare(scene, RenderOptions(width=16, height=16, spp=8))
+    prep = prepare(scene, RenderOptions(width=16, height=16, spp=80))  # waves of 32, 32 and 16 samples
     seen = []
     render_frame(prep, tile_size=8, threads=2, progress=lambda done, total: seen.append((done, total)))
-    assert seen[-1] == (16 * 16 * 8, 16 * 16 * 8)
+    assert seen[-1] == (16 * 16 * 80, 16 * 16 * 80)
     assert [d for d, _ in seen] == sorted(d for d, _ in seen)
 
     waves = []
@@ -150,7 +164,7 @@ def test_progress_reaches_the_total_and_cancellation_stops_between_waves(scene):
 
     with pytest.raises(Cancelled):
         render_tile(prep, Tile(0, 0, 16, 16), stop_after_two)
-    assert waves == [16 * 16 * 1, 16 * 16 * 2]  # stopped after the second wave, before the third
+    assert waves == [16 * 16 * 32, 16 * 16 * 64]  # stopped after the second wave, before the third
 
 
 @pytest.mark.parametrize("name", list(film.FILTERS))

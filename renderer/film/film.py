@@ -7,9 +7,11 @@ own pixels' samples only and hands the partials of its border over for assembly 
 rendered on its own also draws the ring of ``ceil(radius - 0.5)`` pixels around it; either way the sums run over
 the same samples in the same order whatever the tiling: no seams.
 
-The sample budget is spent in *waves* of 1, 1, 2, 4, ... samples per pixel (capped), a schedule that depends on
-the sample count only, never on tile size or threads: the floating-point sums are then bit-identical across
-tilings. Progress and cancellation happen between waves.
+The sample budget is spent in *waves*, a schedule that depends on the sample count and the render's options only,
+never on tile size or threads: of 1, 1, 2, 4, ... samples per pixel (capped) where adaptive sampling or a time
+limit decides between waves, else of the cap at a time. Either way a pixel's sums take its samples in sample
+order, so the floating-point sums are bit-identical across tilings and schedules. Progress and cancellation
+happen between waves.
 """
 from __future__ import annotations
 
@@ -43,8 +45,11 @@ def filter_margin(kind: int) -> int:
     return int(math.ceil(FILTER_RADIUS[kind] - 0.5))
 
 
-def wave_schedule(spp: int) -> list[tuple[int, int]]:
-    """[start, end) sample-index ranges: 1, 1, 2, 4, ... capped at MAX_WAVE; depends on spp only."""
+def wave_schedule(spp: int, progressive: bool = True) -> list[tuple[int, int]]:
+    """[start, end) sample-index ranges: 1, 1, 2, 4, ... capped at MAX_WAVE when ``progressive`` (adaptive
+    sampling and time limits decide between waves), else MAX_WAVE at a time; depends on these two only."""
+    if not progressive:
+        return [(s, min(spp, s + MAX_WAVE)) for s in range(0, spp, MAX_WAVE)]
     waves, start, size = [], 0, 1
     while start < spp:
         end = min(spp, start + size)
@@ -135,14 +140,16 @@ class TileAccum:
 
 
 def new_sample_buffer(n: int, device: str) -> SampleBuffer:
+    """Room for n samples, not cleared: a wave writes every sample it later reads (the path tracing kernel its
+    values, ``axis_weights_kernel`` its weights) before the gather reads them."""
     b = SampleBuffer()
-    b.film = wp.zeros(n, dtype=wp.vec2, device=device)
-    b.rgba = wp.zeros(n, dtype=wp.vec4, device=device)
-    b.depth = wp.zeros(n, dtype=wp.float32, device=device)
-    b.normal = wp.zeros(n, dtype=wp.vec3, device=device)
-    b.albedo = wp.zeros(n, dtype=wp.vec3, device=device)
-    b.wx = wp.zeros(n, dtype=wp.vec3, device=device)
-    b.wy = wp.zeros(n, dtype=wp.vec3, device=device)
+    b.film = wp.empty(n, dtype=wp.vec2, device=device)
+    b.rgba = wp.empty(n, dtype=wp.vec4, device=device)
+    b.depth = wp.empty(n, dtype=wp.float32, device=device)
+    b.normal = wp.empty(n, dtype=wp.vec3, device=device)
+    b.albedo = wp.empty(n, dtype=wp.vec3, device=device)
+    b.wx = wp.empty(n, dtype=wp.vec3, device=device)
+    b.wy = wp.empty(n, dtype=wp.vec3, device=device)
     return b
 
 
