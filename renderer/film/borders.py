@@ -132,8 +132,10 @@ def assemble(tiles: list[tuple[tuple[int, int, int, int], dict[str, np.ndarray]]
         first = tiles[0][1][BAND + name]
         partials = np.zeros((len(pixels),) + (first.shape[0],) + first.shape[2:], np.float32)
         for i, (_, arrays) in enumerate(tiles):
-            # exactly one tile holds a non-zero partial per (direction, pixel): adding zeros changes no bit
-            np.add.at(partials, where[starts[i]:starts[i + 1]], np.moveaxis(arrays[BAND + name], 0, 1))
+            # exactly one tile holds a non-zero partial per (direction, pixel): adding zeros changes no bit. A
+            # tile's band pixels are distinct, so a plain indexed add is exact (np.add.at, which allows repeated
+            # indices, took 0.13 s of a 640x360 frame in 16-pixel tiles)
+            partials[where[starts[i]:starts[i + 1]]] += np.moveaxis(arrays[BAND + name], 0, 1)
         total = combine(np.moveaxis(partials, 1, 0))
         full[name].reshape((height * width,) + total.shape[1:])[pixels] = total
     return full
