@@ -227,9 +227,9 @@ def render_tile(prep: PreparedScene, tile: Tile,
                           settings, launch])
         wp.launch(film.axis_weights_kernel, dim=pixels.size * wave, device=dev,
                   inputs=[buf, kind, float(film.FILTER_RADIUS[kind])])
-        wp.launch(film.gather_kernel, dim=targets, device=dev,
-                  inputs=[buf, acc, wave, sx0, sy0, sw, sh, wp.array(slot_of, dtype=wp.int32, device=dev),
-                          ex0, ey0, ex1 - ex0, margin, aov_sums])
+        wp.launch(film.gather_kernel, dim=sw * sh, device=dev,
+                  inputs=[buf, acc, wave, sx0, sy0, sw, wp.array(slot_of, dtype=wp.int32, device=dev),
+                          ex0, ey0, ex1 - ex0, ey1 - ey0, margin, aov_sums, 1])
         rgb = None
         if conv.enabled:
             rgb = buf.rgba.numpy()[:pixels.size * wave].reshape(pixels.size, wave, 4)[..., :3]

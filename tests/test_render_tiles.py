@@ -198,3 +198,42 @@ def test_the_colour_does_not_depend_on_which_aovs_are_asked_for(scene):
     assert not plain["depth"].any() and not plain["normal"].any()  # the work that is skipped
     assert film.needs_aov_sums((), True) and film.needs_aov_sums(("albedo",), False)
     assert not film.needs_aov_sums(("spp",), False)
+
+
+@pytest.mark.parametrize("region", [(0, 0, 12, 9, 0, 0, 13, 10), (5, 4, 12, 9, 4, 3, 14, 11)])
+def test_the_vector_gather_gives_the_bits_of_the_loop(region):
+    """``gather_nine`` (a source pixel's nine colour partials as vector code) against ``gather_kernel``'s loop, bit
+    for bit: random samples and partials (negative zeros among them), weights of 0 (a sample a partial skips),
+    stopped pixels, targets beyond the extended region on every side; two waves in a row."""
+    x0, y0, w, h, ex0, ey0, ex1, ey1 = region
+    wave = 7
+    rng = np.random.default_rng(5)
+    targets = (ex1 - ex0) * (ey1 - ey0)
+    slot_of = np.arange(w * h, dtype=np.int32)
+    slot_of[rng.random(w * h) < 0.2] = -1
+    rgba0 = rng.normal(size=(targets * 9, 4)).astype(np.float32)
+    rgba0[rng.random(rgba0.shape) < 0.3] = -0.0
+    weight0 = rng.random(targets * 9).astype(np.float32)
+    weight0[::3] = -0.0
+    results = []
+    for native in (0, 1):
+        acc = film.new_tile_accum(targets * 9, "cpu")
+        acc.rgba = wp.array(rgba0, dtype=wp.vec4)
+        acc.weight = wp.array(weight0, dtype=wp.float32)
+        for k in range(2):
+            r = np.random.default_rng(k)
+            buf = film.new_sample_buffer(w * h * wave, "cpu")
+            buf.rgba = wp.array(r.normal(size=(w * h * wave, 4)).astype(np.float32), dtype=wp.vec4)
+            wx, wy = r.random((2, w * h * wave, 3)).astype(np.float32)
+            wx[r.random(wx.shape) < 0.2] = 0.0
+            wy[r.random(wy.shape) < 0.2] = 0.0
+            # some pixels give one direction no weight at all: their partial there must keep its bits (-0.0)
+            wx.reshape(w * h, wave, 3)[r.random(w * h) < 0.3, :, 0] = 0.0
+            buf.wx, buf.wy = wp.array(wx, dtype=wp.vec3), wp.array(wy, dtype=wp.vec3)
+            wp.launch(film.gather_kernel, dim=w * h, inputs=[buf, acc, wave, x0, y0, w, wp.array(slot_of), ex0, ey0,
+                                                              ex1 - ex0, ey1 - ey0, 1, 0, native])
+        results.append((acc.rgba.numpy(), acc.weight.numpy()))
+    (a_rgba, a_w), (b_rgba, b_w) = results
+    assert not np.array_equal(a_rgba, rgba0)  # the samples were added
+    np.testing.assert_array_equal(a_rgba.view(np.uint32), b_rgba.view(np.uint32))
+    np.testing.assert_array_equal(a_w.view(np.uint32), b_w.view(np.uint32))
