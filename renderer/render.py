@@ -188,7 +188,7 @@ def render_tile(prep: PreparedScene, tile: Tile,
     max_wave = max(e - s for s, e in waves)
     dev = prep.device
     buf = film.new_sample_buffer(sw * sh * max_wave, dev)
-    acc = film.new_tile_accum(directions * targets, dev)
+    acc = film.new_tile_accum(directions * targets, dev, aovs=bool(aov_sums))
     counters = wp.zeros(2, dtype=wp.int64, device=dev)  # rays traced, non-finite samples zeroed
     settings = PathSettings()
     settings.max_depth = int(opts.max_depth)
@@ -237,11 +237,12 @@ def render_tile(prep: PreparedScene, tile: Tile,
         conv.update()
         if on_wave is not None:
             on_wave(min(total, int(conv.count[mine].sum())), total)
-    partials = film.accum_partials(acc, directions, ey1 - ey0, ex1 - ex0)
+    partials = film.accum_partials(acc, directions, ey1 - ey0, ex1 - ex0, aovs=bool(aov_sums))
     if shared_borders:
         arrays = borders.split_tile(partials, own, margin, W, H)
     else:
-        arrays = {name: borders.combine(p) for name, p in partials.items()}
+        arrays = {name: borders.combine(p) if p is not None else borders.zero_sums(name, (ey1 - ey0, ex1 - ex0))
+                  for name, p in partials.items()}
     arrays["spp"] = conv.count.reshape(sh, sw)[tile.y0 - sy0:tile.y1 - sy0, tile.x0 - sx0:tile.x1 - sx0] \
         .astype(np.float32)
     c = counters.numpy()

@@ -65,16 +65,26 @@ def combine(partials: np.ndarray) -> np.ndarray:
     return total
 
 
-def split_tile(partials: dict[str, np.ndarray], tile: tuple[int, int, int, int], margin: int, width: int,
+def zero_sums(name: str, shape: tuple[int, ...]) -> np.ndarray:
+    """Sums of channel ``name`` that no sample reached, over ``shape`` (pixels, or directions x pixels)."""
+    return np.zeros(shape + ((CHANNELS[name],) if CHANNELS[name] > 1 else ()), np.float32)
+
+
+def split_tile(partials: dict[str, np.ndarray | None], tile: tuple[int, int, int, int], margin: int, width: int,
                height: int) -> dict[str, np.ndarray]:
     """A tile's arrays from its per-direction partials ``(D, rows, columns[, c])`` over its extended region:
     the sums of its own pixels (final away from the border, its own samples' share on it: a preview) and the
-    band partials ``band.<name>`` that ``assemble`` needs."""
+    band partials ``band.<name>`` that ``assemble`` needs. A channel whose partials are None is all zero."""
     x0, y0, x1, y1 = tile
     ex0, ey0, _, _ = extended_region(x0, y0, x1, y1, margin, width, height)
     band = band_mask(x0, y0, x1, y1, margin, width, height)
     out = {}
     for name, p in partials.items():
+        if p is None:
+            out[name] = zero_sums(name, (y1 - y0, x1 - x0))
+            if margin:
+                out[BAND + name] = zero_sums(name, (directions(margin), int(band.sum())))
+            continue
         out[name] = combine(p)[y0 - ey0:y1 - ey0, x0 - ex0:x1 - ex0]
         if margin:
             out[BAND + name] = np.ascontiguousarray(p[:, band])

@@ -164,14 +164,17 @@ def needs_aov_sums(aovs, denoise: bool) -> bool:
     return denoise or any(a in AOV_SUMS for a in aovs)
 
 
-def new_tile_accum(n: int, device: str) -> TileAccum:
+def new_tile_accum(n: int, device: str, aovs: bool = True) -> TileAccum:
+    """n partial sums of each channel, zeroed; without ``aovs`` the depth, normal and albedo sums (which the
+    gather then leaves alone) are one each."""
+    m = n if aovs else 1
     a = TileAccum()
     a.rgba = wp.zeros(n, dtype=wp.vec4, device=device)
     a.weight = wp.zeros(n, dtype=wp.float32, device=device)
-    a.depth = wp.zeros(n, dtype=wp.float32, device=device)
-    a.hit_weight = wp.zeros(n, dtype=wp.float32, device=device)
-    a.normal = wp.zeros(n, dtype=wp.vec3, device=device)
-    a.albedo = wp.zeros(n, dtype=wp.vec3, device=device)
+    a.depth = wp.zeros(m, dtype=wp.float32, device=device)
+    a.hit_weight = wp.zeros(m, dtype=wp.float32, device=device)
+    a.normal = wp.zeros(m, dtype=wp.vec3, device=device)
+    a.albedo = wp.zeros(m, dtype=wp.vec3, device=device)
     return a
 
 
@@ -325,13 +328,18 @@ def gather_kernel(
                     acc.albedo[k] = asum
 
 
-def accum_partials(acc: TileAccum, directions: int, rows: int, columns: int) -> dict[str, np.ndarray]:
-    """The partial sums as (directions, rows, columns[, c]) arrays (``borders.split_tile``'s input)."""
+def accum_partials(acc: TileAccum, directions: int, rows: int, columns: int,
+                   aovs: bool = True) -> dict[str, np.ndarray | None]:
+    """The partial sums as (directions, rows, columns[, c]) arrays (``borders.split_tile``'s input); without
+    ``aovs`` the depth, normal and albedo sums are None (all zero)."""
     shape = (rows, columns, directions)
-    arrays = {"rgba": acc.rgba.numpy().reshape(shape + (4,)), "weight": acc.weight.numpy().reshape(shape),
-              "depth": acc.depth.numpy().reshape(shape), "hit_weight": acc.hit_weight.numpy().reshape(shape),
-              "normal": acc.normal.numpy().reshape(shape + (3,)), "albedo": acc.albedo.numpy().reshape(shape + (3,))}
-    return {k: np.moveaxis(a, 2, 0) for k, a in arrays.items()}
+    arrays = {"rgba": acc.rgba.numpy().reshape(shape + (4,)), "weight": acc.weight.numpy().reshape(shape)}
+    if aovs:
+        arrays.update({"depth": acc.depth.numpy().reshape(shape), "hit_weight": acc.hit_weight.numpy().reshape(shape),
+                       "normal": acc.normal.numpy().reshape(shape + (3,)),
+                       "albedo": acc.albedo.numpy().reshape(shape + (3,))})
+    out = {k: np.moveaxis(a, 2, 0) for k, a in arrays.items()}
+    return {k: out.get(k) for k in ("rgba", "weight", "depth", "hit_weight", "normal", "albedo")}
 
 
 def resolve(sums: dict[str, np.ndarray], exposure_scale: float = 1.0) -> dict[str, np.ndarray]:
