@@ -180,7 +180,7 @@ def new_tile_accum(n: int, device: str, aovs: bool = True) -> TileAccum:
 
 # ``filter_1d``'s Gaussian at a sample's three offsets in one piece of vector code, with exp as a polynomial (Cephes'
 # expf: Cody-Waite reduction by ln 2, a degree-7 polynomial, the power of two put into the exponent bits; within
-# 2 ulp of the exact value here, tested) instead of three calls of libm's expf: the six calls per sample were the
+# 2 ulp of the exact value here, tested) instead of three calls of libm's expf: the six calls per sample were
 # most of the weights pass (0.079 -> 0.060 s of the teapot shot's 1.7 s on one thread). Each operation is a
 # statement of its own, so no compiler fuses a multiply and an add: the same bits on every CPU and build.
 _GAUSSIAN_AXIS_CPP = VECTOR_TYPES_CPP + r"""
