@@ -20,6 +20,7 @@ import math
 import numpy as np
 import warp as wp
 
+from renderer.sampling.warps import sin_cos
 from renderer.struct_refs import by_reference
 from renderer.vector_code import VECTOR_TYPES_CPP
 
@@ -81,10 +82,15 @@ def filter_1d(kind: int, x: float, radius: float, edge: float):
         a = 1.0 / (2.0 * GAUSSIAN_SIGMA * GAUSSIAN_SIGMA)
         return wp.exp(-a * ax * ax) - edge
     if kind == FILTER_BLACKMAN_HARRIS:
-        # 4-term window over [-radius, radius]
+        # 4-term window over [-radius, radius]; cos 2w and cos 3w from cos w (double- and triple-angle formulas)
+        # and cos w from ``sin_cos``'s polynomials: three libm cosf calls per weight, 18 per sample, were 18 % of a
+        # teapot-shot render with this filter
         t = (x / radius + 1.0) * 0.5
         w = 2.0 * wp.pi * t
-        return 0.35875 - 0.48829 * wp.cos(w) + 0.14128 * wp.cos(2.0 * w) - 0.01168 * wp.cos(3.0 * w)
+        sw, c1 = sin_cos(w)
+        c2 = 2.0 * c1 * c1 - 1.0
+        c3 = c1 * (2.0 * c2 - 1.0)
+        return 0.35875 - 0.48829 * c1 + 0.14128 * c2 - 0.01168 * c3
     return 1.0
 
 
