@@ -119,17 +119,6 @@ class IdempotencyRow(Base):
 _JOB_COLUMNS = tuple(c.name for c in JobRow.__table__.columns)
 _SELECT_JOB = f"SELECT {', '.join(_JOB_COLUMNS)} FROM jobs WHERE id = ?"
 _SELECT_FRAMES = "SELECT idx, time, tiles_done, done FROM frames WHERE job_id = ? ORDER BY idx"
-
-
-def _read_job(conn: sqlite3.Connection, job_id: str) -> JobRow:
-    """The job with its frames, detached, read on ``conn`` inside the caller's transaction."""
-    job = conn.execute(_SELECT_JOB, (job_id,)).fetchone()
-    if job is None:
-        raise JobNotFound(job_id)
-    row = JobRow(**dict(zip(_JOB_COLUMNS, job)))
-    row.frames = [FrameRow(job_id=job_id, idx=i, time=t, tiles_done=n, done=bool(d))
-                  for i, t, n, d in conn.execute(_SELECT_FRAMES, (job_id,))]
-    return row
 _INSERT_JOB = (f"INSERT INTO jobs ({', '.join(c for c in _JOB_COLUMNS if c != 'seq')}) "
                f"VALUES ({', '.join(':' + c for c in _JOB_COLUMNS if c != 'seq')})")
 _ACTIVE = f"({', '.join(repr(x.value) for x in sorted(sm.ACTIVE))})"  # ('queued', 'running')
@@ -141,6 +130,17 @@ class JobNotFound(Exception):
 
 class StoreBusy(Exception):
     """The database is locked and the caller asked not to wait."""
+
+
+def _read_job(conn: sqlite3.Connection, job_id: str) -> JobRow:
+    """The job with its frames, detached, read on ``conn`` inside the caller's transaction."""
+    job = conn.execute(_SELECT_JOB, (job_id,)).fetchone()
+    if job is None:
+        raise JobNotFound(job_id)
+    row = JobRow(**dict(zip(_JOB_COLUMNS, job)))
+    row.frames = [FrameRow(job_id=job_id, idx=i, time=t, tiles_done=n, done=bool(d))
+                  for i, t, n, d in conn.execute(_SELECT_FRAMES, (job_id,))]
+    return row
 
 
 class JobActive(Exception):

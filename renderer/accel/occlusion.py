@@ -65,8 +65,7 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
         sp = 0
         t, part, n = shape_hits(kind, geo.mesh_shape_axis[m], geo.mesh_shape_param[m], ro, rd, tmax)
         if n > 0 and tr > 0.0:
-            tri = geo.mesh_tri_off[m]
-            opacity = eval_opacity(mats, tex, geo.tri_material[tri], hit_uv(geo, m, tri, 0.0, 0.0), s)
+            opacity = crossing_opacity(geo, mats, tex, m, 0, 0.0, 0.0, s)
             tr = tr * (1.0 - opacity)
             if n == 2:
                 tr = tr * (1.0 - opacity)
@@ -87,8 +86,7 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
                     if is_cloud(kind):  # a sphere or disc of a point cloud: each crossing at its point's opacity
                         tp, nq, lp = point_hit(geo, m, kind, poff + first + i, nk, k0, k1, u, ro, rd, tmax)
                         if nq > 0 and tr > 0.0:
-                            trp = geo.mesh_tri_off[m] + lp
-                            op = eval_opacity(mats, tex, geo.tri_material[trp], hit_uv(geo, m, trp, 0.0, 0.0), s)
+                            op = crossing_opacity(geo, mats, tex, m, lp, 0.0, 0.0, s)
                             tr = tr * (1.0 - op)
                             if nq == 2:
                                 tr = tr * (1.0 - op)
