@@ -3,7 +3,8 @@
 Every error answers ``{"detail": "<one line>"}``: ``ApiError`` from the service, FastAPI's own validation errors
 flattened to ``"<field>: <message>"``, a malformed body (e.g. multipart without a boundary) 400, and an oversized
 body cut off early with 413 (the ``Content-Length`` is checked before anything is read, the bytes are counted as
-they arrive). The bearer token is checked before all of that (``auth.TokenFirst``, the outermost middleware).
+they arrive). The bearer token is checked before all of that (``auth.TokenFirst``), and every answer carries the
+service's own time for it (``timing.ServerTiming``, the outermost middleware).
 """
 from __future__ import annotations
 
@@ -24,9 +25,10 @@ from .api.deps import require_token
 from .auth import TokenFirst
 from .errors import ApiError
 from .events import ChangeFeed
-from .latency import tune_api_process
+from .latency import SubmissionGate, new_submission_gate, tune_api_process
 from .runtime import Runtime
 from .settings import ServiceSettings
+from .timing import ServerTiming
 from .uploads import UploadTooLarge
 
 log = logging.getLogger("drt.service")
@@ -95,6 +97,7 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         # contend for the GIL with the event loop (50 clients at once, bench/load_test.py: status p99 15-21 ms
         # with 3 threads, 25-53 ms with 8).
         app.state.submit_limiter = anyio.CapacityLimiter(settings.inspect_processes + 1)
+        app.state.submission_gate = new_submission_gate(settings.inspect_processes + 1)
         app.state.feed = ChangeFeed(app.state.runtime.store)  # the monitor's server-sent events
         tune_api_process()  # startup is done: freeze its heap, shorten the GIL switch interval
         try:
@@ -140,10 +143,13 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
     async def _invalid(_request: Request, exc: RequestValidationError):
         return JSONResponse({"detail": _validation_detail(exc)}, status_code=422)
 
+    app.add_middleware(SubmissionGate, path="/v1/jobs")  # inside the body limit: an oversized body never waits
     app.add_middleware(BodyLimit, limit=settings.max_upload_bytes + MULTIPART_OVERHEAD,
                        detail=str(UploadTooLarge(settings.max_upload_bytes)))
-    # Added last, so outermost: an unauthenticated request is answered 401 before its body is read or measured.
+    # Outside the body limit: an unauthenticated request is answered 401 before its body is read or measured.
     app.add_middleware(TokenFirst, token=settings.api_token.get_secret_value() if protected_docs else None)
+    # Outermost of all: the service's own time for every answer, 401s included (``Server-Timing``).
+    app.add_middleware(ServerTiming)
     app.include_router(health.router)
     app.include_router(jobs.router, prefix="/v1")
     app.include_router(limits.router, prefix="/v1")
