@@ -9,8 +9,7 @@ deadline, and a server it started is stopped at the end. Checks that every job f
 downloadable) and that none is lost or duplicated (the job list holds exactly the submitted ids), and reports
 latency percentiles of the status requests (GET /v1/jobs/{id}; beside them the service's own time for each, from
 its Server-Timing header) and of submissions, and jobs/s, against the goals (status p99 <= 20 ms, submit p50 <= 150
-ms). Exit code 0 when all checks pass (the goals are reported, not
-enforced: the figures depend on the machine).
+ms). Exit code 0 when all checks pass (the goals are reported, not enforced: the figures depend on the machine).
 """
 from __future__ import annotations
 
