@@ -35,9 +35,11 @@ from renderer.accel.intersect import (
     intersect_closest,
     mesh_keys_at,
     mesh_vertex,
+    safe_inverse,
     triangle_points,
 )
 from renderer.accel.occlusion import hit_uv, transmittance
+from renderer.accel.wide import entries, leaf_range, wide_stack_t
 from renderer.camera import CameraParams, camera_ray
 from renderer.film.film import SampleBuffer
 from renderer.lights.sample import (
@@ -270,6 +272,59 @@ def clamp_contribution(c: wp.vec3, limit: float):
     return c
 
 
+@wp.func(inline=True)  # no copy of the big structs
+def add_area_light(L: wp.vec3, lights: Lights, li: int, origin: wp.vec3, rd: wp.vec3, t_hit: float, s: float,
+                   prev_inst: int, prev_delta: int, prev_pdf: float, prev_p: wp.vec3, lobe_frac: wp.vec3,
+                   beta: wp.vec3, hit_clamp: float):
+    """L plus what area light li sends along the scattered ray (origin, rd) before the surface at t_hit, with its
+    multiple importance weight against sampling the light."""
+    t_l, Le, pdf_l = area_light_hit(lights, li, origin, rd, t_hit, s)
+    if t_l < BIG and lit_by(lights.links, li, prev_inst):
+        w = float(1.0)
+        if prev_delta == 0:
+            w = power_heuristic(prev_pdf, select_pdf(lights.select, li, prev_p) * pdf_l)
+        if lights.lobe_mults != 0:
+            Le = wp.cw_mul(Le, sampled_weight(lights, li, lobe_frac))
+        return L + clamp_contribution(wp.cw_mul(beta, Le) * w, hit_clamp)
+    return L
+
+
+@wp.func(inline=True)  # one call site: no copy of the big structs
+def add_area_lights(L: wp.vec3, lights: Lights, origin: wp.vec3, rd: wp.vec3, t_hit: float, s: float,
+                    prev_inst: int, prev_delta: int, prev_pdf: float, prev_p: wp.vec3, lobe_frac: wp.vec3,
+                    beta: wp.vec3, hit_clamp: float):
+    """L plus every area light the scattered ray reaches before t_hit (``lights.reach``): each in light order, or
+    the still ones found by a walk of their tree and the moving ones in light order."""
+    if lights.reach.tree == 0:
+        for k in range(lights.reach.n_area):
+            L = add_area_light(L, lights, lights.reach.area[k], origin, rd, t_hit, s, prev_inst, prev_delta, prev_pdf,
+                               prev_p, lobe_frac, beta, hit_clamp)
+        return L
+    inv_d = safe_inverse(rd)
+    stack = wide_stack_t()  # scratch: not zeroed, read below sp only
+    stack[0] = 0  # the root
+    sp = int(1)
+    while sp > 0:
+        sp -= 1
+        ref = stack[sp]
+        if ref < 0:
+            first, count = leaf_range(ref)
+            for i in range(count):
+                L = add_area_light(L, lights, lights.reach.light[first + i], origin, rd, t_hit, s, prev_inst, prev_delta,
+                                   prev_pdf, prev_p, lobe_frac, beta, hit_clamp)
+        else:
+            c = lights.reach.child[ref]
+            d = entries(lights.reach.box, ref, c, 0, 0, 0.0, origin, inv_d, t_hit)
+            for j in range(4):
+                if d[j] < BIG:
+                    stack[sp] = c[j]
+                    sp += 1
+    for k in range(lights.reach.n_loose):
+        L = add_area_light(L, lights, lights.reach.loose[k], origin, rd, t_hit, s, prev_inst, prev_delta, prev_pdf,
+                           prev_p, lobe_frac, beta, hit_clamp)
+    return L
+
+
 @wp.func
 def roughness_of_pdf(pdf: float):
     """The perceptual GGX roughness whose lobe peaks at this pdf (1/sr): alpha = 1/sqrt(4 pi pdf), clamped to 1.
@@ -385,20 +440,13 @@ def trace_wave_kernel(
         hit = intersect_closest(geo, origin, rd, t_far, s)
         if geo.csg_groups > 0:
             hit = csg_closest(geo, origin, rd, s, hit)
-        # UsdLux area lights are not in the BVH: rays after the first bounce may reach them directly
+        # UsdLux area lights are not in the scene's hierarchy: rays after the first bounce may reach them directly
         if bounce > 0:
-            for li in range(lights.count):
-                if is_area_light(lights.kind[li]):
-                    t_l, Le, pdf_l = area_light_hit(lights, li, origin, rd, hit.t, s)
-                    if t_l < BIG and lit_by(lights.links, li, prev_inst):
-                        w = float(1.0)
-                        if prev_delta == 0:
-                            w = power_heuristic(prev_pdf, select_pdf(lights.select, li, prev_p) * pdf_l)
-                        if lights.lobe_mults != 0:
-                            Le = wp.cw_mul(Le, sampled_weight(lights, li, lobe_frac))
-                        L += clamp_contribution(wp.cw_mul(beta, Le) * w, hit_clamp)
+            L = add_area_lights(L, lights, origin, rd, hit.t, s, prev_inst, prev_delta, prev_pdf, prev_p, lobe_frac,
+                                beta, hit_clamp)
         if hit.inst < 0:
-            for li in range(lights.count):
+            for k in range(lights.reach.n_infinite):
+                li = lights.reach.infinite[k]
                 kind = lights.kind[li]
                 # domes hidden from the camera stay hidden behind pass-through surfaces too
                 if is_infinite_light(kind) and lit_by(lights.links, li, prev_inst) and not (

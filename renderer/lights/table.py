@@ -19,6 +19,7 @@ import warp as wp
 
 from renderer.lights.envmap import EnvMap, upload_envmap
 from renderer.lights.linking import Links, upload_links
+from renderer.lights.reach import Reach, upload_reach
 from renderer.lights.select import SelectEstimate, Selection, upload_selection
 from renderer.lights.shaping import mean_shaping
 from renderer.motion.kernels import MotionKeys, upload_keys
@@ -74,6 +75,7 @@ class Lights:
     img_h: wp.array(dtype=wp.int32)
     img: wp.array(dtype=wp.vec3)  # rect light textures, rows top to bottom, concatenated
     links: Links  # light/shadow linking and shadow controls (``linking``)
+    reach: Reach  # which lights a ray may reach: the area lights' tree, the infinite lights (``reach``)
     select: Selection  # which light a shading point samples (``select``)
     env: EnvMap  # the textured dome, if any (size[0] == 1 marks its light)
     dome_visible: int  # 1 when camera rays see a dome (alpha 1 there)
@@ -339,6 +341,7 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
     _upload_images(lt, images, device)
     lt.links = upload_links(kept, len(scene.instances), device, warn)
     lt.select = upload_selection(estimates, device, clusters=clusters)
+    lt.reach = upload_reach(kinds, size, transforms, device)
     lt.env = upload_envmap(env_image, env_xf, device)
     lt.dome_visible = int(dome_visible)
     return lt, n
