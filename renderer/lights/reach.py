@@ -9,11 +9,10 @@ rendered 7.8x slower than by one (320x180, 16 spp), 85 % of it in those loops (`
 With ``TREE_MIN`` area lights or more, the still ones get a tree of their own: the top level's four-wide nodes
 (``accel.wide``) over each light's world box, walked to the surface the ray hit, so a bounce tests the lights
 whose boxes it enters. Lights that move within the shutter are tested one by one (``loose``): their boxes would
-have to bound a sweep, and they are rare. Fewer area lights are tested one by one in light order, as before (the
-integrator's loop, unchanged, so a scene with a few lights keeps its code: a walk inlined there cost a Cornell
-box 1.5 %). The infinite lights (distant, dome) are listed in ``infinite``. The lists are in light order, the
-order the old loops added their light in; a tree walk adds them in its own order, which changes a pixel's last
-bits only where one ray reaches two lights (tested).
+have to bound a sweep, and they are rare. Fewer area lights are all ``loose``, tested one by one as before. The
+infinite lights (distant, dome) are listed in ``infinite``. The lists are in light order, the order the old loops
+added their light in; a tree walk adds them in its own order, which changes a pixel's last bits only where one
+ray reaches two lights (tested).
 
 Boxes are grown by ``PAD`` of their size and position: the kernels intersect the lights in float32, from frames
 computed in float64, so a box exactly on a light's edge could miss a ray the light itself takes.
@@ -37,13 +36,13 @@ AREA_KINDS = (LIGHT_RECT, LIGHT_DISK, LIGHT_SPHERE, LIGHT_CYLINDER)
 @by_reference
 @wp.struct
 class Reach:
-    n_area: int  # area lights (with fewer than ``TREE_MIN``, the integrator tests each in turn)
+    n_area: int  # area lights (fewer than ``TREE_MIN``: no tree, all of them ``loose``)
     tree: int  # 1: the still area lights are walked in the tree below, the moving ones in ``loose``
     box: wp.array(dtype=WideBoxes)  # the tree's nodes (one time key), ``accel.wide`` layout
     child: wp.array(dtype=wp.vec4i)
     light: wp.array(dtype=wp.int32)  # leaf slot -> light
     n_loose: int
-    loose: wp.array(dtype=wp.int32)  # area lights that move within the shutter, in light order
+    loose: wp.array(dtype=wp.int32)  # area lights tested one by one, in light order: the moving ones, or all
     n_infinite: int
     infinite: wp.array(dtype=wp.int32)  # distant and dome lights, in light order
 
@@ -94,7 +93,7 @@ def upload_reach(kinds, sizes, transforms, device: str, tree_min: int | None = N
     box = np.full((6, 4), 3.0e38, np.float32)
     child = np.zeros((1, 4), np.int32)
     light = [0]
-    loose = []
+    loose = area  # without a tree, every area light in turn
     if r.tree:
         lo, hi = world_boxes([kinds[i] for i in still], [sizes[i] for i in still],
                              matrices_at([transforms[i] for i in still], 0.0))
