@@ -183,3 +183,16 @@ def test_the_tree_holds_every_still_area_light_once_and_few_lights_get_none(tmp_
     assert leaves == sorted(area.tolist())  # every still area light is in the tree once
     small = reach.upload_reach(kinds[:3], [(1, 1, 0, 0)] * 3, [prep.scene.lights[0].transform] * 3, "cpu")
     assert small.tree == 0 and small.n_area == sum(int(k) in reach.AREA_KINDS for k in kinds[:3])
+
+
+def test_the_many_lights_benchmark_runs():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "bench" / "many_lights.py"
+    r = subprocess.run([sys.executable, str(script), "--width", "32", "--height", "18", "--spp", "1", "--repeats", "1",
+                        "--counts", "1", "16"], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.strip().splitlines()
+    assert len(lines) == 2 and lines[0].split()[0] == "1" and lines[1].split()[0] == "16", r.stdout
