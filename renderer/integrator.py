@@ -68,7 +68,7 @@ from renderer.sampling.sobol import (
     sample_camera_pair,
 )
 from renderer.sampling.warps import sample_tent
-from renderer.scene.model import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_DOME, LIGHT_RECT, LIGHT_SPHERE
+from renderer.scene.model import LIGHT_DOME
 from renderer.lights.multipliers import diffuse_fraction, nee_bsdf, sampled_weight
 from renderer.shading.bsdf import SurfaceParams, bsdf_albedo_hint, bsdf_setup, lobes_eval, lobes_pdf, lobes_sample
 from renderer.shading.materials import (
@@ -251,16 +251,6 @@ def surface_params(ms: MaterialSample, thin: int):
     p.ior = ms.ior
     p.thin = thin
     return p
-
-
-@wp.func
-def is_area_light(kind: int):
-    return kind == LIGHT_RECT or kind == LIGHT_DISK or kind == LIGHT_SPHERE or kind == LIGHT_CYLINDER
-
-
-@wp.func
-def is_infinite_light(kind: int):
-    return kind == LIGHT_DOME or kind == LIGHT_DISTANT
 
 
 @wp.func
@@ -453,11 +443,11 @@ def trace_wave_kernel(
             L = add_area_lights(L, lights, origin, rd, hit.t, s, prev_inst, prev_delta, prev_pdf, prev_p, lobe_frac,
                                 beta, hit_clamp)
         if hit.inst < 0:
-            for k in range(lights.reach.n_infinite):
+            for k in range(lights.reach.n_infinite):  # the distant and dome lights, in light order
                 li = lights.reach.infinite[k]
                 kind = lights.kind[li]
                 # domes hidden from the camera stay hidden behind pass-through surfaces too
-                if is_infinite_light(kind) and lit_by(lights.links, li, prev_inst) and not (
+                if lit_by(lights.links, li, prev_inst) and not (
                         see_through != 0 and kind == LIGHT_DOME and lights.dome_visible == 0):
                     Le, pdf_l = infinite_light_eval(lights, li, rd, prev_n, s)
                     w = float(1.0)

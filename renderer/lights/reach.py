@@ -4,7 +4,7 @@ UsdLux area lights (rect, disk, sphere, cylinder) are not in the scene's hierarc
 tests them on its own, so that mirrors and glass show them and multiple importance sampling can weight the two
 ways of finding them (``sample.area_light_hit``). Every bounce used to test every light in turn, and a ray that
 left the scene went through every light for the infinite ones: a Cornell box lit by 1024 small rect lights
-rendered 7.8x slower than by one (320x180, 16 spp), 85 % of it in those loops (``bench/kernel_profile.py``).
+rendered 8-9x slower than by one (``bench/many_lights.py``), 85 % of it in those loops (``bench/kernel_profile.py``).
 
 With ``TREE_MIN`` area lights or more, the still ones get a tree of their own: the top level's four-wide nodes
 (``accel.wide``) over each light's world box, walked to the surface the ray hit, so a bounce tests the lights
@@ -42,7 +42,8 @@ class Reach:
     child: wp.array(dtype=wp.vec4i)
     light: wp.array(dtype=wp.int32)  # leaf slot -> light
     n_loose: int
-    loose: wp.array(dtype=wp.int32)  # area lights tested one by one, in light order: the moving ones, or all
+    loose: wp.array(dtype=wp.int32)  # area lights tested one by one, in light order: the moving ones (and any
+    #                                  without a finite box), or all
     n_infinite: int
     infinite: wp.array(dtype=wp.int32)  # distant and dome lights, in light order
 
@@ -81,6 +82,12 @@ def upload_reach(kinds, sizes, transforms, device: str, tree_min: int | None = N
     infinite = [i for i, k in enumerate(kinds) if k in (LIGHT_DISTANT, LIGHT_DOME)]
     moving = {i for i in area if len(transforms[i].times) > 1}
     still = [i for i in area if i not in moving]
+    if still:  # a light whose box is not finite (a degenerate transform) is tested in turn, never lost
+        lo, hi = world_boxes([kinds[i] for i in still], [sizes[i] for i in still],
+                             matrices_at([transforms[i] for i in still], 0.0))
+        ok = np.isfinite(lo).all(1) & np.isfinite(hi).all(1) & (np.abs(lo) < 1e37).all(1) & (np.abs(hi) < 1e37).all(1)
+        moving |= {i for i, good in zip(still, ok) if not good}
+        still, lo, hi = [i for i, good in zip(still, ok) if good], lo[ok], hi[ok]
     r = Reach()
 
     def ints(a):
@@ -95,8 +102,6 @@ def upload_reach(kinds, sizes, transforms, device: str, tree_min: int | None = N
     light = [0]
     loose = area  # without a tree, every area light in turn
     if r.tree:
-        lo, hi = world_boxes([kinds[i] for i in still], [sizes[i] for i in still],
-                             matrices_at([transforms[i] for i in still], 0.0))
         wide = collapse(build_bvh(lo.astype(np.float32), hi.astype(np.float32), max_leaf=1, device=device),
                         device)
         box, child, light = wide.box, wide.child, np.asarray(still, np.int32)[wide.prim_order]
