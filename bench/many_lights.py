@@ -3,7 +3,8 @@ N x N grid of rect lights (the same total area, spread over the same patch), N^2
 
     python bench/many_lights.py [--width 320 --height 180 --spp 16] [--counts 1 64 256 1024]
 
-Prints each count's render time (``drt render``'s own figure, best of ``--repeats``) and its ratio to one light.
+Prints each count's render time (``drt render``'s own figure, best of ``--repeats``) and its ratio to the first
+count's (one light by default).
 A scattered ray tests the area lights whose boxes it enters (``renderer.lights.reach``): with a tree over them the
 time should barely grow with the count; testing every light in turn, it grew 7.8x from 1 to 1024 lights.
 """
@@ -18,10 +19,13 @@ import tempfile
 from pathlib import Path
 
 CORNELL = Path(__file__).resolve().parents[2] / "shared" / "bench" / "scenes" / "cornell.usda"
+if not CORNELL.is_file():  # a clone elsewhere on the development machine
+    CORNELL = Path("/work/shared/bench/scenes/cornell.usda")
 
 
 def grid_scene(src: str, n: int) -> str:
-    """The Cornell box with its one rect light (24 x 19 at y = 99.9) replaced by n x n lights of 90 % of a cell."""
+    """The Cornell box with its one rect light (24 x 19 at y = 99.9) replaced by n x n lights of 90 % of a cell:
+    the text from ``def RectLight "CeilingLight"`` to ``def Camera "Camera"`` is replaced."""
     start, end = src.index('    def RectLight "CeilingLight"'), src.index('    def Camera "Camera"')
     lights = []
     for i in range(n):
@@ -57,6 +61,9 @@ def main(argv=None) -> int:
     p.add_argument("--counts", type=int, nargs="+", default=[1, 64, 256, 1024])
     p.add_argument("--scene", type=Path, default=CORNELL, help="the Cornell box (../shared/bench/scenes)")
     args = p.parse_args(argv)
+    if not args.scene.is_file():
+        p.error(f"scene not found: {args.scene} (pass --scene: a scene with a RectLight \"CeilingLight\" defined "
+                f"just before its Camera \"Camera\", as the bench's Cornell box)")
     src = args.scene.read_text()
     base = None
     with tempfile.TemporaryDirectory() as tmp:
@@ -65,8 +72,9 @@ def main(argv=None) -> int:
             scene = Path(tmp) / f"cornell_{n * n}.usda"
             scene.write_text(grid_scene(src, n))
             t = min(render_seconds(scene, args) for _ in range(args.repeats))
-            base = base or t
-            print(f"{n * n:5d} rect lights: {t:.2f} s render ({t / base:.2f}x one light), "
+            base = t if base is None else base
+            ratio = f"{t / base:.2f}x" if base > 0 else "-"
+            print(f"{n * n:5d} rect lights: {t:.2f} s render ({ratio} the first count), "
                   f"{args.width}x{args.height}, {args.spp} spp", flush=True)
     return 0
 

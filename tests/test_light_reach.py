@@ -185,14 +185,54 @@ def test_the_tree_holds_every_still_area_light_once_and_few_lights_get_none(tmp_
     assert small.tree == 0 and small.n_area == sum(int(k) in reach.AREA_KINDS for k in kinds[:3])
 
 
-def test_the_many_lights_benchmark_runs():
+BOX = """#usda 1.0
+(
+    metersPerUnit = 0.01
+    upAxis = "Y"
+)
+def Xform "World"
+{
+    def Mesh "Floor"
+    {
+        int[] faceVertexCounts = [4]
+        int[] faceVertexIndices = [0, 1, 2, 3]
+        point3f[] points = [(0, 0, 0), (100, 0, 0), (100, 0, -100), (0, 0, -100)]
+    }
+    def RectLight "CeilingLight"
+    {
+        float inputs:height = 19
+        float inputs:intensity = 40
+        float inputs:width = 24
+        float xformOp:rotateX = -90
+        double3 xformOp:translate = (50, 99.9, -50)
+        uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateX"]
+    }
+
+    def Camera "Camera"
+    {
+        float focalLength = 35
+        float horizontalAperture = 36
+        float verticalAperture = 20.25
+        double3 xformOp:translate = (50, 50, 185)
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    }
+}
+"""
+
+
+def test_the_many_lights_benchmark_runs(tmp_path):
     import subprocess
     import sys
     from pathlib import Path
 
     script = Path(__file__).resolve().parents[1] / "bench" / "many_lights.py"
+    scene = tmp_path / "box.usda"
+    scene.write_text(BOX)
     r = subprocess.run([sys.executable, str(script), "--width", "32", "--height", "18", "--spp", "1", "--repeats", "1",
-                        "--counts", "1", "16"], capture_output=True, text=True, timeout=600)
+                        "--counts", "1", "16", "--scene", str(scene)], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
     lines = r.stdout.strip().splitlines()
     assert len(lines) == 2 and lines[0].split()[0] == "1" and lines[1].split()[0] == "16", r.stdout
+    r = subprocess.run([sys.executable, str(script), "--scene", str(tmp_path / "none.usda")], capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 2 and "scene not found" in r.stderr
