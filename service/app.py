@@ -96,8 +96,9 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         # process and one more to read the next upload meanwhile: more threads inspect no faster, they only
         # contend for the GIL with the event loop (50 clients at once, bench/load_test.py: status p99 15-21 ms
         # with 3 threads, 25-53 ms with 8).
-        app.state.submit_limiter = anyio.CapacityLimiter(settings.inspect_processes + 1)
-        app.state.submission_gate = new_submission_gate(settings.inspect_processes + 1)
+        submission_threads = settings.inspect_processes + 1
+        app.state.submit_limiter = anyio.CapacityLimiter(submission_threads)
+        app.state.submission_gate = new_submission_gate(submission_threads)
         app.state.feed = ChangeFeed(app.state.runtime.store)  # the monitor's server-sent events
         tune_api_process()  # startup is done: freeze its heap, shorten the GIL switch interval
         try:

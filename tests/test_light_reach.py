@@ -175,14 +175,22 @@ def test_the_tree_holds_every_still_area_light_once_and_few_lights_get_none(tmp_
     r = prep.lights.reach
     kinds = prep.lights.kind.numpy()
     area = np.flatnonzero(np.isin(kinds, reach.AREA_KINDS))
-    assert r.n_area == len(area) == len(LIGHTS)
+    assert len(area) == len(LIGHTS) and r.tree == 1 and r.n_loose == 0
     assert {int(kinds[i]) for i in area} == {LIGHT_RECT, LIGHT_DISK, LIGHT_SPHERE, LIGHT_CYLINDER}
     inf = r.infinite.numpy()[:r.n_infinite]
     assert len(inf) == 2 and list(inf) == sorted(inf)
     leaves = sorted(r.light.numpy().tolist())
     assert leaves == sorted(area.tolist())  # every still area light is in the tree once
-    small = reach.upload_reach(kinds[:3], [(1, 1, 0, 0)] * 3, [prep.scene.lights[0].transform] * 3, "cpu")
-    assert small.tree == 0 and small.n_area == sum(int(k) in reach.AREA_KINDS for k in kinds[:3])
+    xf = prep.scene.lights[0].transform
+    small = reach.upload_reach(kinds[:3], [(1, 1, 0, 0)] * 3, [xf] * 3, np.tile(np.eye(4), (3, 1, 1)), "cpu")
+    assert small.tree == 0 and small.n_loose == 3 and small.loose.numpy().tolist() == [0, 1, 2]
+    # a light whose matrix is not finite leaves the tree and is tested in turn
+    mats = np.tile(np.eye(4), (9, 1, 1))
+    mats[:, 0, 3] = np.arange(9) * 2.0
+    mats[5, :3, :3] = np.nan
+    many = reach.upload_reach([LIGHT_RECT] * 9, [(1, 1, 0, 0)] * 9, [xf] * 9, mats, "cpu")
+    assert many.tree == 1 and many.loose.numpy()[:many.n_loose].tolist() == [5]
+    assert sorted(many.light.numpy().tolist()) == [0, 1, 2, 3, 4, 6, 7, 8]
 
 
 BOX = """#usda 1.0

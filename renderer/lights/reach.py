@@ -36,8 +36,7 @@ AREA_KINDS = (LIGHT_RECT, LIGHT_DISK, LIGHT_SPHERE, LIGHT_CYLINDER)
 @by_reference
 @wp.struct
 class Reach:
-    n_area: int  # area lights (fewer than ``TREE_MIN``: no tree, all of them ``loose``)
-    tree: int  # 1: the still area lights are walked in the tree below, the moving ones in ``loose``
+    tree: int  # 1: the still area lights are walked in the tree below, the others in ``loose``
     box: wp.array(dtype=WideBoxes)  # the tree's nodes (one time key), ``accel.wide`` layout
     child: wp.array(dtype=wp.vec4i)
     light: wp.array(dtype=wp.int32)  # leaf slot -> light
@@ -52,48 +51,42 @@ def world_boxes(kinds, sizes, matrices) -> tuple[np.ndarray, np.ndarray]:
     """(lo, hi), each (N, 3): the world boxes of lights (``table.Lights.size``) under their 4x4 column-vector
     matrices, as ``sample``'s frames place them, grown by PAD. A rect is its four corners; a disk and a sphere are
     a ball of radius r |M x| about the centre (the kernels make them round whatever the matrix's scales); a
-    cylinder is its axis, M x times its length, grown by its radius r |M y| every way."""
-    lo, hi = [], []
-    for kind, size, m in zip(kinds, sizes, matrices):
-        m = np.asarray(m, np.float64)
-        c, ax, ay = m[:3, 3], m[:3, 0], m[:3, 1]
-        w, h, r = float(size[0]), float(size[1]), float(size[2])
-        if kind == LIGHT_RECT:
-            pts = np.array([c + sx * 0.5 * w * ax + sy * 0.5 * h * ay for sx in (-1, 1) for sy in (-1, 1)])
-            l, u = pts.min(0), pts.max(0)
-        elif kind == LIGHT_CYLINDER:  # size: (length, _, radius)
-            half = np.abs(0.5 * w * ax) + abs(r) * np.linalg.norm(ay)
-            l, u = c - half, c + half
-        else:  # disk, sphere
-            radius = abs(r) * np.linalg.norm(ax)
-            l, u = c - radius, c + radius
-        grow = PAD * (np.abs(u - l).max() + np.abs(c).max()) + 1e-30
-        lo.append(l - grow)
-        hi.append(u + grow)
-    return np.array(lo, np.float64).reshape(-1, 3), np.array(hi, np.float64).reshape(-1, 3)
+    cylinder is its axis, M x times its length, grown by its radius r |M y| every way. One NumPy pass for all."""
+    kinds = np.asarray(kinds).reshape(-1)
+    sizes = np.asarray(sizes, np.float64).reshape(-1, 4)
+    m = np.asarray(matrices, np.float64).reshape(-1, 4, 4)
+    c, ax, ay = m[:, :3, 3], m[:, :3, 0], m[:, :3, 1]
+    w, h, r = sizes[:, 0:1], sizes[:, 1:2], np.abs(sizes[:, 2:3])
+    # a ball (disk, sphere) by default
+    half = r * np.linalg.norm(ax, axis=1, keepdims=True) * np.ones((1, 3))
+    rect = kinds == LIGHT_RECT  # the four corners' spread about the centre
+    half[rect] = (np.abs(0.5 * w * ax) + np.abs(0.5 * h * ay))[rect]
+    cyl = kinds == LIGHT_CYLINDER  # size: (length, _, radius)
+    half[cyl] = (np.abs(0.5 * w * ax) + r * np.linalg.norm(ay, axis=1, keepdims=True))[cyl]
+    lo, hi = c - half, c + half
+    grow = PAD * (np.abs(hi - lo).max(1, keepdims=True) + np.abs(c).max(1, keepdims=True)) + 1e-30
+    return lo - grow, hi + grow
 
 
-def upload_reach(kinds, sizes, transforms, device: str, tree_min: int | None = None) -> Reach:
-    """The lists and the tree for lights of ``kinds`` (``table.Lights.kind`` order), their ``sizes`` and
-    MotionTransforms; a tree from ``tree_min`` area lights (default ``TREE_MIN``)."""
+def upload_reach(kinds, sizes, transforms, matrices, device: str, tree_min: int | None = None) -> Reach:
+    """The lists and the tree for lights of ``kinds`` (``table.Lights.kind`` order), their ``sizes``,
+    MotionTransforms and matrices at the shutter's start (``table.Lights.xf_still``); a tree from ``tree_min`` area
+    lights (default ``TREE_MIN``)."""
     tree_min = TREE_MIN if tree_min is None else tree_min
-    kinds = [int(k) for k in kinds]
-    area = [i for i, k in enumerate(kinds) if k in AREA_KINDS]
-    infinite = [i for i, k in enumerate(kinds) if k in (LIGHT_DISTANT, LIGHT_DOME)]
-    moving = {i for i in area if len(transforms[i].times) > 1}
-    still = [i for i in area if i not in moving]
-    if still:  # a light whose box is not finite (a degenerate transform) is tested in turn, never lost
-        lo, hi = world_boxes([kinds[i] for i in still], [sizes[i] for i in still],
-                             matrices_at([transforms[i] for i in still], 0.0))
-        ok = np.isfinite(lo).all(1) & np.isfinite(hi).all(1) & (np.abs(lo) < 1e37).all(1) & (np.abs(hi) < 1e37).all(1)
-        moving |= {i for i, good in zip(still, ok) if not good}
-        still, lo, hi = [i for i, good in zip(still, ok) if good], lo[ok], hi[ok]
+    kinds = np.asarray([int(k) for k in kinds], np.int32)
+    area = np.flatnonzero(np.isin(kinds, AREA_KINDS))
+    infinite = np.flatnonzero(np.isin(kinds, (LIGHT_DISTANT, LIGHT_DOME)))
+    still = np.array([i for i in area if len(transforms[i].times) == 1], np.int64)
+    lo, hi = world_boxes(kinds[still], np.asarray(sizes, np.float64).reshape(-1, 4)[still],
+                         np.asarray(matrices, np.float64).reshape(-1, 4, 4)[still])
+    # a light whose box is not finite (a degenerate transform) is tested in turn, never lost
+    ok = (np.abs(lo) < 1e37).all(1) & (np.abs(hi) < 1e37).all(1)  # also False for NaN
+    still, lo, hi = still[ok], lo[ok], hi[ok]
     r = Reach()
 
     def ints(a):
         return wp.array(np.array(a if len(a) else [0], np.int32), dtype=wp.int32, device=device)
 
-    r.n_area = len(area)
     r.n_infinite = len(infinite)
     r.infinite = ints(infinite)
     r.tree = int(len(area) >= tree_min and len(still) > 0)
@@ -104,8 +97,8 @@ def upload_reach(kinds, sizes, transforms, device: str, tree_min: int | None = N
     if r.tree:
         wide = collapse(build_bvh(lo.astype(np.float32), hi.astype(np.float32), max_leaf=1, device=device),
                         device)
-        box, child, light = wide.box, wide.child, np.asarray(still, np.int32)[wide.prim_order]
-        loose = sorted(moving)
+        box, child, light = wide.box, wide.child, still.astype(np.int32)[wide.prim_order]
+        loose = np.setdiff1d(area, still)  # sorted: light order
     r.box = box_records(box, device)
     r.child = wp.array(np.asarray(child, np.int32), dtype=wp.vec4i, device=device)
     r.light = ints(light)

@@ -341,7 +341,7 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
     _upload_images(lt, images, device)
     lt.links = upload_links(kept, len(scene.instances), device, warn)
     lt.select = upload_selection(estimates, device, clusters=clusters)
-    lt.reach = upload_reach(kinds, size, transforms, device)
+    lt.reach = upload_reach(kinds, size, transforms, still, device)
     lt.env = upload_envmap(env_image, env_xf, device)
     lt.dome_visible = int(dome_visible)
     return lt, n
