@@ -250,9 +250,12 @@ def bsdf_setup(p: SurfaceParams, n: wp.vec3, ng: wp.vec3, wo: wp.vec3, front: in
             b.trans = TRANS_DIELECTRIC
     # lobe selection: estimated albedo of each lobe at wo
     co = wp.clamp(b.wo[2], 0.0, 1.0)
-    fcc = fresnel_dielectric(co, W_CLEARCOAT_IOR)
-    att = 1.0 - b.cc * fcc
-    e_coat = b.cc * fcc
+    att = float(1.0)  # what the coat lets through; the coat's own Fresnel only where there is a coat (2 % of a
+    e_coat = float(0.0)  # Cornell box sample went to it): 1 - 0 * F and 0 * F are these same bits
+    if b.cc > 0.0:
+        fcc = fresnel_dielectric(co, W_CLEARCOAT_IOR)
+        att = 1.0 - b.cc * fcc
+        e_coat = b.cc * fcc
     e_spec = float(0.0)
     if b.w_spec > 0.0 and _lum(b.f90) > 0.0:  # a black specular layer (F0 = F90 = 0) reflects nothing
         e_spec = att * b.w_spec * wp.max(_lum(fresnel_schlick(b.f0, b.f90, co)), SPEC_SELECT_FLOOR)
