@@ -4,7 +4,8 @@
 For the scenes in ../shared/bench/scenes (640x360, ANCHORS.md settings): samples/s and rays/s at 2 threads
 against Blender Cycles' and Mitsuba 3 LLVM's figures on the same machine kind (ANCHORS.md); a production scene
 from ../shared/usd-assets (the usd-wg teapot layout: 494 instanced, subdivided teapots) with its USD load and
-flatten/build times, against live Cycles when $BPY names a Python with Blender's bpy; scaling from 1 to 2 threads
+flatten/build times; every scene also against live Cycles, rendered in the same run, when $BPY names a Python with
+Blender's bpy; scaling from 1 to 2 threads
 on each scene (in turn, best of 3);
 the cost of motion blur (motion scene vs the same scene still; and 10x faster motion vs the scene's own) and of
 depth of field (vs the pinhole), each pair rendered in turn, best of 3; BVH build
@@ -73,6 +74,27 @@ def cycles_anchors() -> dict[str, float]:
     return anchors(0)
 
 
+def live_cycles_seconds(bpy: str, scene: pathlib.Path, spp: int, *, motion: bool = False,
+                        fixups: bool = False) -> float | None:
+    """Seconds Cycles (Blender's ``bpy`` at ``bpy``, CPU, 2 threads, its defaults) takes to render ``scene`` at
+    640x360 and ``spp``, BVH build included, as ANCHORS.md measured it; None when it fails. ``motion`` turns on
+    its motion blur; ``fixups`` rebuilds what Blender's USD import drops (``noise.blender_fixups``), as the
+    anchors' and ``noise.py``'s renders do for the bench scenes."""
+    env = dict(os.environ)
+    if fixups:
+        from noise import blender_fixups
+
+        env["DRT_BLENDER_FIXUPS"] = json.dumps(blender_fixups(str(scene)))
+    with tempfile.TemporaryDirectory() as tmp:
+        p = subprocess.run([bpy, str(ROOT / "bench" / "cycles_render.py"), str(scene), f"{tmp}/c.exr", "640", "360",
+                            str(spp), "1"] + (["motion"] if motion else []), capture_output=True, text=True, env=env)
+    for line in p.stdout.splitlines():
+        if line.startswith("{"):
+            return float(json.loads(line)["seconds"])
+    print(f"# live Cycles failed on {scene.name}: {p.stderr.strip()[-300:]}")
+    return None
+
+
 def production_figures(scenes: pathlib.Path, spp: int, bpy: str | None):
     """Our load / prepare / render figures for the teapot layout shot at 640x360, and live Cycles' render seconds
     on it (same size, samples and threads) when ``bpy`` names a Python with Blender's bpy."""
@@ -83,11 +105,7 @@ def production_figures(scenes: pathlib.Path, spp: int, bpy: str | None):
                                                layout=scenes / "teapotScene_layout.usd"))
         r = render(shot, spp=spp, threads=2)
         if bpy:
-            p = subprocess.run([bpy, str(ROOT / "bench" / "cycles_render.py"), str(shot), f"{tmp}/c.exr", "640",
-                                "360", str(spp), "1"], capture_output=True, text=True)
-            for line in p.stdout.splitlines():
-                if line.startswith("{"):
-                    cycles_seconds = json.loads(line)["seconds"]
+            cycles_seconds = live_cycles_seconds(bpy, shot, spp)
     return r, cycles_seconds
 
 
@@ -273,20 +291,28 @@ def main() -> None:
 
     builds = ", ".join(sorted(set(load_kernels().values())))  # host-tuned ("native") once `drt warmup` ran here
     print(f"# render kernels: {builds} (renderer.kernel_cache)")
+    bpy = os.environ.get("BPY")
+    if not bpy:
+        print("# Cycles: the ANCHORS.md figures (another day); set BPY to a Python with bpy to render it side by side")
     print(f"{'scene':8} {'tris':>9} {'load s':>7} {'build s':>7} {'render s':>8} {'Msamples/s':>10} "
-          f"{'Mrays/s':>8} {'Cycles':>7} {'vs Cycles':>9} {'Mitsuba LLVM':>12} {'vs Mitsuba':>10}")
+          f"{'Mrays/s':>8} {'Cycles':>7} {'vs Cycles':>9} {'live Cycles':>11} {'vs live':>8} {'Mitsuba LLVM':>12} "
+          f"{'vs Mitsuba':>10}")
     results = {}
     for name in args.scenes.split(","):
         r = render(scenes / f"{name}.usda", spp=spp, threads=2, repeats=args.repeats)
         results[name] = r
         cyc, mi = cycles.get(name), mitsuba.get(name)
+        live = float("nan")
+        if bpy:  # side by side, the same minutes: the anchors are another day's (noise between days ~25 %)
+            live_s = live_cycles_seconds(bpy, scenes / f"{name}.usda", spp, motion=name == "motion", fixups=True)
+            live = 640 * 360 * spp / live_s if live_s else float("nan")
         st = r["stats"]
         print(f"{name:8} {st.triangles:9d} {r['load']:7.2f} {st.build_seconds:7.2f} {r['seconds']:8.2f} "
               f"{r['sps'] / 1e6:10.3f} {r['rps'] / 1e6:8.3f} {cyc / 1e6 if cyc else float('nan'):7.2f} "
-              f"{r['sps'] / cyc if cyc else float('nan'):8.2f}x {mi / 1e6 if mi else float('nan'):12.2f} "
-              f"{r['sps'] / mi if mi else float('nan'):9.2f}x  (targets: 2x Cycles)")
+              f"{r['sps'] / cyc if cyc else float('nan'):8.2f}x {live / 1e6:11.2f} {r['sps'] / live:7.2f}x "
+              f"{mi / 1e6 if mi else float('nan'):12.2f} {r['sps'] / mi if mi else float('nan'):9.2f}x  "
+              f"(targets: 2x Cycles)")
     if not args.skip_production and PRODUCTION.is_dir():
-        bpy = os.environ.get("BPY")
         r, cyc_s = production_figures(PRODUCTION, args.production_spp, bpy)
         st = r["stats"]
         samples = 640 * 360 * args.production_spp
