@@ -146,7 +146,6 @@ def surface_at(geo: Geometry, inst: int, tri: int, b1: float, b2: float, ro: wp.
                s: float):
     """Position, normals, uv and tangent of a hit at time s (vertices and transform at that instant)."""
     m = geo.inst_mesh[inst]
-    o2w = instance_object_to_world(geo, inst, s)
     w2o = instance_world_to_object(geo, inst, s)
     w2o_t = wp.transpose(w2o)  # normals transform by the inverse transpose
     kind = geo.mesh_shape[m]
@@ -186,6 +185,7 @@ def surface_at(geo: Geometry, inst: int, tri: int, b1: float, b2: float, ro: wp.
     uc = corner_index(geo, geo.mesh_uv_off, m, tri)
     if uc >= 0:
         # from world-space corners, so a mirroring transform is accounted for in the handedness
+        o2w = instance_object_to_world(geo, inst, s)  # (only here: a moving instance's keys are looked up again)
         w0 = wp.transform_point(o2w, p0)
         w1 = wp.transform_point(o2w, p1)
         w2 = wp.transform_point(o2w, p2)
