@@ -385,14 +385,14 @@ def instance_object_to_world(geo: Geometry, inst: int, s: float):
 
 
 @wp.func(inline=True)  # one call site: no copy of the Geometry struct
-def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float, s: float, best: Hit, inst: int):
-    """Closest triangle of mesh m (object-space ray) nearer than tmax; updates and returns ``best``. A walk of
-    the four-wide tree, nearest child first, skipping what lies beyond the best hit so far."""
+def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, inv_d: wp.vec3, tmax: float, s: float, best: Hit,
+                 inst: int):
+    """Closest triangle of mesh m (object-space ray, ``inv_d`` = ``safe_inverse(rd)``) nearer than tmax; updates and
+    returns ``best``. A walk of the four-wide tree, nearest child first, skipping what lies beyond the best hit."""
     k0, k1, u = mesh_keys_at(geo, m, s)
     nk = geo.mesh_nkeys[m]
     noff = geo.mesh_node_off[m]
     poff = geo.mesh_prim_off[m]
-    inv_d = safe_inverse(rd)
     stack = wide_stack_t()  # scratch: not zeroed, read below sp only
     dist = dist_stack_t()
     stack[0] = 0  # the root, entered at distance 0
@@ -488,16 +488,19 @@ def intersect_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, tmax: float, s: f
     best.t = tmax
     best.inst = -1
     best.tri = -1
+    inv_d = safe_inverse(rd)  # the top level's, and the direct walk's when its matrix is the identity: once
     direct = geo.direct_inst
     if direct >= 0:
         if instance_visible(geo, direct, s):
             ro_o, rd_o = direct_ray(geo, ro, rd)
-            best = blas_closest(geo, geo.inst_mesh[direct], ro_o, rd_o, tmax, s, best, direct)
+            inv_o = inv_d
+            if geo.direct_identity == 0:
+                inv_o = safe_inverse(rd_o)
+            best = blas_closest(geo, geo.inst_mesh[direct], ro_o, rd_o, inv_o, tmax, s, best, direct)
         if geo.tlas_others == 0:
             return best
     k0, k1, u = tlas_keys_at(geo, s)
     nk = geo.tlas_nkeys
-    inv_d = safe_inverse(rd)
     if not root_entered(geo.tlas_root, k0, ro, inv_d, best.t):
         return best
     stack = wide_stack_t()  # scratch: not zeroed, read below sp only
@@ -517,7 +520,8 @@ def intersect_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, tmax: float, s: f
                         w2o = instance_world_to_object(geo, inst, s)
                         ro_o = wp.transform_point(w2o, ro)
                         rd_o = wp.transform_vector(w2o, rd)
-                        best = blas_closest(geo, geo.inst_mesh[inst], ro_o, rd_o, best.t, s, best, inst)
+                        best = blas_closest(geo, geo.inst_mesh[inst], ro_o, rd_o, safe_inverse(rd_o), best.t, s,
+                                            best, inst)
             else:
                 c = geo.tlas_child[ref]
                 d, c = far_to_near(entries(geo.tlas_box, ref * nk, c, k0, k1, u, ro, inv_d, best.t), c)

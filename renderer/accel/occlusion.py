@@ -49,13 +49,13 @@ def crossing_opacity(geo: Geometry, mats: Materials, tex: Textures, m: int, lt: 
 
 @wp.func(inline=True)  # one call site: no copy of the Geometry struct
 def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro: wp.vec3, rd: wp.vec3,
-                       tmax: float, s: float, trans: float):
-    """Multiply ``trans`` by (1 - opacity) of every triangle of mesh m crossed before tmax; stops at 0."""
+                       inv_d: wp.vec3, tmax: float, s: float, trans: float):
+    """Multiply ``trans`` by (1 - opacity) of every triangle of mesh m crossed before tmax (object-space ray,
+    ``inv_d`` = ``safe_inverse(rd)``); stops at 0."""
     k0, k1, u = mesh_keys_at(geo, m, s)
     nk = geo.mesh_nkeys[m]
     noff = geo.mesh_node_off[m]
     poff = geo.mesh_prim_off[m]
-    inv_d = safe_inverse(rd)
     stack = wide_stack_t()  # scratch: not zeroed, read below sp only
     stack[0] = 0  # the root
     sp = int(1)
@@ -108,16 +108,19 @@ def transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd
                   s: float):
     """Fraction of light passing along the segment ro + t rd, t in (0, tmax), at time s."""
     tr = float(1.0)
+    inv_d = safe_inverse(rd)  # the top level's, and the direct walk's when its matrix is the identity: once
     direct = geo.direct_inst  # walked first, outside the top level (``Geometry.direct_inst``)
     if direct >= 0:
         if instance_visible(geo, direct, s):
             ro_o, rd_o = direct_ray(geo, ro, rd)
-            tr = blas_transmittance(geo, mats, tex, geo.inst_mesh[direct], ro_o, rd_o, tmax, s, tr)
+            inv_o = inv_d
+            if geo.direct_identity == 0:
+                inv_o = safe_inverse(rd_o)
+            tr = blas_transmittance(geo, mats, tex, geo.inst_mesh[direct], ro_o, rd_o, inv_o, tmax, s, tr)
         if geo.tlas_others == 0:
             return tr
     k0, k1, u = tlas_keys_at(geo, s)
     nk = geo.tlas_nkeys
-    inv_d = safe_inverse(rd)
     stack = wide_stack_t()  # scratch: not zeroed, read below sp only
     stack[0] = 0  # the root
     sp = int(1)
@@ -132,8 +135,9 @@ def transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd
                 inst = geo.tlas_prim[first + i]
                 if instance_visible(geo, inst, s) and tr > 0.0 and geo.inst_csg[inst] < 0:
                     w2o = instance_world_to_object(geo, inst, s)
-                    tr = blas_transmittance(geo, mats, tex, geo.inst_mesh[inst], wp.transform_point(w2o, ro),
-                                            wp.transform_vector(w2o, rd), tmax, s, tr)
+                    rd_o = wp.transform_vector(w2o, rd)
+                    tr = blas_transmittance(geo, mats, tex, geo.inst_mesh[inst], wp.transform_point(w2o, ro), rd_o,
+                                            safe_inverse(rd_o), tmax, s, tr)
         else:
             c = geo.tlas_child[ref]
             d = entries(geo.tlas_box, ref * nk, c, k0, k1, u, ro, inv_d, tmax)
