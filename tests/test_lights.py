@@ -99,6 +99,53 @@ def test_selection_kernel_frequencies_match_its_pdf():
     assert near > 20 * far
 
 
+def test_one_cluster_chooses_by_power_and_its_pdf_is_the_power_share():
+    """One cluster of finite lights (selection by power alone; one lamp is the same path): select_light's choices
+    follow the lights' power shares, its probability is select_pdf's, the rescaled number stays uniform in each
+    light's share, and a point the cluster cannot light (weight 0) chooses nothing. This is select_light's
+    one-cluster shortcut (its weight computed once): the loops it skips give these same choices."""
+    powers = [1.0, 2.0, 5.0]
+    lights = [Light(LIGHT_SPHERE, f"s{i}", (p, p, p), MotionTransform.static(translate(i * 0.5, 1, 0)), radius=0.05)
+              for i, p in enumerate(powers)]
+    lights.append(Light(LIGHT_DOME, "sky", (0.2, 0.2, 0.2), MotionTransform.static(np.eye(4))))
+    lt, n = upload_lights(unit_scene(lights), clusters=False)
+    assert lt.select.n_finite == 1
+
+    @wp.kernel
+    def run(sel: Selection, p: wp.vec3, picks: wp.array(dtype=wp.int32), probs: wp.array(dtype=wp.float32),
+            rest: wp.array(dtype=wp.float32), pdfs: wp.array(dtype=wp.float32)):
+        i = wp.tid()
+        u = (float(i) + 0.5) / float(picks.shape[0])
+        li, pr, ur = select_light(sel, p, u)
+        picks[i] = li
+        probs[i] = pr - light_select_pdf(sel, li, p)
+        rest[i] = ur
+        if i < pdfs.shape[0]:
+            pdfs[i] = light_select_pdf(sel, i, p)
+
+    m = 100000
+    picks, probs, rest = wp.zeros(m, dtype=wp.int32), wp.zeros(m, dtype=wp.float32), wp.zeros(m, dtype=wp.float32)
+    pdfs = wp.zeros(n, dtype=wp.float32)
+    wp.launch(run, m, [lt.select, wp.vec3(0.5, 0.0, 0.0), picks, probs, rest, pdfs])
+    share = np.array(powers) / sum(powers)
+    np.testing.assert_allclose(pdfs.numpy()[:3], share, rtol=1e-6)
+    assert pdfs.numpy()[3] == 1.0  # the dome: sampled at every point
+    freq = np.bincount(picks.numpy(), minlength=n) / m
+    np.testing.assert_allclose(freq[:3], share, atol=2e-4)
+    assert np.abs(probs.numpy()).max() < 1e-6
+    for k in range(3):  # u rescaled within each light's share: uniform again
+        r = np.sort(rest.numpy()[picks.numpy() == k])
+        assert np.abs(r - (np.arange(len(r)) + 0.5) / len(r)).max() < 1e-3
+
+    # a point the cluster's (capped, distance-limited) estimate gives no weight: nothing chosen, pdf 0
+    sel = lt.select
+    saved = sel.power.numpy().copy()
+    sel.power.assign(np.zeros_like(saved))
+    wp.launch(run, 4, [sel, wp.vec3(0.5, 0.0, 0.0), picks, probs, rest, pdfs])
+    sel.power.assign(saved)
+    assert picks.numpy()[:4].tolist() == [-1] * 4 and pdfs.numpy()[:3].tolist() == [0.0] * 3
+
+
 def test_with_only_infinite_lights_nothing_is_chosen_by_the_cut():
     from renderer.lights.select import infinite_light
 

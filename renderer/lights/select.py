@@ -156,8 +156,8 @@ def select_light(sel: Selection, p: wp.vec3, u: float):
     chosen = int(0)
     w_c = float(0.0)
     if sel.n_finite == 1:
-        # one cluster (one lamp, or lamps close together): its weight once, not in three loops (2 % of a Cornell
-        # box sample); the loops below give this cluster, acc = 0 and these same bits
+        # one cluster (one finite light, or selection by power alone): its weight once, not in three loops (2 % of
+        # a Cornell box sample); the loops below give this cluster, acc = 0 and these same bits
         total = cluster_weight(sel, 0, p)
         w_c = total
     else:
