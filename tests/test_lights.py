@@ -58,6 +58,32 @@ def test_equal_lights_at_equal_distance_are_equally_likely():
 
 
 # --------------------------------------------------------------------------- spatially aware selection
+@wp.kernel
+def select_many(sel: Selection, p: wp.vec3, picks: wp.array(dtype=wp.int32), probs: wp.array(dtype=wp.float32),
+                rest: wp.array(dtype=wp.float32), pdfs: wp.array(dtype=wp.float32)):
+    """select_light at p for picks.shape[0] evenly spaced uniform numbers: the light, its probability minus
+    select_pdf's (the probability itself when no light is chosen), the rescaled number; and select_pdf of the first
+    pdfs.shape[0] lights."""
+    i = wp.tid()
+    u = (float(i) + 0.5) / float(picks.shape[0])
+    li, pr, ur = select_light(sel, p, u)
+    picks[i] = li
+    probs[i] = pr
+    if li >= 0:
+        probs[i] = pr - light_select_pdf(sel, li, p)
+    rest[i] = ur
+    if i < pdfs.shape[0]:
+        pdfs[i] = light_select_pdf(sel, i, p)
+
+
+def selections(sel: Selection, p, m: int, n: int):
+    """``select_many``'s four arrays as NumPy."""
+    out = [wp.zeros(m, dtype=wp.int32), wp.zeros(m, dtype=wp.float32), wp.zeros(m, dtype=wp.float32),
+           wp.zeros(n, dtype=wp.float32)]
+    wp.launch(select_many, m, [sel, wp.vec3(*p)] + out)
+    return [a.numpy() for a in out]
+
+
 def test_selection_kernel_frequencies_match_its_pdf():
     """select_light's choices at a point, over many uniform numbers, follow select_pdf: the finite lights' pdfs
     sum to 1; the dome is not among the choices, it is sampled at every point (pdf 1, ``infinite_light``)."""
@@ -69,32 +95,20 @@ def test_selection_kernel_frequencies_match_its_pdf():
     lt, n = upload_lights(unit_scene(lights))
 
     @wp.kernel
-    def run(sel: Selection, p: wp.vec3, picks: wp.array(dtype=wp.int32), probs: wp.array(dtype=wp.float32),
-            pdfs: wp.array(dtype=wp.float32), sky: wp.array(dtype=wp.int32)):
-        i = wp.tid()
-        u = (float(i) + 0.5) / float(picks.shape[0])
-        li, pr, _ = select_light(sel, p, u)
-        picks[i] = li
-        probs[i] = pr - light_select_pdf(sel, li, p)
-        if i < pdfs.shape[0]:
-            pdfs[i] = light_select_pdf(sel, i, p)
-        if i == 0:
-            sky[0] = sel.count - sel.n_finite
-            sky[1] = infinite_light(sel, 0)
+    def infinite(sel: Selection, sky: wp.array(dtype=wp.int32)):
+        sky[0] = sel.count - sel.n_finite
+        sky[1] = infinite_light(sel, 0)
 
     m = 200000
-    picks = wp.zeros(m, dtype=wp.int32)
-    probs = wp.zeros(m, dtype=wp.float32)
-    pdfs = wp.zeros(n, dtype=wp.float32)
+    picks, probs, _, pdf = selections(lt.select, (3.0, 0.0, 0.0), m, n)
     sky = wp.zeros(2, dtype=wp.int32)
-    wp.launch(run, m, [lt.select, wp.vec3(3.0, 0.0, 0.0), picks, probs, pdfs, sky])
-    pdf = pdfs.numpy()
+    wp.launch(infinite, 1, [lt.select, sky])
     assert abs(pdf[:40].sum() - 1.0) < 1e-5 and (pdf > 0).all() and pdf[40] == 1.0
     assert sky.numpy().tolist() == [1, 40]
-    freq = np.bincount(picks.numpy(), minlength=n) / m
+    freq = np.bincount(picks, minlength=n) / m
     np.testing.assert_allclose(freq[:40], pdf[:40], atol=2e-4)
     assert freq[40] == 0.0
-    assert np.abs(probs.numpy()).max() < 1e-6
+    assert np.abs(probs).max() < 1e-6
     near, far = pdf[6], pdf[39]  # the light above x = 3 against one 16.5 units away
     assert near > 20 * far
 
@@ -111,39 +125,25 @@ def test_one_cluster_chooses_by_power_and_its_pdf_is_the_power_share():
     lt, n = upload_lights(unit_scene(lights), clusters=False)
     assert lt.select.n_finite == 1
 
-    @wp.kernel
-    def run(sel: Selection, p: wp.vec3, picks: wp.array(dtype=wp.int32), probs: wp.array(dtype=wp.float32),
-            rest: wp.array(dtype=wp.float32), pdfs: wp.array(dtype=wp.float32)):
-        i = wp.tid()
-        u = (float(i) + 0.5) / float(picks.shape[0])
-        li, pr, ur = select_light(sel, p, u)
-        picks[i] = li
-        probs[i] = pr - light_select_pdf(sel, li, p)
-        rest[i] = ur
-        if i < pdfs.shape[0]:
-            pdfs[i] = light_select_pdf(sel, i, p)
-
     m = 100000
-    picks, probs, rest = wp.zeros(m, dtype=wp.int32), wp.zeros(m, dtype=wp.float32), wp.zeros(m, dtype=wp.float32)
-    pdfs = wp.zeros(n, dtype=wp.float32)
-    wp.launch(run, m, [lt.select, wp.vec3(0.5, 0.0, 0.0), picks, probs, rest, pdfs])
+    picks, probs, rest, pdfs = selections(lt.select, (0.5, 0.0, 0.0), m, n)
     share = np.array(powers) / sum(powers)
-    np.testing.assert_allclose(pdfs.numpy()[:3], share, rtol=1e-6)
-    assert pdfs.numpy()[3] == 1.0  # the dome: sampled at every point
-    freq = np.bincount(picks.numpy(), minlength=n) / m
+    np.testing.assert_allclose(pdfs[:3], share, rtol=1e-6)
+    assert pdfs[3] == 1.0  # the dome: sampled at every point
+    freq = np.bincount(picks, minlength=n) / m
     np.testing.assert_allclose(freq[:3], share, atol=2e-4)
-    assert np.abs(probs.numpy()).max() < 1e-6
+    assert np.abs(probs).max() < 1e-6
     for k in range(3):  # u rescaled within each light's share: uniform again
-        r = np.sort(rest.numpy()[picks.numpy() == k])
+        r = np.sort(rest[picks == k])
         assert np.abs(r - (np.arange(len(r)) + 0.5) / len(r)).max() < 1e-3
 
     # a point the cluster's (capped, distance-limited) estimate gives no weight: nothing chosen, pdf 0
     sel = lt.select
     saved = sel.power.numpy().copy()
     sel.power.assign(np.zeros_like(saved))
-    wp.launch(run, 4, [sel, wp.vec3(0.5, 0.0, 0.0), picks, probs, rest, pdfs])
+    picks, _, _, pdfs = selections(sel, (0.5, 0.0, 0.0), 4, n)
     sel.power.assign(saved)
-    assert picks.numpy()[:4].tolist() == [-1] * 4 and pdfs.numpy()[:3].tolist() == [0.0] * 3
+    assert picks.tolist() == [-1] * 4 and pdfs[:3].tolist() == [0.0] * 3
 
 
 def test_with_only_infinite_lights_nothing_is_chosen_by_the_cut():
