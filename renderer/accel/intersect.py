@@ -22,6 +22,7 @@ from __future__ import annotations
 import warp as wp
 
 from renderer.accel.analytic import SHAPE_DISCS, is_cloud, shape_hits, sphere_roots
+from renderer.accel.embree import embree_closest
 from renderer.accel.quantize import QNode, q_entries
 from renderer.accel.wide import (WideBoxes, dist_stack_t, entries, far_to_near, leaf_range, root_entered,
                                  wide_stack_t)
@@ -77,6 +78,13 @@ class Geometry:
     mesh_shape: wp.array(dtype=wp.int32)
     mesh_shape_axis: wp.array(dtype=wp.int32)
     mesh_shape_param: wp.array(dtype=wp.vec4)
+    # per mesh: the Embree scene that answers its closest hits instead of our walk, or 0 (``accel.embree``: still
+    # triangle meshes); 1 where that scene also answers its shadow rays (every material opaque for them); and
+    # Embree's rtcIntersect1 and rtcOccluded1
+    mesh_embree: wp.array(dtype=wp.uint64)
+    mesh_embree_shadow: wp.array(dtype=wp.int32)
+    embree_closest_fn: wp.uint64
+    embree_occluded_fn: wp.uint64
     # --- top level
     # four-wide nodes as the bottom level's, in float: node n, key k (uniform key times k / (K - 1)) at record
     # n * tlas_nkeys + k
@@ -400,7 +408,17 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, inv_d: wp.vec3
     sp = int(1)
     t_best = tmax
     kind = geo.mesh_shape[m]
-    if kind > 0 and not is_cloud(kind):  # an exact shape: a quadratic or two, no walk
+    es = geo.mesh_embree[m]
+    if es != wp.uint64(0):  # Embree's walk of a still triangle mesh instead of ours
+        sp = 0
+        eh = embree_closest(geo.embree_closest_fn, es, ro, rd, t_best)
+        if eh[3] >= wp.float64(0.0):
+            best.t = float(eh[0])
+            best.inst = inst
+            best.tri = geo.mesh_tri_off[m] + int(eh[3])
+            best.b1 = float(eh[1])
+            best.b2 = float(eh[2])
+    elif kind > 0 and not is_cloud(kind):  # an exact shape: a quadratic or two, no walk
         sp = 0
         t, part, n = shape_hits(kind, geo.mesh_shape_axis[m], geo.mesh_shape_param[m], ro, rd, t_best)
         if t < t_best:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import warp as wp
 
 from renderer.accel.csg import csg_transmittance
+from renderer.accel.embree import embree_occluded
 from renderer.accel.intersect import (
     BIG,
     Geometry,
@@ -61,7 +62,11 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
     sp = int(1)
     tr = trans
     kind = geo.mesh_shape[m]
-    if kind > 0 and not is_cloud(kind):  # an exact shape: each crossing at the opacity of its material, no walk
+    if geo.mesh_embree_shadow[m] != 0:  # opaque still triangles: any crossing Embree finds blocks the light
+        sp = 0
+        if tr > 0.0 and embree_occluded(geo.embree_occluded_fn, geo.mesh_embree[m], ro, rd, tmax) != 0:
+            tr = 0.0
+    elif kind > 0 and not is_cloud(kind):  # an exact shape: each crossing at the opacity of its material, no walk
         sp = 0
         t, part, n = shape_hits(kind, geo.mesh_shape_axis[m], geo.mesh_shape_param[m], ro, rd, tmax)
         if n > 0 and tr > 0.0:

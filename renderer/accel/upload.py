@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from renderer.accel import embree
 from renderer.accel.build import Bvh, build_bvh
 from renderer.accel.csg import OPERATIONS as CSG_OPERATIONS
 from renderer.accel.instance_bounds import box_cut, cut_size, instance_key_bounds, still_world_boxes
@@ -58,7 +59,8 @@ class GeometryStats:
     tlas_nodes: int
     tlas_keys: int
     build_seconds: float
-    nbytes: int
+    nbytes: int  # everything the walks read beyond the meshes' own arrays, Embree's trees included
+    embree_nbytes: int = 0  # of which Embree's (``accel.embree``)
 
 
 def _mesh_prim_bounds(mesh: Mesh, device: str = "cpu") -> tuple[np.ndarray, np.ndarray]:
@@ -165,6 +167,33 @@ def direct_instance(scene: Scene, lo: np.ndarray, hi: np.ndarray) -> int:
     return best
 
 
+def upload_embree(g: Geometry, scene: Scene, shapes: list, device: str = "cpu") -> int:
+    """Embree scenes for the still triangle meshes (``accel.embree``), their handles in ``g``; Embree's bytes.
+    Without Embree every handle is 0 and the walks are all ours. The ``EmbreeScenes`` that owns them is kept on
+    ``g`` itself, so they live as long as the uploaded geometry."""
+    lib = embree.library() if device == "cpu" else None
+    handles = np.zeros(max(1, len(scene.meshes)), np.uint64)
+    shadow = np.zeros(max(1, len(scene.meshes)), np.int32)
+    owner = None
+    if lib is not None:
+        opaque = np.array([embree.opaque_for_shadows(m) for m in scene.materials] or [True], bool)
+        for mi, (mesh, shape) in enumerate(zip(scene.meshes, shapes)):
+            if shape is not None or len(mesh.point_times) != 1 or not len(mesh.triangles):
+                continue
+            if owner is None:
+                owner = embree.EmbreeScenes(lib)
+            handles[mi] = owner.add_mesh(mesh.points[0], mesh.triangles)
+            ids = np.asarray(mesh.material_ids)
+            known = bool(((ids >= 0) & (ids < len(scene.materials))).all())
+            shadow[mi] = int(handles[mi] != 0 and known and bool(opaque[ids].all()))
+    g.mesh_embree = wp.array(handles, dtype=wp.uint64, device=device)
+    g.mesh_embree_shadow = _i32(shadow, device)
+    g.embree_closest_fn = wp.uint64(owner.closest_fn if owner else 0)
+    g.embree_occluded_fn = wp.uint64(owner.occluded_fn if owner else 0)
+    object.__setattr__(g, "embree_owner", owner)  # the scenes' handles above point into it
+    return owner.nbytes if owner else 0
+
+
 def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, GeometryStats]:
     """Build both BVH levels of a scene and upload everything a ray needs."""
     import time
@@ -243,6 +272,7 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     g.mesh_shape = _i32(codes if len(codes) else [0], device)
     g.mesh_shape_axis = _i32(axes if len(axes) else [0], device)
     g.mesh_shape_param = _wp(params if len(params) else np.zeros((1, 4), np.float32), wp.vec4, device)
+    embree_nbytes = upload_embree(g, scene, shapes, device)
 
     # --- top level over instances, boxes on a uniform grid of time keys
     nk = _tlas_key_count(scene)
@@ -306,7 +336,8 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     upload_csg(g, scene, device)
 
     leaf_bytes = 3 * 12 * sum(len(x) for x in v0)  # the leaf-ordered still triangles
-    nbytes = sum(q.nbytes for q in nodes) + sum(b.prim_order.nbytes for b in blas) + tlas.nbytes + leaf_bytes
+    nbytes = (sum(q.nbytes for q in nodes) + sum(b.prim_order.nbytes for b in blas) + tlas.nbytes + leaf_bytes
+              + embree_nbytes)
     stats = GeometryStats(
         triangles=int(n_tris[-1]),
         blas_nodes=int(n_nodes[-1]),
@@ -314,5 +345,6 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
         tlas_keys=nk,
         build_seconds=time.perf_counter() - t_start,
         nbytes=int(nbytes),
+        embree_nbytes=int(embree_nbytes),
     )
     return g, stats

@@ -1,0 +1,232 @@
+"""Embree 4 as the bottom level of still triangle meshes: the walks call it instead of our own tree.
+
+Embree's single-ray traversal (eight-wide nodes, four triangles per leaf test, hand-written AVX2) traces the heavy
+bench scene's incoherent closest-hit rays at twice the rate of our four-wide quantized walk, called from the same
+Warp kernel (``bench/embree_rays.py``), and builds its tree for a million triangles in 0.23 s. Cycles uses it the
+same way. We take the library from the ``embreex`` wheel, which ships Embree 4.4 as a shared library, and call
+its C API through ``ctypes`` (building) and through function pointers handed to the kernels (tracing): nothing of
+ours is linked against it, so the shipped kernels stay portable and a machine without it renders with our walk.
+
+What Embree answers, per mesh (``EmbreeScenes``): the closest hit of a still triangle mesh (not an exact shape,
+not a point cloud, not deforming), and the shadow test of such a mesh when every material it uses is opaque for
+shadow rays (no opacity below 1, no opacity texture, no opacity keys), where the first crossing found settles the
+transmittance at 0. Everything else (motion, instancing, CSG, exact shapes, clouds, partly opaque surfaces) stays
+in our hierarchy. ``DRT_EMBREE=0`` turns it off.
+
+Embree's hit is a pure function of the ray and the mesh: its builders are deterministic, so every process that
+builds the same mesh returns the same bits (``tests/test_embree.py`` builds with one and with two threads).
+"""
+from __future__ import annotations
+
+import ctypes
+import glob
+import importlib.util
+import logging
+import os
+import pathlib
+import threading
+
+import numpy as np
+import warp as wp
+
+log = logging.getLogger(__name__)
+
+# rtcore_common.h / rtcore_buffer.h / rtcore_geometry.h / rtcore_scene.h
+RTC_GEOMETRY_TYPE_TRIANGLE = 0
+RTC_BUFFER_TYPE_INDEX = 0
+RTC_BUFFER_TYPE_VERTEX = 1
+RTC_FORMAT_UINT3 = 0x5003
+RTC_FORMAT_FLOAT3 = 0x9003
+RTC_BUILD_QUALITY_MEDIUM = 1
+RTC_SCENE_FLAG_ROBUST = 1 << 2
+
+_MONITOR = ctypes.CFUNCTYPE(ctypes.c_bool, ctypes.c_void_p, ctypes.c_ssize_t, ctypes.c_bool)
+_lock = threading.Lock()
+_lib: ctypes.CDLL | None | bool = False  # False: not looked for yet
+
+
+def _library_path() -> pathlib.Path | None:
+    """libembree4 as the embreex wheel installs it (``embreex.libs/`` beside the package on Linux, renamed by
+    auditwheel; ``embreex/.dylibs/`` on macOS)."""
+    spec = importlib.util.find_spec("embreex")
+    if spec is None or not spec.submodule_search_locations:
+        return None
+    pkg = pathlib.Path(list(spec.submodule_search_locations)[0])
+    for pattern in ("../embreex.libs/libembree4*.so*", ".dylibs/libembree4*.dylib", "libembree4*"):
+        found = sorted(glob.glob(str(pkg / pattern)))
+        if found:
+            return pathlib.Path(found[0])
+    return None
+
+
+def library() -> ctypes.CDLL | None:
+    """The loaded Embree library, or None (``DRT_EMBREE=0``, embreex not installed, or it fails to load)."""
+    global _lib
+    with _lock:
+        if _lib is not False:
+            return _lib
+        _lib = None
+        if os.environ.get("DRT_EMBREE", "1") == "0":
+            return None
+        path = _library_path()
+        if path is None:
+            log.info("embreex is not installed: still meshes are walked by our own hierarchy")
+            return None
+        try:
+            lib = ctypes.CDLL(str(path))
+        except OSError as e:
+            log.warning("could not load %s (%s): still meshes are walked by our own hierarchy", path, e)
+            return None
+        vp, u32, sz = ctypes.c_void_p, ctypes.c_uint, ctypes.c_size_t
+        for name, res, args in (
+            ("rtcNewDevice", vp, [ctypes.c_char_p]),
+            ("rtcReleaseDevice", None, [vp]),
+            ("rtcGetDeviceError", ctypes.c_int, [vp]),
+            ("rtcSetDeviceMemoryMonitorFunction", None, [vp, _MONITOR, vp]),
+            ("rtcNewScene", vp, [vp]),
+            ("rtcReleaseScene", None, [vp]),
+            ("rtcSetSceneFlags", None, [vp, ctypes.c_int]),
+            ("rtcSetSceneBuildQuality", None, [vp, ctypes.c_int]),
+            ("rtcCommitScene", None, [vp]),
+            ("rtcNewGeometry", vp, [vp, ctypes.c_int]),
+            ("rtcReleaseGeometry", None, [vp]),
+            ("rtcSetNewGeometryBuffer", vp, [vp, ctypes.c_int, u32, ctypes.c_int, sz, sz]),
+            ("rtcCommitGeometry", None, [vp]),
+            ("rtcAttachGeometry", u32, [vp, vp]),
+        ):
+            f = getattr(lib, name)
+            f.restype, f.argtypes = res, args
+        _lib = lib
+        return lib
+
+
+def opaque_for_shadows(material) -> bool:
+    """True when every shadow ray crossing the material is blocked: constant opacity 1 (after its threshold),
+    no texture on opacity or opacityThreshold, no opacity keys (``materials.eval_opacity_cone``)."""
+    if "opacity" in material.textures or "opacityThreshold" in material.textures or material.opacity_keys:
+        return False
+    op = float(np.clip(np.nan_to_num(material.opacity, nan=1.0), 0.0, 1.0))
+    if material.opacity_threshold > 0:
+        op = 1.0 if op >= material.opacity_threshold else 0.0
+    return op == 1.0
+
+
+class EmbreeScenes:
+    """One Embree device and a scene per eligible mesh. Keep this object alive while the kernels may trace: the
+    handles in ``scenes`` point into it. ``threads`` (None: all cores) bounds the builders' threads."""
+
+    def __init__(self, lib: ctypes.CDLL, threads: int | None = None):
+        self.lib = lib
+        config = b"verbose=0" + (b",threads=%d" % threads if threads else b"")
+        self.device = lib.rtcNewDevice(config)
+        if not self.device:
+            raise RuntimeError("rtcNewDevice failed")
+        self.nbytes = 0
+
+        def monitor(_ptr, nbytes, _post):  # Embree's own allocations (trees, triangle copies), in bytes
+            self.nbytes += int(nbytes)
+            return True
+
+        self._monitor = _MONITOR(monitor)  # referenced here: Embree calls it for the device's lifetime
+        lib.rtcSetDeviceMemoryMonitorFunction(self.device, self._monitor, None)
+        self._scenes: list[int] = []
+        self.closest_fn = ctypes.cast(lib.rtcIntersect1, ctypes.c_void_p).value
+        self.occluded_fn = ctypes.cast(lib.rtcOccluded1, ctypes.c_void_p).value
+
+    def add_mesh(self, points: np.ndarray, triangles: np.ndarray) -> int:
+        """A committed scene of one triangle mesh (points (V, 3), triangles (T, 3) indices); its handle, or 0 when
+        Embree refuses it."""
+        lib = self.lib
+        pts = np.ascontiguousarray(points, np.float32).reshape(-1, 3)
+        tris = np.ascontiguousarray(triangles, np.uint32).reshape(-1, 3)
+        scene = lib.rtcNewScene(self.device)
+        lib.rtcSetSceneFlags(scene, RTC_SCENE_FLAG_ROBUST)  # watertight edges, as Cycles asks
+        lib.rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_MEDIUM)
+        geom = lib.rtcNewGeometry(self.device, RTC_GEOMETRY_TYPE_TRIANGLE)
+        # Embree-owned copies (it may read 16 bytes from the last vertex: its buffers are padded for that)
+        vb = lib.rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 12, len(pts))
+        ib = lib.rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 12, len(tris))
+        if not vb or not ib:
+            lib.rtcReleaseGeometry(geom)
+            lib.rtcReleaseScene(scene)
+            return 0
+        ctypes.memmove(vb, pts.ctypes.data, pts.nbytes)
+        ctypes.memmove(ib, tris.ctypes.data, tris.nbytes)
+        lib.rtcCommitGeometry(geom)
+        lib.rtcAttachGeometry(scene, geom)
+        lib.rtcReleaseGeometry(geom)  # the scene holds it
+        lib.rtcCommitScene(scene)
+        if lib.rtcGetDeviceError(self.device) != 0:
+            lib.rtcReleaseScene(scene)
+            return 0
+        self._scenes.append(scene)
+        return int(scene)
+
+    def close(self) -> None:
+        for s in self._scenes:
+            self.lib.rtcReleaseScene(s)
+        self._scenes = []
+        if self.device:
+            self.lib.rtcReleaseDevice(self.device)
+            self.device = None
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:  # interpreter shutdown: the library may be gone already
+            pass
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The calls from the kernels: Embree's RTCRayHit and RTCRay (rtcore_ray.h) filled here, the entry points
+# (rtcIntersect1, rtcOccluded1) reached through the function pointers in ``Geometry``. The ray's interval is ours,
+# open at both ends: (0, tmax), as ``intersect.triangle_hit_edges`` accepts it. A ray with a NaN or infinite
+# coordinate misses, as it misses our boxes.
+
+_RAY_CPP = r"""
+    struct alignas(16) Ray { float ox, oy, oz, tnear, dx, dy, dz, time, tfar; unsigned mask, id, flags; };
+    struct alignas(16) Hit { float ngx, ngy, ngz, u, v; unsigned prim, geom, inst[2], pad[3]; };
+    struct alignas(16) RayHit { Ray ray; Hit hit; };
+    const float finite_check = ro[0] + ro[1] + ro[2] + rd[0] + rd[1] + rd[2];
+    const bool valid = (finite_check - finite_check) == 0.0f && tmax > 0.0f;
+    auto fill = [&](Ray& r) {
+        r.ox = ro[0]; r.oy = ro[1]; r.oz = ro[2]; r.tnear = __FLT_DENORM_MIN__;
+        r.dx = rd[0]; r.dy = rd[1]; r.dz = rd[2]; r.time = 0.0f;
+        r.tfar = __builtin_nextafterf(tmax, 0.0f); r.mask = 0xffffffffu; r.id = 0; r.flags = 0;
+    };
+"""
+
+_CLOSEST_CPP = _RAY_CPP + r"""
+    typedef void (*closest_fn)(void*, RayHit*, void*);
+    if (!valid) return wp::vec_t<4, wp::float64>(0.0, 0.0, 0.0, -1.0);
+    RayHit rh;
+    fill(rh.ray);
+    rh.hit.geom = 0xffffffffu;
+    rh.hit.inst[0] = 0xffffffffu;
+    ((closest_fn)fn)((void*)scene, &rh, nullptr);
+    if (rh.hit.geom == 0xffffffffu) return wp::vec_t<4, wp::float64>(0.0, 0.0, 0.0, -1.0);
+    return wp::vec_t<4, wp::float64>(rh.ray.tfar, rh.hit.u, rh.hit.v, (double)rh.hit.prim);
+"""
+
+
+@wp.func_native(_CLOSEST_CPP)
+def embree_closest(fn: wp.uint64, scene: wp.uint64, ro: wp.vec3, rd: wp.vec3, tmax: float) -> wp.vec4d:
+    """Embree's closest hit of an object-space ray in (0, tmax): (t, b1, b2, local triangle), or a negative
+    triangle on a miss (in doubles: a triangle index past 2^24 stays exact; the floats come back unchanged)."""
+    ...
+
+
+_OCCLUDED_CPP = _RAY_CPP + r"""
+    typedef void (*occluded_fn)(void*, Ray*, void*);
+    if (!valid) return 0;
+    Ray r;
+    fill(r);
+    ((occluded_fn)fn)((void*)scene, &r, nullptr);
+    return r.tfar < 0.0f ? 1 : 0;  /* Embree sets tfar to -inf when it finds a crossing */
+"""
+
+
+@wp.func_native(_OCCLUDED_CPP)
+def embree_occluded(fn: wp.uint64, scene: wp.uint64, ro: wp.vec3, rd: wp.vec3, tmax: float) -> int:
+    """1 when an object-space ray crosses a triangle of the scene in (0, tmax), else 0."""
+    ...
