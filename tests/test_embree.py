@@ -127,7 +127,9 @@ def test_the_interval_is_open_and_bad_rays_miss():
     or infinite coordinate, or an empty interval, misses instead of reaching Embree."""
     quad = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float32)
     scenes = embree.EmbreeScenes(embree.library())
-    handle = scenes.add_mesh(quad, np.array([[0, 1, 2], [0, 2, 3]]))
+    handle = scenes.add_mesh(quad, np.array([[0, 1, 2], [0, 2, 3]]))  # int64 indices: converted
+    assert handle != 0
+    assert scenes.add_mesh(quad, np.array([[0, 1, 4]])) == 0  # an index past the vertices: refused
     down = [0.0, 0.0, -1.0]
     ro = np.array([[0.3, 0.2, 1.0], [0.3, 0.2, 1.0], [0.3, 0.2, 0.0], [np.nan, 0, 1], [0.3, 0.2, np.inf],
                    [0.3, 0.2, 1.0]])

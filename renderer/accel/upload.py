@@ -167,10 +167,22 @@ def direct_instance(scene: Scene, lo: np.ndarray, hi: np.ndarray) -> int:
     return best
 
 
-def upload_embree(g: Geometry, scene: Scene, shapes: list, device: str = "cpu") -> int:
-    """Embree scenes for the still triangle meshes (``accel.embree``), their handles in ``g``; Embree's bytes.
-    Without Embree every handle is 0 and the walks are all ours. The ``EmbreeScenes`` that owns them is kept on
-    ``g`` itself, so they live as long as the uploaded geometry."""
+@dataclass
+class EmbreeMeshes:
+    """What ``embree_meshes`` built: per mesh, the Embree scene (0: none) and whether it answers shadow rays too."""
+
+    owner: object  # the ``embree.EmbreeScenes`` the handles point into, or None
+    handles: np.ndarray  # (M,) uint64
+    shadow: np.ndarray  # (M,) int32
+
+    @property
+    def nbytes(self) -> int:
+        return self.owner.nbytes if self.owner is not None else 0
+
+
+def embree_meshes(scene: Scene, shapes: list, device: str = "cpu") -> EmbreeMeshes:
+    """Embree scenes for the still triangle meshes (``accel.embree``); with opaque materials only, their shadow
+    rays too. Without Embree every handle is 0 and the walks are all ours."""
     lib = embree.library() if device == "cpu" else None
     handles = np.zeros(max(1, len(scene.meshes)), np.uint64)
     shadow = np.zeros(max(1, len(scene.meshes)), np.int32)
@@ -186,12 +198,20 @@ def upload_embree(g: Geometry, scene: Scene, shapes: list, device: str = "cpu") 
             ids = np.asarray(mesh.material_ids)
             known = bool(((ids >= 0) & (ids < len(scene.materials))).all())
             shadow[mi] = int(handles[mi] != 0 and known and bool(opaque[ids].all()))
-    g.mesh_embree = wp.array(handles, dtype=wp.uint64, device=device)
-    g.mesh_embree_shadow = _i32(shadow, device)
-    g.embree_closest_fn = wp.uint64(owner.closest_fn if owner else 0)
-    g.embree_occluded_fn = wp.uint64(owner.occluded_fn if owner else 0)
-    object.__setattr__(g, "embree_owner", owner)  # the scenes' handles above point into it
-    return owner.nbytes if owner else 0
+    return EmbreeMeshes(owner, handles, shadow)
+
+
+def _walked_by_embree_only(scene: Scene, em: EmbreeMeshes) -> np.ndarray:
+    """(M,) bool: meshes whose every walk Embree answers (closest hits and shadows), outside CSG (whose walks are
+    ours), and placed only by still identity transforms, so that their root box is their instances' world box:
+    our own tree over their triangles would never be read (a flattened still scene's merged mesh)."""
+    only = (em.handles[:len(scene.meshes)] != 0) & (em.shadow[:len(scene.meshes)] != 0)
+    eye = np.eye(4)
+    for inst in scene.instances:
+        if inst.csg_group >= 0 or inst.transform.num_keys != 1 or \
+                not np.array_equal(matrices_at([inst.transform], 0.0)[0], eye):
+            only[inst.mesh] = False
+    return only
 
 
 def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, GeometryStats]:
@@ -202,7 +222,14 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     blas: list[Bvh] = []
     wide: list[WideBvh] = []
     shapes = analytic_shapes(realize_tessellations(scene))  # a stand-in that cannot be its shape gets triangles
-    for mesh, shape in zip(scene.meshes, shapes):
+    em = embree_meshes(scene, shapes, device)
+    embree_only = _walked_by_embree_only(scene, em)
+    for mi, (mesh, shape) in enumerate(zip(scene.meshes, shapes)):
+        if embree_only[mi]:  # our tree is one leaf over the mesh's box, for the top level and its choices
+            pts = mesh.points[0]
+            blas.append(build_bvh(pts.min(axis=0)[None], pts.max(axis=0)[None], max_leaf=1))
+            wide.append(collapse(blas[-1], device))
+            continue
         if shape is not None and shape.kind not in CLOUD_KINDS:  # one leaf holding the shape's box (walks test
             # the shape, never this leaf's triangle)
             lo, hi = (np.asarray(b * SHAPE_BOX_PAD, np.float32)[None, None] for b in shape_bounds(shape))
@@ -272,7 +299,11 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     g.mesh_shape = _i32(codes if len(codes) else [0], device)
     g.mesh_shape_axis = _i32(axes if len(axes) else [0], device)
     g.mesh_shape_param = _wp(params if len(params) else np.zeros((1, 4), np.float32), wp.vec4, device)
-    embree_nbytes = upload_embree(g, scene, shapes, device)
+    g.mesh_embree = wp.array(em.handles, dtype=wp.uint64, device=device)
+    g.mesh_embree_shadow = _i32(em.shadow, device)
+    g.embree_closest_fn = wp.uint64(em.owner.closest_fn if em.owner else 0)
+    g.embree_occluded_fn = wp.uint64(em.owner.occluded_fn if em.owner else 0)
+    object.__setattr__(g, "embree_owner", em.owner)  # the handles above point into it: it lives as long as g
 
     # --- top level over instances, boxes on a uniform grid of time keys
     nk = _tlas_key_count(scene)
@@ -337,7 +368,7 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
 
     leaf_bytes = 3 * 12 * sum(len(x) for x in v0)  # the leaf-ordered still triangles
     nbytes = (sum(q.nbytes for q in nodes) + sum(b.prim_order.nbytes for b in blas) + tlas.nbytes + leaf_bytes
-              + embree_nbytes)
+              + em.nbytes)
     stats = GeometryStats(
         triangles=int(n_tris[-1]),
         blas_nodes=int(n_nodes[-1]),
@@ -345,6 +376,6 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
         tlas_keys=nk,
         build_seconds=time.perf_counter() - t_start,
         nbytes=int(nbytes),
-        embree_nbytes=int(embree_nbytes),
+        embree_nbytes=int(em.nbytes),
     )
     return g, stats
