@@ -408,17 +408,7 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, inv_d: wp.vec3
     sp = int(1)
     t_best = tmax
     kind = geo.mesh_shape[m]
-    es = geo.mesh_embree[m]
-    if es != wp.uint64(0):  # Embree's walk of a still triangle mesh instead of ours
-        sp = 0
-        eh = embree_closest(geo.embree_closest_fn, es, ro, rd, t_best)
-        if eh[3] >= wp.float64(0.0):
-            best.t = float(eh[0])
-            best.inst = inst
-            best.tri = geo.mesh_tri_off[m] + int(eh[3])
-            best.b1 = float(eh[1])
-            best.b2 = float(eh[2])
-    elif kind > 0 and not is_cloud(kind):  # an exact shape: a quadratic or two, no walk
+    if kind > 0 and not is_cloud(kind):  # an exact shape: a quadratic or two, no walk
         sp = 0
         t, part, n = shape_hits(kind, geo.mesh_shape_axis[m], geo.mesh_shape_param[m], ro, rd, t_best)
         if t < t_best:
@@ -474,6 +464,19 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, inv_d: wp.vec3
 
 
 @wp.func
+def embree_mesh_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float, best: Hit, inst: int):
+    """``blas_closest`` of a mesh Embree holds (``geo.mesh_embree[m]`` != 0): its walk instead of ours."""
+    eh = embree_closest(geo.embree_closest_fn, geo.mesh_embree[m], ro, rd, tmax)
+    if eh[3] >= wp.float64(0.0):
+        best.t = float(eh[0])
+        best.inst = inst
+        best.tri = geo.mesh_tri_off[m] + int(eh[3])
+        best.b1 = float(eh[1])
+        best.b2 = float(eh[2])
+    return best
+
+
+@wp.func
 def tlas_keys_at(geo: Geometry, s: float):
     nk = geo.tlas_nkeys
     if nk == 1:
@@ -506,17 +509,26 @@ def intersect_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, tmax: float, s: f
     best.t = tmax
     best.inst = -1
     best.tri = -1
-    inv_d = safe_inverse(rd)  # the top level's, and the direct walk's when its matrix is the identity: once
+    inv_d = wp.vec3(0.0)  # the top level's, and the direct walk's when its matrix is the identity: once
     direct = geo.direct_inst
     if direct >= 0:
         if instance_visible(geo, direct, s):
             ro_o, rd_o = direct_ray(geo, ro, rd)
-            inv_o = inv_d
-            if geo.direct_identity == 0:
-                inv_o = safe_inverse(rd_o)
-            best = blas_closest(geo, geo.inst_mesh[direct], ro_o, rd_o, inv_o, tmax, s, best, direct)
+            dm = geo.inst_mesh[direct]
+            if geo.mesh_embree[dm] != wp.uint64(0):  # Embree's (no inverse direction of ours)
+                best = embree_mesh_closest(geo, dm, ro_o, rd_o, tmax, best, direct)
+            else:
+                inv_d = safe_inverse(rd)
+                inv_o = inv_d
+                if geo.direct_identity == 0:
+                    inv_o = safe_inverse(rd_o)
+                best = blas_closest(geo, dm, ro_o, rd_o, inv_o, tmax, s, best, direct)
         if geo.tlas_others == 0:
             return best
+        if geo.mesh_embree[geo.inst_mesh[direct]] != wp.uint64(0) or not instance_visible(geo, direct, s):
+            inv_d = safe_inverse(rd)
+    else:
+        inv_d = safe_inverse(rd)
     k0, k1, u = tlas_keys_at(geo, s)
     nk = geo.tlas_nkeys
     if not root_entered(geo.tlas_root, k0, ro, inv_d, best.t):
@@ -538,8 +550,11 @@ def intersect_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, tmax: float, s: f
                         w2o = instance_world_to_object(geo, inst, s)
                         ro_o = wp.transform_point(w2o, ro)
                         rd_o = wp.transform_vector(w2o, rd)
-                        best = blas_closest(geo, geo.inst_mesh[inst], ro_o, rd_o, safe_inverse(rd_o), best.t, s,
-                                            best, inst)
+                        im = geo.inst_mesh[inst]
+                        if geo.mesh_embree[im] != wp.uint64(0):
+                            best = embree_mesh_closest(geo, im, ro_o, rd_o, best.t, best, inst)
+                        else:
+                            best = blas_closest(geo, im, ro_o, rd_o, safe_inverse(rd_o), best.t, s, best, inst)
             else:
                 c = geo.tlas_child[ref]
                 d, c = far_to_near(entries(geo.tlas_box, ref * nk, c, k0, k1, u, ro, inv_d, best.t), c)
