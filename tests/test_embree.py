@@ -10,7 +10,7 @@ import warp as wp
 from renderer.accel import embree
 from renderer.accel.upload import upload_geometry
 from renderer.scene.model import Camera, Instance, Material, Mesh, MotionTransform, Scene
-from tests.test_accel import _probe, brute_force, random_mesh
+from tests.test_accel import _probe, brute_force, random_mesh, rot_y
 
 pytestmark = pytest.mark.skipif(embree.library() is None, reason="Embree (embreex) is not available")
 
@@ -63,6 +63,39 @@ def test_still_triangle_meshes_go_to_embree_and_it_finds_what_our_walk_and_brute
         np.testing.assert_allclose(t[i], bt, rtol=1e-4)
         if (inst[i], tri[i]) != (bi, btri):  # another triangle at the same distance (they cross there)
             assert abs(t[i] - bt) <= 1e-4 * bt, i
+
+
+def test_meshes_embree_answers_upload_one_leaf_of_ours_and_rotated_instances_stay_tightly_placed():
+    """Opaque still meshes: Embree answers every walk, so our uploaded tree of each is one leaf of one slot; the
+    top level still places rotated instances from a cut of a full tree of ours (their boxes are no larger than
+    with Embree off), and hits and shadows agree with brute force."""
+    rng = np.random.default_rng(4)
+    meshes = [random_mesh(rng, 500, 1, "a"), random_mesh(rng, 400, 1, "b")]
+    insts = [Instance(0, MotionTransform.static(np.eye(4))),
+             Instance(1, MotionTransform.static(rot_y(35, (3, 0, 0)))),
+             Instance(1, MotionTransform.static(rot_y(-60, (-3, 0.5, 0))))]
+    scene = _scene(meshes, [Material("m")])
+    scene.instances = insts
+    geo, stats = upload_geometry(scene)
+    assert list(geo.mesh_embree_shadow.numpy()) == [1, 1]
+    assert len(geo.blas_prim.numpy()) == 2 and len(geo.leaf_v0.numpy()) == 2
+    from renderer.accel import upload
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(embree, "library", lambda: None)
+        ours = upload.upload_geometry(scene)[0]
+    np.testing.assert_array_equal(geo.tlas_box.numpy(), ours.tlas_box.numpy())  # the same instance boxes
+    n = 400
+    ro = np.tile([0.0, 0.3, 8.0], (n, 1)) + rng.normal(0, 0.5, (n, 3))
+    rd = rng.uniform([-5, -1.5, -2], [5, 1.5, 1], (n, 3)) - ro
+    rd /= np.linalg.norm(rd, axis=1, keepdims=True)
+    t, inst, tri, tr = _probe(geo, scene, ro, rd, np.zeros(n, np.float32))
+    assert (inst >= 0).sum() > n // 4 and (inst >= 1).sum() > 20
+    np.testing.assert_array_equal(tr, np.where(inst >= 0, 0.0, 1.0))
+    for i in range(n):
+        bt, bi, btri = brute_force(scene, ro[i], rd[i], 0.0)
+        assert (inst[i] >= 0) == (bi >= 0), i
+        if bi >= 0:
+            np.testing.assert_allclose(t[i], bt, rtol=1e-4)
 
 
 def test_partly_opaque_meshes_keep_our_shadow_walk():

@@ -201,17 +201,23 @@ def embree_meshes(scene: Scene, shapes: list, device: str = "cpu") -> EmbreeMesh
     return EmbreeMeshes(owner, handles, shadow)
 
 
-def _walked_by_embree_only(scene: Scene, em: EmbreeMeshes) -> np.ndarray:
-    """(M,) bool: meshes whose every walk Embree answers (closest hits and shadows), outside CSG (whose walks are
-    ours), and placed only by still identity transforms, so that their root box is their instances' world box:
-    our own tree over their triangles would never be read (a flattened still scene's merged mesh)."""
-    only = (em.handles[:len(scene.meshes)] != 0) & (em.shadow[:len(scene.meshes)] != 0)
-    eye = np.eye(4)
-    for inst in scene.instances:
-        if inst.csg_group >= 0 or inst.transform.num_keys != 1 or \
-                not np.array_equal(matrices_at([inst.transform], 0.0)[0], eye):
-            only[inst.mesh] = False
-    return only
+def _walked_by_embree(scene: Scene, em: EmbreeMeshes, o2w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per mesh: (Embree answers every walk of it: closest hits and shadows, and no CSG group holds it, whose walks
+    are ours; of those, the ones placed only by still identity transforms (``o2w``: each instance's matrix at
+    time 0), whose root box is their instances' world box). Our uploaded tree of the first kind is one leaf, never
+    walked; of the second kind our tree is not even built: the top level places the others from a cut of it."""
+    m = len(scene.meshes)
+    walked = (em.handles[:m] != 0) & (em.shadow[:m] != 0)
+    if not scene.instances:
+        return walked, walked.copy()
+    mesh_of = np.array([i.mesh for i in scene.instances], np.int64)
+    csg = np.array([i.csg_group >= 0 for i in scene.instances], bool)
+    placed = np.array([i.transform.num_keys == 1 for i in scene.instances], bool) & \
+        np.all(o2w == np.eye(4), axis=(1, 2))
+    walked[np.unique(mesh_of[csg])] = False
+    unplaced = walked.copy()
+    unplaced[np.unique(mesh_of[~placed])] = False
+    return walked, unplaced
 
 
 def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, GeometryStats]:
@@ -223,13 +229,17 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     wide: list[WideBvh] = []
     shapes = analytic_shapes(realize_tessellations(scene))  # a stand-in that cannot be its shape gets triangles
     em = embree_meshes(scene, shapes, device)
-    embree_only = _walked_by_embree_only(scene, em)
+    o2w = matrices_at([inst.transform for inst in scene.instances], 0.0) if scene.instances else np.eye(4)[None]
+    by_embree, identity_placed = _walked_by_embree(scene, em, o2w)
+    walked: list[Bvh] = []  # the trees uploaded, walked by our kernels (``blas`` is for placing instances)
     for mi, (mesh, shape) in enumerate(zip(scene.meshes, shapes)):
-        if embree_only[mi]:  # our tree is one leaf over the mesh's box, for the top level and its choices
+        if by_embree[mi]:  # uploaded: one leaf over the mesh's box (never walked)
             pts = mesh.points[0]
-            blas.append(build_bvh(pts.min(axis=0)[None], pts.max(axis=0)[None], max_leaf=1))
-            wide.append(collapse(blas[-1], device))
-            continue
+            walked.append(build_bvh(pts.min(axis=0)[None], pts.max(axis=0)[None], max_leaf=1))
+            wide.append(collapse(walked[-1], device))
+            if identity_placed[mi]:  # the root box places its instances exactly
+                blas.append(walked[-1])
+                continue
         if shape is not None and shape.kind not in CLOUD_KINDS:  # one leaf holding the shape's box (walks test
             # the shape, never this leaf's triangle)
             lo, hi = (np.asarray(b * SHAPE_BOX_PAD, np.float32)[None, None] for b in shape_bounds(shape))
@@ -240,7 +250,9 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
         else:
             max_leaf, c_trav, merge_leaf = BLAS_MAX_LEAF, BLAS_TRAVERSAL_COST, BLAS_MERGE_LEAF
         blas.append(build_bvh(lo, hi, max_leaf=max_leaf, c_trav=c_trav))
-        wide.append(collapse(blas[-1], device, merge_leaf=merge_leaf))
+        if not by_embree[mi]:
+            walked.append(blas[-1])
+            wide.append(collapse(blas[-1], device, merge_leaf=merge_leaf))
 
     g = Geometry()
     nodes = [quantize(w, device) for w in wide]
@@ -266,9 +278,9 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     # would wrap, is only 16-byte aligned)
     g.blas_node = wp.array(np.concatenate(nodes) if nodes else np.zeros(1, QNODE_DTYPE), dtype=QNode, device=device,
                            copy=True)
-    g.blas_prim = _i32(cat([b.prim_order for b in blas], (1,), np.int32), device)
+    g.blas_prim = _i32(cat([b.prim_order for b in walked], (1,), np.int32), device)
     v0, e1, e2 = [], [], []
-    for mesh, b, shape in zip(scene.meshes, blas, shapes):
+    for mesh, b, shape in zip(scene.meshes, walked, shapes):
         if shape is not None and shape.kind in CLOUD_KINDS:  # per slot: centre (still clouds), radius, disc normal
             z = np.zeros((len(b.prim_order), 3), np.float32)
             radius = z.copy()
@@ -284,7 +296,7 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     g.leaf_v0 = _v3(cat(v0, (1, 3), np.float32), device)
     g.leaf_e1 = _v3(cat(e1, (1, 3), np.float32), device)
     g.leaf_e2 = _v3(cat(e2, (1, 3), np.float32), device)
-    prim_off = np.cumsum([0] + [len(b.prim_order) for b in blas])
+    prim_off = np.cumsum([0] + [len(b.prim_order) for b in walked])
     g.mesh_node_off = _i32(n_records[:-1], device)
     g.mesh_prim_off = _i32(prim_off[:-1], device)
     g.mesh_tri_off = _i32(n_tris[:-1], device)
@@ -310,7 +322,6 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     ninst = len(scene.instances)
     lo = np.empty((nk, ninst, 3), np.float32)
     hi = np.empty((nk, ninst, 3), np.float32)
-    o2w = matrices_at([inst.transform for inst in scene.instances], 0.0) if ninst else np.eye(4)[None]
     still = np.array([nk == 1 or (inst.transform.num_keys == 1 and len(scene.meshes[inst.mesh].point_times) == 1)
                       for inst in scene.instances], bool)
     cuts = {}  # mesh -> the node boxes its instances are placed from (instance_bounds)
@@ -367,7 +378,7 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     upload_csg(g, scene, device)
 
     leaf_bytes = 3 * 12 * sum(len(x) for x in v0)  # the leaf-ordered still triangles
-    nbytes = (sum(q.nbytes for q in nodes) + sum(b.prim_order.nbytes for b in blas) + tlas.nbytes + leaf_bytes
+    nbytes = (sum(q.nbytes for q in nodes) + sum(b.prim_order.nbytes for b in walked) + tlas.nbytes + leaf_bytes
               + em.nbytes)
     stats = GeometryStats(
         triangles=int(n_tris[-1]),
