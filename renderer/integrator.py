@@ -143,10 +143,8 @@ class SurfacePoint:
 
 @wp.func
 def surface_at(geo: Geometry, inst: int, tri: int, b1: float, b2: float, ro: wp.vec3, rd: wp.vec3, t: float,
-               s: float, ng_object: wp.vec3, ng_known: bool):
-    """Position, normals, uv and tangent of a hit at time s (vertices and transform at that instant).
-    ``ng_object``: the triangle's unnormalised normal in object space where ``ng_known`` (Embree's hits), which
-    spares the vertices' loads (a random read of four cache lines on a large mesh) unless the mesh has uvs."""
+               s: float):
+    """Position, normals, uv and tangent of a hit at time s (vertices and transform at that instant)."""
     m = geo.inst_mesh[inst]
     w2o = instance_world_to_object(geo, inst, s)
     w2o_t = wp.transpose(w2o)  # normals transform by the inverse transpose
@@ -166,8 +164,6 @@ def surface_at(geo: Geometry, inst: int, tri: int, b1: float, b2: float, ro: wp.
         po = wp.transform_point(w2o, ro + rd * t)
         no = shape_normal(kind, geo.mesh_shape_axis[m], geo.mesh_shape_param[m], po, int(b1))
         ng = wp.normalize(wp.transform_vector(w2o_t, no))
-    elif ng_known and corner_index(geo, geo.mesh_uv_off, m, tri) < 0:
-        ng = wp.normalize(wp.transform_vector(w2o_t, ng_object))
     else:
         k0, k1, u = mesh_keys_at(geo, m, s)
         p0, p1, p2 = triangle_points(geo, m, tri - geo.mesh_tri_off[m], k0, k1, u)
@@ -467,8 +463,7 @@ def trace_wave_kernel(
             # Beer-Lambert: absorbed along the way through a solid
             if sigma[0] > 0.0 or sigma[1] > 0.0 or sigma[2] > 0.0:
                 beta = wp.cw_mul(beta, beer_lambert(sigma, hit.t))
-            sp = surface_at(geo, hit.inst, hit.tri, hit.b1, hit.b2, origin, rd, hit.t, s, hit.ng,
-                            hit.ng_tri == hit.tri)
+            sp = surface_at(geo, hit.inst, hit.tri, hit.b1, hit.b2, origin, rd, hit.t, s)
             cone_w = cone_w + cone_spread * hit.t
             ms = eval_material_cone(mats, tex, sp.material, sp.uv, s,
                                     uv_footprint(cone_w, sp.uv_density, wp.dot(sp.ng, rd)))

@@ -119,7 +119,7 @@ def test_partly_opaque_meshes_keep_our_shadow_walk():
 
 @wp.kernel
 def _closest_kernel(fn: wp.uint64, scene: wp.uint64, ro: wp.array(dtype=wp.vec3), rd: wp.array(dtype=wp.vec3),
-                    tmax: wp.array(dtype=float), out: wp.array(dtype=embree.vec8d), occluded: wp.array(dtype=int),
+                    tmax: wp.array(dtype=float), out: wp.array(dtype=wp.vec4d), occluded: wp.array(dtype=int),
                     occluded_fn: wp.uint64):
     i = wp.tid()
     out[i] = embree.embree_closest(fn, scene, ro[i], rd[i], tmax[i])
@@ -128,7 +128,7 @@ def _closest_kernel(fn: wp.uint64, scene: wp.uint64, ro: wp.array(dtype=wp.vec3)
 
 def _trace(scenes, handle, ro, rd, tmax):
     n = len(ro)
-    out, occ = wp.zeros(n, dtype=embree.vec8d), wp.zeros(n, dtype=int)
+    out, occ = wp.zeros(n, dtype=wp.vec4d), wp.zeros(n, dtype=int)
     wp.launch(_closest_kernel, dim=n, inputs=[wp.uint64(scenes.closest_fn), wp.uint64(handle),
                                               wp.array(ro, dtype=wp.vec3), wp.array(rd, dtype=wp.vec3),
                                               wp.array(tmax, dtype=float), out, occ, wp.uint64(scenes.occluded_fn)])
@@ -157,8 +157,7 @@ def test_hits_do_not_depend_on_the_builders_threads():
 
 def test_the_interval_is_open_and_bad_rays_miss():
     """(0, tmax) as our triangle test has it: a hit exactly at tmax or at the origin is not one; a ray with a NaN
-    or infinite coordinate, or an empty interval, misses instead of reaching Embree. A hit's normal is ours,
-    (p1 - p0) x (p2 - p0), unnormalised."""
+    or infinite coordinate, or an empty interval, misses instead of reaching Embree."""
     quad = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float32)
     scenes = embree.EmbreeScenes(embree.library())
     handle = scenes.add_mesh(quad, np.array([[0, 1, 2], [0, 2, 3]]))  # int64 indices: converted
@@ -172,8 +171,7 @@ def test_the_interval_is_open_and_bad_rays_miss():
     hits, occ = _trace(scenes, handle, ro, rd, tmax)
     assert list(hits[:, 3] >= 0) == [False, True, False, False, False, False]
     assert list(occ) == [0, 1, 0, 0, 0, 0]
-    assert hits[1, 0] == 1.0 and hits[1, 3] == 0
-    np.testing.assert_array_equal(hits[1, 4:7], [0.0, 0.0, 4.0])  # (p1 - p0) x (p2 - p0) of triangle 0
+    assert hits[1, 0] == 1.0 and hits[1, 3] in (0, 1)
     np.testing.assert_allclose(hits[1, 1] + hits[1, 2] <= 1.0, True)
     scenes.close()
 

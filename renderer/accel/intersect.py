@@ -134,10 +134,6 @@ class Hit:
     tri: int  # global triangle index
     b1: float  # barycentric weight of vertex 1
     b2: float  # barycentric weight of vertex 2
-    # the triangle's unnormalised normal (p1 - p0) x (p2 - p0) in its mesh's space, as Embree returns it, valid
-    # when ng_tri == tri (Embree found it; a walk of ours that finds a nearer triangle leaves ng_tri behind)
-    ng: wp.vec3
-    ng_tri: int
 
 
 @wp.func
@@ -477,8 +473,6 @@ def embree_mesh_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: f
         best.tri = geo.mesh_tri_off[m] + int(eh[3])
         best.b1 = float(eh[1])
         best.b2 = float(eh[2])
-        best.ng = wp.vec3(float(eh[4]), float(eh[5]), float(eh[6]))
-        best.ng_tri = best.tri
     return best
 
 
@@ -515,7 +509,6 @@ def intersect_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, tmax: float, s: f
     best.t = tmax
     best.inst = -1
     best.tri = -1
-    best.ng_tri = -1
     inv_d = wp.vec3(0.0)  # the top level's, and the direct walk's when its matrix is the identity: once
     direct = geo.direct_inst
     if direct >= 0:
