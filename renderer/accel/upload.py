@@ -202,22 +202,23 @@ def embree_meshes(scene: Scene, shapes: list, device: str = "cpu") -> EmbreeMesh
 
 
 def _walked_by_embree(scene: Scene, em: EmbreeMeshes, o2w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per mesh: (Embree answers every walk of it: closest hits and shadows, and no CSG group holds it, whose walks
-    are ours; of those, the ones placed only by still identity transforms (``o2w``: each instance's matrix at
-    time 0), whose root box is their instances' world box). Our uploaded tree of the first kind is one leaf, never
-    walked; of the second kind our tree is not even built: the top level places the others from a cut of it."""
+    """Two (M,) bool arrays over the meshes: ``by_embree``, Embree answers every walk of the mesh (closest hits and
+    shadows) and no CSG group holds it (CSG walks are ours), so the tree of ours we upload for it is one leaf, never
+    walked; and ``identity_placed``, of those the ones whose instances are all still at the identity (``o2w``:
+    each instance's matrix at time 0), whose root box is their world box, so no full tree of ours is built for
+    them at all (for the others one is built only to place their instances from a cut of it)."""
     m = len(scene.meshes)
-    walked = (em.handles[:m] != 0) & (em.shadow[:m] != 0)
+    by_embree = (em.handles[:m] != 0) & (em.shadow[:m] != 0)
     if not scene.instances:
-        return walked, walked.copy()
+        return by_embree, by_embree.copy()
     mesh_of = np.array([i.mesh for i in scene.instances], np.int64)
     csg = np.array([i.csg_group >= 0 for i in scene.instances], bool)
     placed = np.array([i.transform.num_keys == 1 for i in scene.instances], bool) & \
         np.all(o2w == np.eye(4), axis=(1, 2))
-    walked[np.unique(mesh_of[csg])] = False
-    unplaced = walked.copy()
-    unplaced[np.unique(mesh_of[~placed])] = False
-    return walked, unplaced
+    by_embree[np.unique(mesh_of[csg])] = False
+    identity_placed = by_embree.copy()
+    identity_placed[np.unique(mesh_of[~placed])] = False
+    return by_embree, identity_placed
 
 
 def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, GeometryStats]:
