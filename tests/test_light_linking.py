@@ -143,3 +143,14 @@ def test_many_distinct_link_collections_warn(tmp_path, n):
     bits = links.light_bit.numpy()
     assert (bits[:MAX_GROUPS] == np.arange(MAX_GROUPS)).all() and (bits[MAX_GROUPS:] == -1).all()
     assert seen
+
+
+def test_a_shadow_linked_light_keeps_every_other_casters_whole_shadow(tmp_path):
+    """With a shadow-link collection the shadow rays walk the casters of the light's group only
+    (``linking.caster_transmittance``); the occluder left in it shadows across its whole width: both of its
+    triangles, whichever walk (ours or Embree's) holds its mesh."""
+    def configure(sun, stage):
+        exclude(UsdLux.LightAPI(sun).GetShadowLinkCollectionAPI(), "/World/FloorA")
+    row = build(tmp_path / "f.usda", configure)
+    assert row[x_px(0.11):x_px(0.19) + 1].max() == 0.0  # the occluder's stripe, both triangles
+    np.testing.assert_allclose(row[x_px(0.05)], 1.0, rtol=1e-3)

@@ -476,6 +476,16 @@ def embree_mesh_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: f
     return best
 
 
+@wp.func(inline=True)  # no copy of the Geometry struct
+def mesh_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float, s: float, best: Hit, inst: int):
+    """Closest triangle of mesh m nearer than tmax (object-space ray): Embree's walk where it holds the mesh, else
+    ours. Every walk of a mesh goes through here: our uploaded tree of a mesh Embree answers for may be a
+    single leaf (``upload._walked_by_embree``)."""
+    if geo.mesh_embree[m] != wp.uint64(0):
+        return embree_mesh_closest(geo, m, ro, rd, tmax, best, inst)
+    return blas_closest(geo, m, ro, rd, safe_inverse(rd), tmax, s, best, inst)
+
+
 @wp.func
 def tlas_keys_at(geo: Geometry, s: float):
     nk = geo.tlas_nkeys
@@ -509,26 +519,14 @@ def intersect_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, tmax: float, s: f
     best.t = tmax
     best.inst = -1
     best.tri = -1
-    inv_d = wp.vec3(0.0)  # the top level's, and the direct walk's when its matrix is the identity: once
     direct = geo.direct_inst
     if direct >= 0:
         if instance_visible(geo, direct, s):
             ro_o, rd_o = direct_ray(geo, ro, rd)
-            dm = geo.inst_mesh[direct]
-            if geo.mesh_embree[dm] != wp.uint64(0):  # Embree's (no inverse direction of ours)
-                best = embree_mesh_closest(geo, dm, ro_o, rd_o, tmax, best, direct)
-            else:
-                inv_d = safe_inverse(rd)
-                inv_o = inv_d
-                if geo.direct_identity == 0:
-                    inv_o = safe_inverse(rd_o)
-                best = blas_closest(geo, dm, ro_o, rd_o, inv_o, tmax, s, best, direct)
+            best = mesh_closest(geo, geo.inst_mesh[direct], ro_o, rd_o, tmax, s, best, direct)
         if geo.tlas_others == 0:
             return best
-        if geo.mesh_embree[geo.inst_mesh[direct]] != wp.uint64(0) or not instance_visible(geo, direct, s):
-            inv_d = safe_inverse(rd)
-    else:
-        inv_d = safe_inverse(rd)
+    inv_d = safe_inverse(rd)
     k0, k1, u = tlas_keys_at(geo, s)
     nk = geo.tlas_nkeys
     if not root_entered(geo.tlas_root, k0, ro, inv_d, best.t):
@@ -550,11 +548,7 @@ def intersect_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, tmax: float, s: f
                         w2o = instance_world_to_object(geo, inst, s)
                         ro_o = wp.transform_point(w2o, ro)
                         rd_o = wp.transform_vector(w2o, rd)
-                        im = geo.inst_mesh[inst]
-                        if geo.mesh_embree[im] != wp.uint64(0):
-                            best = embree_mesh_closest(geo, im, ro_o, rd_o, best.t, best, inst)
-                        else:
-                            best = blas_closest(geo, im, ro_o, rd_o, safe_inverse(rd_o), best.t, s, best, inst)
+                        best = mesh_closest(geo, geo.inst_mesh[inst], ro_o, rd_o, best.t, s, best, inst)
             else:
                 c = geo.tlas_child[ref]
                 d, c = far_to_near(entries(geo.tlas_box, ref * nk, c, k0, k1, u, ro, inv_d, best.t), c)

@@ -104,11 +104,17 @@ def blas_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
     return tr
 
 
-@wp.func
-def embree_mesh_blocks(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float):
-    """For a mesh whose shadow rays Embree answers (``geo.mesh_embree_shadow[m]``: opaque still triangles): True
-    when the object-space segment crosses it, which blocks the light."""
-    return embree_occluded(geo.embree_occluded_fn, geo.mesh_embree[m], ro, rd, tmax) != 0
+@wp.func(inline=True)  # no copy of the Geometry struct
+def mesh_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro: wp.vec3, rd: wp.vec3,
+                       tmax: float, s: float, trans: float):
+    """``trans`` times what passes mesh m before tmax (object-space ray). Where Embree answers the mesh's shadow
+    rays (opaque still triangles) any crossing it finds blocks the light; else our walk. Every shadow walk of a
+    mesh goes through here: our uploaded tree of a mesh Embree answers for may be a single leaf."""
+    if geo.mesh_embree_shadow[m] != 0:
+        if trans > 0.0 and embree_occluded(geo.embree_occluded_fn, geo.mesh_embree[m], ro, rd, tmax) != 0:
+            return 0.0
+        return trans
+    return blas_transmittance(geo, mats, tex, m, ro, rd, safe_inverse(rd), tmax, s, trans)
 
 
 @wp.func(inline=True)  # one call site: no copy of the Geometry struct
@@ -116,27 +122,14 @@ def transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd
                   s: float):
     """Fraction of light passing along the segment ro + t rd, t in (0, tmax), at time s."""
     tr = float(1.0)
-    inv_d = wp.vec3(0.0)  # the top level's, and the direct walk's when its matrix is the identity: once
     direct = geo.direct_inst  # walked first, outside the top level (``Geometry.direct_inst``)
     if direct >= 0:
         if instance_visible(geo, direct, s):
             ro_o, rd_o = direct_ray(geo, ro, rd)
-            dm = geo.inst_mesh[direct]
-            if geo.mesh_embree_shadow[dm] != 0:  # Embree's (no inverse direction of ours)
-                if embree_mesh_blocks(geo, dm, ro_o, rd_o, tmax):
-                    return 0.0
-            else:
-                inv_d = safe_inverse(rd)
-                inv_o = inv_d
-                if geo.direct_identity == 0:
-                    inv_o = safe_inverse(rd_o)
-                tr = blas_transmittance(geo, mats, tex, dm, ro_o, rd_o, inv_o, tmax, s, tr)
+            tr = mesh_transmittance(geo, mats, tex, geo.inst_mesh[direct], ro_o, rd_o, tmax, s, tr)
         if geo.tlas_others == 0:
             return tr
-        if geo.mesh_embree_shadow[geo.inst_mesh[direct]] != 0 or not instance_visible(geo, direct, s):
-            inv_d = safe_inverse(rd)
-    else:
-        inv_d = safe_inverse(rd)
+    inv_d = safe_inverse(rd)
     k0, k1, u = tlas_keys_at(geo, s)
     nk = geo.tlas_nkeys
     stack = wide_stack_t()  # scratch: not zeroed, read below sp only
@@ -154,13 +147,8 @@ def transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd
                 if instance_visible(geo, inst, s) and tr > 0.0 and geo.inst_csg[inst] < 0:
                     w2o = instance_world_to_object(geo, inst, s)
                     rd_o = wp.transform_vector(w2o, rd)
-                    im = geo.inst_mesh[inst]
-                    if geo.mesh_embree_shadow[im] != 0:
-                        if embree_mesh_blocks(geo, im, wp.transform_point(w2o, ro), rd_o, tmax):
-                            tr = 0.0
-                    else:
-                        tr = blas_transmittance(geo, mats, tex, im, wp.transform_point(w2o, ro), rd_o,
-                                                safe_inverse(rd_o), tmax, s, tr)
+                    tr = mesh_transmittance(geo, mats, tex, geo.inst_mesh[inst], wp.transform_point(w2o, ro), rd_o,
+                                            tmax, s, tr)
         else:
             c = geo.tlas_child[ref]
             d = entries(geo.tlas_box, ref * nk, c, k0, k1, u, ro, inv_d, tmax)

@@ -22,7 +22,7 @@ from renderer.accel.intersect import (
     safe_inverse,
     tlas_keys_at,
 )
-from renderer.accel.occlusion import blas_transmittance, transmittance
+from renderer.accel.occlusion import mesh_transmittance, transmittance
 from renderer.accel.wide import entries, leaf_range, root_entered, wide_stack_t
 from renderer.shading.materials import Materials
 from renderer.shading.textures import Textures
@@ -117,9 +117,8 @@ def caster_transmittance(geo: Geometry, mats: Materials, tex: Textures, links: L
                 casts = ((links.inst_caster[inst] >> bit) & 1) != 0
                 if casts and instance_visible(geo, inst, s) and tr > 0.0:
                     w2o = instance_world_to_object(geo, inst, s)
-                    rd_o = wp.transform_vector(w2o, rd)
-                    tr = blas_transmittance(geo, mats, tex, geo.inst_mesh[inst], wp.transform_point(w2o, ro), rd_o,
-                                            safe_inverse(rd_o), tmax, s, tr)
+                    tr = mesh_transmittance(geo, mats, tex, geo.inst_mesh[inst], wp.transform_point(w2o, ro),
+                                            wp.transform_vector(w2o, rd), tmax, s, tr)
         else:
             c = geo.tlas_child[ref]
             d = entries(geo.tlas_box, ref * nk, c, k0, k1, u, ro, inv_d, tmax)
