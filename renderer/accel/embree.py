@@ -9,9 +9,10 @@ ours is linked against it, so the shipped kernels stay portable and a machine wi
 
 What Embree answers, per mesh (``EmbreeScenes``): the closest hit of a still triangle mesh (not an exact shape,
 not a point cloud, not deforming), and the shadow test of such a mesh when every material it uses is opaque for
-shadow rays (no opacity below 1, no opacity texture, no opacity keys), where the first crossing found settles the
-transmittance at 0. Everything else (motion, instancing, CSG, exact shapes, clouds, partly opaque surfaces) stays
-in our hierarchy. ``DRT_EMBREE=0`` turns it off.
+shadow rays (``materials.opaque_for_shadows``), where the first crossing found settles the
+transmittance at 0. Everything else (the top level over instances, motion, CSG, exact shapes, clouds, partly opaque
+surfaces) stays in our hierarchy; the walks reach a mesh through ``intersect.mesh_closest`` and
+``occlusion.mesh_transmittance``, which choose. ``DRT_EMBREE=0`` turns it off.
 
 Embree's hit is a pure function of the ray and the mesh: its builders are deterministic, so every process that
 builds the same mesh returns the same bits (``tests/test_embree.py`` builds with one and with two threads).
@@ -98,17 +99,6 @@ def library() -> ctypes.CDLL | None:
             f.restype, f.argtypes = res, args
         _lib = lib
         return lib
-
-
-def opaque_for_shadows(material) -> bool:
-    """True when every shadow ray crossing the material is blocked: constant opacity 1 (after its threshold),
-    no texture on opacity or opacityThreshold, no opacity keys (``materials.eval_opacity_cone``)."""
-    if "opacity" in material.textures or "opacityThreshold" in material.textures or material.opacity_keys:
-        return False
-    op = float(np.clip(np.nan_to_num(material.opacity, nan=1.0), 0.0, 1.0))
-    if material.opacity_threshold > 0:
-        op = 1.0 if op >= material.opacity_threshold else 0.0
-    return op == 1.0
 
 
 class EmbreeScenes:

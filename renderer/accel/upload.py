@@ -26,6 +26,7 @@ from renderer.scene.analytic import (CLOUD_KINDS, SHAPE_BOX_PAD, analytic_shapes
                                      shape_bounds, shape_table, shape_world_boxes)
 from renderer.scene.mesh_facts import is_closed
 from renderer.scene.model import Mesh, MotionTransform, Scene
+from renderer.shading.materials import opaque_for_shadows
 
 MAX_TLAS_KEYS = 33  # top-level time keys for moving scenes (32 segments over the shutter)
 # Bottom-level leaves of up to 4 triangles, SAH node cost 2 triangle tests: for the four-wide walk, 5-13 % faster
@@ -188,7 +189,7 @@ def embree_meshes(scene: Scene, shapes: list, device: str = "cpu") -> EmbreeMesh
     shadow = np.zeros(max(1, len(scene.meshes)), np.int32)
     owner = None
     if lib is not None:
-        opaque = np.array([embree.opaque_for_shadows(m) for m in scene.materials] or [True], bool)
+        opaque = np.array([opaque_for_shadows(m) for m in scene.materials] or [True], bool)
         for mi, (mesh, shape) in enumerate(zip(scene.meshes, shapes)):
             if shape is not None or len(mesh.point_times) != 1 or not len(mesh.triangles):
                 continue

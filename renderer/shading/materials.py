@@ -444,6 +444,15 @@ def _constant_opacity(mat: Material) -> float:
     return op
 
 
+def opaque_for_shadows(mat: Material) -> bool:
+    """True when every shadow ray crossing the material is blocked (``eval_opacity_cone`` gives 1 everywhere, at
+    every time): its constant opacity is 1 after the threshold, no texture drives opacity or opacityThreshold, and
+    it has no opacity keys."""
+    if "opacity" in mat.textures or "opacityThreshold" in mat.textures or mat.opacity_keys:
+        return False
+    return _constant_opacity(mat) == 1.0
+
+
 def upload_materials(materials: list[Material], device: str = "cpu") -> Materials:
     """Every material's inputs and texture bindings for the kernels (textures: ``upload_material_textures``)."""
     mats = materials or [Material(name="default")]
