@@ -142,7 +142,8 @@ def render(args, kernel, perf: Perf) -> tuple[float, int]:
     from renderer.render import RenderOptions, prepare, render_frame
     from renderer.usd.importer import load_scene
     path = pathlib.Path(args.scene) if ".usd" in args.scene else SCENES / f"{args.scene}.usda"
-    prep = prepare(load_scene(path), RenderOptions(width=args.width, height=args.height, spp=args.spp))
+    prep = prepare(load_scene(path, motion_blur=not args.no_motion_blur),
+                   RenderOptions(width=args.width, height=args.height, spp=args.spp))
     launch, spent, frames = wp.launch, [0.0], 0
 
     def sampled(k, *a, **kw):
@@ -226,6 +227,7 @@ def main() -> None:
         ap.add_argument(flag, type=int, default=default)
     ap.add_argument("--seconds", type=float, default=20.0, help="kernel time to sample (frames are repeated)")
     ap.add_argument("--sort", choices=("incl", "self"), default="incl")
+    ap.add_argument("--no-motion-blur", action="store_true", help="load the scene still, at the frame's time")
     ap.add_argument("--native", action="store_true", help="profile the -march=native build, not x86-64-v3")
     ap.add_argument("--cache", default=os.path.join(tempfile.gettempdir(), "drt-kernel-profile"))
     args = ap.parse_args()

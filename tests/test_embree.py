@@ -165,12 +165,12 @@ def test_the_interval_is_open_and_bad_rays_miss():
     assert scenes.add_mesh(quad, np.array([[0, 1, 4]])) == 0  # an index past the vertices: refused
     down = [0.0, 0.0, -1.0]
     ro = np.array([[0.3, 0.2, 1.0], [0.3, 0.2, 1.0], [0.3, 0.2, 0.0], [np.nan, 0, 1], [0.3, 0.2, np.inf],
-                   [0.3, 0.2, 1.0]])
-    rd = np.array([down, down, down, down, down, down])
-    tmax = np.array([1.0, np.nextafter(np.float32(1), np.float32(2)), 5.0, 5.0, 5.0, 0.0], np.float32)
+                   [0.3, 0.2, 1.0], [0.3, 0.2, 1.0]])
+    rd = np.array([down] * 7)
+    tmax = np.array([1.0, np.nextafter(np.float32(1), np.float32(2)), 5.0, 5.0, 5.0, 0.0, np.inf], np.float32)
     hits, occ = _trace(scenes, handle, ro, rd, tmax)
-    assert list(hits[:, 3] >= 0) == [False, True, False, False, False, False]
-    assert list(occ) == [0, 1, 0, 0, 0, 0]
+    assert list(hits[:, 3] >= 0) == [False, True, False, False, False, False, True]  # an endless ray hits too
+    assert list(occ) == [0, 1, 0, 0, 0, 0, 1]
     assert hits[1, 0] == 1.0 and hits[1, 3] in (0, 1)
     np.testing.assert_allclose(hits[1, 1] + hits[1, 2] <= 1.0, True)
     scenes.close()
