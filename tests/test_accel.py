@@ -7,7 +7,7 @@ import warp as wp
 
 from renderer.accel.intersect import (Geometry, instance_object_to_world, instance_world_to_object, intersect_closest,
                                       leaf_closest, leaf_four, triangle_hit_edges)
-from renderer.motion.kernels import keys_matrix
+from renderer.motion.kernels import find_segment, keys_matrix
 from renderer.shading.materials import Materials, upload_material_textures, upload_materials
 from renderer.accel.occlusion import hit_uv, transmittance
 from renderer.shading.textures import Textures
@@ -390,3 +390,43 @@ def test_a_still_leaf_tested_four_triangles_at_a_time_gives_the_scalar_loops_bit
     assert 0.2 < hits.mean() < 0.9 and (want[hits, 3] > 0).sum() > 1000  # hits beyond the first lane too
     np.testing.assert_array_equal(got.view(np.uint32), want.view(np.uint32))
     assert four_wrong.numpy()[0] == 0
+
+
+@wp.kernel
+def _segments(times: wp.array(dtype=wp.float32), offset: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32),
+              s: wp.array(dtype=wp.float32), out: wp.array(dtype=wp.vec3)):
+    i = wp.tid()
+    a, b, u = find_segment(times, offset[i], count[i], s[i])
+    out[i] = wp.vec3(float(a), float(b), u)
+
+
+def test_find_segment_brackets_the_time_by_the_first_key_at_or_after_it():
+    """Keys and blend of a time among a thing's keys: uniform, uneven and repeated key times, one key, times at,
+    between and outside the keys (outside: the end key, blend 0)."""
+    rng = np.random.default_rng(3)
+    spans = [np.linspace(0, 1, 9), np.linspace(-0.25, 1.25, 5), np.array([0.5]), np.array([0.0, 1.0]),
+             np.array([0.0, 0.01, 0.02, 0.9, 1.0]), np.array([0.0, 0.5, 0.5, 0.5, 1.0]),
+             np.sort(rng.uniform(0, 1, 30)), np.array([0.2, 0.3, 0.95])]
+    times = np.concatenate(spans).astype(np.float32)
+    offs = np.cumsum([0] + [len(k) for k in spans])[:-1]
+    cases = []
+    for off, k in zip(offs, spans):
+        kt = times[off:off + len(k)]
+        for s in np.concatenate([kt, (kt[:-1] + kt[1:]) / 2, rng.uniform(-0.5, 1.5, 40), [0.0, 1.0]]):
+            cases.append((off, len(k), np.float32(s)))
+    off, cnt, s = (np.array(c) for c in zip(*cases))
+    out = wp.zeros(len(s), dtype=wp.vec3)
+    wp.launch(_segments, dim=len(s), inputs=[wp.array(times), wp.array(off.astype(np.int32)),
+                                             wp.array(cnt.astype(np.int32)), wp.array(s.astype(np.float32)), out])
+    for (o, n, t), (a, b, u) in zip(cases, out.numpy()):
+        kt = times[o:o + n]
+        if n == 1 or t <= kt[0]:
+            want = (o, o, 0.0)
+        elif t >= kt[-1]:
+            want = (o + n - 1, o + n - 1, 0.0)
+        else:
+            j = o + int(np.argmax(kt >= t))  # the first key at or after t
+            span = np.float32(times[j] - times[j - 1])
+            want = (j - 1, j, float(np.float32(t - times[j - 1]) / span) if span > 0 else 0.0)
+        assert (int(a), int(b)) == want[:2], (o, n, t)
+        assert u == pytest.approx(want[2], abs=1e-6)
