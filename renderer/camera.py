@@ -181,6 +181,6 @@ def camera_ray(cam: CameraParams, film: wp.vec2, lens_u: wp.vec2, s: float):
     # The clipping planes are distances along the view axis, -d.z for the camera-space step d, which the world
     # step v = m d makes |v| long (a scaling camera transform scales world distances): the ray's world distance
     # per unit of view depth is |v| / -d.z. (d is not normalised first: one square root and two divisions
-    # instead of three and four, where a sample of the teapot shot spent 10 % of its kernel time.)
+    # instead of three and four; ``kernel_profile.py`` had put 10 % of a teapot-shot sample in this function.)
     per_depth = lw / wp.max(-d[2], 1.0e-30)
     return wo, v / lw, cam.near * per_depth, cam.far * per_depth, fwd

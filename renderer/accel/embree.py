@@ -180,7 +180,7 @@ class EmbreeScenes:
 # The calls from the kernels: Embree's RTCRayHit and RTCRay (rtcore_ray.h) filled here, the entry points
 # (rtcIntersect1, rtcOccluded1) reached through the function pointers in ``Geometry``. The ray's interval is ours,
 # open at both ends: (0, tmax), as ``intersect.triangle_hit_edges`` accepts it. Its end is the float below tmax
-# (tmax > 0 here), one less in its bits: what libm's nextafterf returns, whose call had taken 1.4 % of the motion
+# (tmax > 0 here), one less in its bits: what libm's nextafterf returns, whose call had taken 1.3 % of the motion
 # scene's kernel instructions. A ray with a NaN or infinite coordinate misses, as it misses our boxes.
 
 _RAY_CPP = r"""

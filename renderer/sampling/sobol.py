@@ -259,9 +259,11 @@ _OWEN3_CPP = VECTOR_TYPES_CPP + r"""
 def owen_scramble3(v0: wp.uint32, v1: wp.uint32, v2: wp.uint32, h: wp.uint32, k: wp.uint32,
                    first_reversed: int) -> wp.vec3:
     """``u32_to_unit_float(owen_scramble(v_j, mix32(h + k + j)))`` for j = 0, 1, 2, the three lanes at once in
-    vector code, the same bits as ``owen_scramble3_reference``. ``first_reversed`` 1: v0 is given as
-    ``reverse_bits32(v0)`` (a sample's first coordinate scrambles the reversed index, and the scramble's first step
-    reverses it back). The scalar code spent 6-12 % of the path tracing kernel here, three coordinates in turn."""
+    vector code, the same bits as ``owen_scramble3_reference``. ``first_reversed`` 1: the first lane scrambles
+    ``reverse_bits32(v0)`` instead (a sample's first coordinate is the van der Corput value of the shuffled index;
+    the scramble's first step reverses the bits back, so that lane skips both reversals). The samplers took 6-12 %
+    of the path tracing kernel (``bench/kernel_profile.py``), most of it in these scrambles, one coordinate at a
+    time."""
     ...
 
 
