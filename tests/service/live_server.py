@@ -12,6 +12,26 @@ import httpx
 from service_helpers import service_settings
 
 
+def _import_anyio_eagerly() -> None:
+    """Import anyio's submodules now, in the importing thread. anyio imports them when an attribute is first used
+    (the first static file the server sends: ``anyio.open_file``), and under pytest a plugin's modules are compiled
+    through the assertion rewriter's ``ast.parse``. Done in the server's thread while another thread parses too
+    (Warp reads a render module's source), CPython 3.11 can fail with "SystemError: AST constructor recursion
+    depth mismatch" (a race in the ast module, cpython gh-106905): the page's first load got a 500 and a browser
+    test timed out, about one run in four when it ran alone."""
+    import importlib
+    import pkgutil
+
+    import anyio
+
+    for info in pkgutil.walk_packages(anyio.__path__, "anyio.", onerror=lambda _name: None):
+        if "trio" not in info.name and "pytest" not in info.name:
+            importlib.import_module(info.name)
+
+
+_import_anyio_eagerly()
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

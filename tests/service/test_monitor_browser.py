@@ -14,7 +14,10 @@ from service_helpers import submit, wait_job, write_card
 pytestmark = pytest.mark.skipif(why_no_browser() is not None, reason=str(why_no_browser()))
 
 HTML = "<img src=x onerror=alert(1)>"
-QUICK = {"width": 48, "height": 48, "spp": 512, "tile": 8}  # 36 tiles, about 2 s on one thread
+QUICK = {"width": 48, "height": 48, "spp": 512, "tile": 8}  # 36 tiles, 0.5-0.8 s on one thread
+# a job watched as it runs: long enough for several turns of the event stream (0.25 s each; QUICK, once about 2 s,
+# had become fast enough to show the bar at one value only, and the test failed one run in three)
+WATCHED = {"width": 48, "height": 48, "spp": 2048, "tile": 8}
 SLOW = {"width": 64, "height": 64, "spp": 4096, "tile": 8}  # long enough to act on while it runs
 
 
@@ -105,7 +108,7 @@ def test_the_list_follows_a_job_from_queued_to_succeeded(server, tab, card):
     wait_job(server.http, blocker, until=("running",))
     tab.goto("/")
     tab.page.wait_for_selector("#live[data-state=live]")
-    job_id = submit(server.http, card, QUICK).json()["id"]
+    job_id = submit(server.http, card, WATCHED).json()["id"]
     tab.page.wait_for_selector(f'tr[data-id="{job_id}"][data-state=queued]', timeout=10_000)
     server.http.post(f"/v1/jobs/{blocker}/cancel")
     seen = sample(lambda v: v is not None and v[0] == "succeeded", lambda: tab.js(ROW, job_id))
