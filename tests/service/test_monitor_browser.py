@@ -148,7 +148,8 @@ def test_a_snapshot_older_than_the_events_does_not_hide_a_job(server, tab, card)
 
 
 def test_the_job_page_fills_in_tiles_and_preview_live_then_downloads(server, tab, card, tmp_path):
-    job_id = submit(server.http, card, {"width": 64, "height": 48, "spp": 512, "tile": 8}).json()["id"]
+    # as WATCHED: long enough (about 3 s) for the grid to be seen filling in over several event turns
+    job_id = submit(server.http, card, {"width": 64, "height": 48, "spp": 2048, "tile": 8}).json()["id"]
     tab.goto(f"/jobs/{job_id}")
     seen = sample(lambda v: v["state"] == "succeeded" and v["preview"] and v["done"] == 48, lambda: tab.js(JOB_PAGE))
     running = [v for v in seen if v["state"] == "running"]
