@@ -16,7 +16,7 @@ pytestmark = pytest.mark.skipif(why_no_browser() is not None, reason=str(why_no_
 HTML = "<img src=x onerror=alert(1)>"
 QUICK = {"width": 48, "height": 48, "spp": 512, "tile": 8}  # 36 tiles, 0.5-0.8 s on one thread
 # a job watched as it runs: long enough for several turns of the event stream (0.25 s each; QUICK, once about 2 s,
-# had become fast enough to show the bar at one value only, and the test failed one run in three)
+# had become fast enough to show the bar at one value only, and the test failed about one run in four)
 WATCHED = {"width": 48, "height": 48, "spp": 2048, "tile": 8}
 SLOW = {"width": 64, "height": 64, "spp": 4096, "tile": 8}  # long enough to act on while it runs
 
