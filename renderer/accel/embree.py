@@ -85,7 +85,6 @@ def library() -> ctypes.CDLL | None:
             ("rtcSetDeviceMemoryMonitorFunction", None, [vp, _MONITOR, vp]),
             ("rtcNewScene", vp, [vp]),
             ("rtcReleaseScene", None, [vp]),
-            ("rtcSetSceneFlags", None, [vp, ctypes.c_int]),
             ("rtcSetSceneBuildQuality", None, [vp, ctypes.c_int]),
             ("rtcCommitScene", None, [vp]),
             ("rtcNewGeometry", vp, [vp, ctypes.c_int]),

@@ -26,7 +26,10 @@ def _import_anyio_eagerly() -> None:
 
     for info in pkgutil.walk_packages(anyio.__path__, "anyio.", onerror=lambda _name: None):
         if "trio" not in info.name and "pytest" not in info.name:
-            importlib.import_module(info.name)
+            try:
+                importlib.import_module(info.name)
+            except ImportError:  # a backend or extra whose optional dependency is absent: never used here
+                pass
 
 
 _import_anyio_eagerly()
