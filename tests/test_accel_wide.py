@@ -185,6 +185,53 @@ def test_the_native_slab_test_gives_the_bits_of_the_warp_one():
 
 
 @wp.kernel
+def _one_box_kernel(lo: wp.array(dtype=wp.vec3), hi: wp.array(dtype=wp.vec3), ro: wp.array(dtype=wp.vec3),
+                    inv: wp.array(dtype=wp.vec3), tmax: wp.array(dtype=wp.float32), native: wp.array(dtype=int),
+                    reference: wp.array(dtype=int)):
+    i = wp.tid()
+    native[i] = int(wide.box_entered(lo[i], hi[i], ro[i], inv[i], tmax[i]))
+    reference[i] = int(wide.box_entered_reference(lo[i], hi[i], ro[i], inv[i], tmax[i]))
+
+
+def test_the_native_one_box_test_answers_as_the_warp_one():
+    """``box_entered`` (native vector code, the root test) against ``box_entered_reference`` on every kind of ray
+    of numbers: flat boxes, origins inside, on corners and on faces, axis-parallel rays (safe_inverse's 1e30),
+    negative zeros, tmax at 0, at a face and unbounded."""
+    rng = np.random.default_rng(12)
+    n = 60000
+    a = rng.uniform(-1, 1, (n, 3)).astype(np.float32)
+    b = rng.uniform(-1, 1, (n, 3)).astype(np.float32)
+    b = np.where(rng.random((n, 3)) < 0.2, a, b)  # flat on an axis
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    ro = rng.uniform(-2, 2, (n, 3)).astype(np.float32)
+    corner = rng.random(n) < 0.1
+    ro[corner] = lo[corner]
+    face = rng.random(n) < 0.1
+    ro[face, 0] = hi[face, 0]
+    d = rng.normal(size=(n, 3))
+    d[rng.random((n, 3)) < 0.15] = 0.0
+    d[rng.random((n, 3)) < 0.05] = -0.0
+    grazing = rng.random(n) < 0.2  # aimed at a corner from outside: entered and left at one distance, rounded
+    d[grazing] = hi[grazing] - (ro[grazing] + 3.0)
+    ro[grazing] += 3.0
+    inv = np.ones((n, 3), np.float32)
+    for i in range(0, n, 5000):
+        inv[i:i + 5000] = _inverse(d[i:i + 5000].astype(np.float32))
+    tmax = rng.choice(np.array([0.0, 0.5, 3.0, 3.4e38, np.inf], np.float32), size=n)
+    exact = rng.random(n) < 0.1  # tmax where the ray leaves the box's x slab: on the slack's edge
+    with np.errstate(all="ignore"):
+        tx = np.maximum((lo[:, 0] - ro[:, 0]) * inv[:, 0], (hi[:, 0] - ro[:, 0]) * inv[:, 0])
+    tmax[exact & np.isfinite(tx) & (tx >= 0)] = tx[exact & np.isfinite(tx) & (tx >= 0)]
+    native, reference = wp.zeros(n, dtype=int), wp.zeros(n, dtype=int)
+    wp.launch(_one_box_kernel, dim=n, inputs=[wp.array(lo, dtype=wp.vec3), wp.array(hi, dtype=wp.vec3),
+                                              wp.array(ro, dtype=wp.vec3), wp.array(inv, dtype=wp.vec3),
+                                              wp.array(tmax, dtype=wp.float32), native, reference])
+    got, want = native.numpy(), reference.numpy()
+    assert 0.05 < want.mean() < 0.95  # thousands of rays each way
+    np.testing.assert_array_equal(got, want)
+
+
+@wp.kernel
 def _inverse_kernel(d: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
     i = wp.tid()
     out[i] = safe_inverse(d[i])

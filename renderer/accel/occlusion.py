@@ -127,7 +127,7 @@ def transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd
         if instance_visible(geo, direct, s):
             ro_o, rd_o = direct_ray(geo, ro, rd)
             tr = mesh_transmittance(geo, mats, tex, geo.inst_mesh[direct], ro_o, rd_o, tmax, s, tr)
-        if geo.tlas_others == 0:
+        if geo.tlas_others == 0 or tr <= 0.0:  # blocked by the still prims: no top-level walk, no CSG
             return tr
     inv_d = safe_inverse(rd)
     k0, k1, u = tlas_keys_at(geo, s)
