@@ -65,7 +65,7 @@ INV_TWO_PI = wp.constant(0.5 / math.pi)
 INV_FOUR_PI = wp.constant(0.25 / math.pi)
 PI_OVER_2 = wp.constant(0.5 * math.pi)
 PI_OVER_4 = wp.constant(0.25 * math.pi)
-ONE_MINUS_EPS = wp.constant(float(np.float32(1.0) - np.float32(2.0**-24)))
+XU_RADICAND_MIN = wp.constant(1.0e-30)  # sample_rect: fu^2 + b0^2 - 1 at least this (never a 0 / 0)
 
 # Spherical-rectangle sampling is used only for solid angles in this range (pbrt-v4's thresholds for spherical
 # triangles): below it float32 cancellation spoils the warp, above it p_ref is nearly on the light.
@@ -418,11 +418,16 @@ def sample_rect(p_ref: wp.vec3, corner: wp.vec3, edge_u: wp.vec3, edge_v: wp.vec
     au = u[0] * (g01 - TWO_PI) + (u[0] - 1.0) * g23
     sau, cau = sin_cos(au)
     fu = (cau * b0 - b1) / sau
-    cu = wp.clamp(wp.where(fu < 0.0, -1.0, 1.0) / wp.sqrt(fu * fu + b0 * b0), -ONE_MINUS_EPS, ONE_MINUS_EPS)
-    xu = wp.clamp(-(cu * z0) / wp.sqrt(wp.max(0.0, 1.0 - cu * cu)), x0, x1)
-    dd = wp.sqrt(xu * xu + z0 * z0)
-    h0 = y0 / wp.sqrt(dd * dd + y0 * y0)
-    h1 = y1 / wp.sqrt(dd * dd + y1 * y1)
+    # pbrt's cu = sign(fu) / sqrt(fu^2 + b0^2) and xu = -cu z0 / sqrt(1 - cu^2) in one step: 1 - cu^2 is
+    # (fu^2 + b0^2 - 1) / (fu^2 + b0^2), so xu = -sign(fu) z0 / sqrt(fu^2 + b0^2 - 1), one square root and one
+    # division on the sample's chain of dependent ones where there were two of each (the floor stands for pbrt's
+    # clamp of cu below 1: xu then lies past the rectangle's edge and is clamped to it)
+    e = fu * fu + b0 * b0 - 1.0
+    xu = wp.clamp(wp.where(fu < 0.0, z0, -z0) / wp.sqrt(wp.max(e, XU_RADICAND_MIN)), x0, x1)
+    dd2 = xu * xu + z0 * z0  # squared distance to the vertical arc's line: its root is off the chain
+    h0 = y0 / wp.sqrt(dd2 + y0 * y0)
+    h1 = y1 / wp.sqrt(dd2 + y1 * y1)
+    dd = wp.sqrt(dd2)
     hv = h0 + u[1] * (h1 - h0)
     hv2 = hv * hv
     yv = y1
@@ -835,12 +840,12 @@ def np_sample_rect(p_ref, corner, edge_u, edge_v, u) -> NpLightSample:
     with np.errstate(invalid="ignore", divide="ignore"):
         au = u0 * (g01 - 2 * np.pi) + (u0 - 1.0) * g23
         fu = (np.cos(au) * b0 - b1) / np.sin(au)
-        one_m = float(np.float32(1.0) - np.float32(2.0**-24))
-        cu = np.clip(np.where(fu < 0, -1.0, 1.0) / np.sqrt(fu * fu + b0 * b0), -one_m, one_m)
-        xu = np.clip(-(cu * z0) / np.sqrt(np.maximum(0.0, 1.0 - cu * cu)), x0, x1)
-        dd = np.sqrt(xu * xu + z0 * z0)
-        h0 = y0 / np.sqrt(dd * dd + y0 * y0)
-        h1 = y1 / np.sqrt(dd * dd + y1 * y1)
+        e = np.maximum(fu * fu + b0 * b0 - 1.0, 1e-30)  # pbrt's cu and xu in one step, as sample_rect
+        xu = np.clip(np.where(fu < 0, z0, -z0) / np.sqrt(e), x0, x1)
+        dd2 = xu * xu + z0 * z0
+        dd = np.sqrt(dd2)
+        h0 = y0 / np.sqrt(dd2 + y0 * y0)
+        h1 = y1 / np.sqrt(dd2 + y1 * y1)
         hv = h0 + u1 * (h1 - h0)
         hv2 = hv * hv
         yv = np.where(hv2 < 1.0 - 1e-6, hv * dd / np.sqrt(np.maximum(1e-300, 1.0 - hv2)), y1)
