@@ -8,7 +8,9 @@ import pytest
 import warp as wp
 
 from renderer.accel import embree
+from renderer.accel.intersect import Geometry, intersect_closest
 from renderer.accel.upload import upload_geometry
+from renderer.integrator import surface_at
 from renderer.scene.model import Camera, Instance, Material, Mesh, MotionTransform, Scene
 from tests.test_accel import _probe, brute_force, random_mesh, rot_y
 
@@ -119,7 +121,7 @@ def test_partly_opaque_meshes_keep_our_shadow_walk():
 
 @wp.kernel
 def _closest_kernel(fn: wp.uint64, scene: wp.uint64, ro: wp.array(dtype=wp.vec3), rd: wp.array(dtype=wp.vec3),
-                    tmax: wp.array(dtype=float), out: wp.array(dtype=wp.vec4d), occluded: wp.array(dtype=int),
+                    tmax: wp.array(dtype=float), out: wp.array(dtype=embree.embree_hit_t), occluded: wp.array(dtype=int),
                     occluded_fn: wp.uint64):
     i = wp.tid()
     out[i] = embree.embree_closest(fn, scene, ro[i], rd[i], tmax[i])
@@ -128,7 +130,7 @@ def _closest_kernel(fn: wp.uint64, scene: wp.uint64, ro: wp.array(dtype=wp.vec3)
 
 def _trace(scenes, handle, ro, rd, tmax):
     n = len(ro)
-    out, occ = wp.zeros(n, dtype=wp.vec4d), wp.zeros(n, dtype=int)
+    out, occ = wp.zeros(n, dtype=embree.embree_hit_t), wp.zeros(n, dtype=int)
     wp.launch(_closest_kernel, dim=n, inputs=[wp.uint64(scenes.closest_fn), wp.uint64(handle),
                                               wp.array(ro, dtype=wp.vec3), wp.array(rd, dtype=wp.vec3),
                                               wp.array(tmax, dtype=float), out, occ, wp.uint64(scenes.occluded_fn)])
@@ -186,3 +188,46 @@ def test_drt_embree_0_turns_it_off(monkeypatch):
     monkeypatch.setattr(embree, "_lib", False)
     monkeypatch.delenv("DRT_EMBREE")
     assert embree.library() is not None
+
+
+@wp.kernel
+def _surface_kernel(geo: Geometry, ro: wp.array(dtype=wp.vec3), rd: wp.array(dtype=wp.vec3),
+                    with_ng: wp.array(dtype=wp.vec3), without: wp.array(dtype=wp.vec3), fronts: wp.array(dtype=wp.vec2i),
+                    hit_ng: wp.array(dtype=wp.vec3)):
+    i = wp.tid()
+    hit = intersect_closest(geo, ro[i], rd[i], 1.0e30, 0.5)
+    if hit.inst >= 0:
+        a = surface_at(geo, hit.inst, hit.tri, hit.b1, hit.b2, hit.ng, ro[i], rd[i], hit.t, 0.5)
+        b = surface_at(geo, hit.inst, hit.tri, hit.b1, hit.b2, wp.vec3(0.0), ro[i], rd[i], hit.t, 0.5)
+        with_ng[i] = a.ng
+        without[i] = b.ng
+        fronts[i] = wp.vec2i(a.front, b.front)
+        hit_ng[i] = hit.ng
+
+
+def test_embrees_normal_of_the_hit_is_the_one_from_the_corners(monkeypatch):
+    """Embree hands back the hit triangle's (p1 - p0) x (p2 - p0), which ``surface_at`` uses for a mesh without
+    uvs instead of reading the corners: the same facing normal (up to rounding) and the same side (front or back,
+    what a solid's inside depends on) as from the corners, through a rotated, scaled instance too; our own walk
+    leaves no stale normal of an Embree hit it overrides."""
+    rng = np.random.default_rng(5)
+    still = random_mesh(rng, 2000, 1, "still")
+    deforming = random_mesh(rng, 200, 3, "deforming")  # walked by us, beside Embree's
+    scale = np.diag([1.5, 0.7, 1.0, 1.0]) @ rot_y(35, (0.2, 0, 0))
+    scene = Scene([still, deforming], [Instance(0, MotionTransform.static(scale)),
+                                       Instance(1, MotionTransform.static(np.eye(4)))],
+                  [Material("m")], [], Camera("cam", MotionTransform.static(np.eye(4))), 0, 0, 1)
+    geo, _ = upload_geometry(scene)
+    assert list(geo.mesh_embree.numpy() != 0) == [True, False]
+    n = 3000
+    ro, rd = _rays(rng, n)
+    outs = [wp.zeros(n, dtype=wp.vec3), wp.zeros(n, dtype=wp.vec3), wp.zeros(n, dtype=wp.vec2i),
+            wp.zeros(n, dtype=wp.vec3)]
+    wp.launch(_surface_kernel, dim=n, inputs=[geo, wp.array(ro, dtype=wp.vec3), wp.array(rd, dtype=wp.vec3)] + outs)
+    a, b, fronts, hit_ng = (o.numpy() for o in outs)
+    hit = np.linalg.norm(b, axis=1) > 0
+    by_embree = np.linalg.norm(hit_ng, axis=1) > 0
+    assert hit.sum() > n // 2 and by_embree.sum() > n // 4 and (hit & ~by_embree).sum() > 50  # both walks hit
+    np.testing.assert_allclose(a[hit], b[hit], atol=2e-5)
+    np.testing.assert_array_equal(fronts[hit, 0], fronts[hit, 1])
+    assert 0.2 < fronts[hit, 0].mean() < 0.8  # both sides seen

@@ -189,6 +189,7 @@ def csg_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, s: float, best: Hit):
                 best.tri = tri
                 best.b1 = b1
                 best.b2 = b2
+                best.ng = wp.vec3(0.0)
                 break
             t_cur = t
     return best

@@ -196,23 +196,31 @@ _RAY_CPP = r"""
     };
 """
 
+# (t, b1, b2, local triangle, Ng x, y, z, unused) of ``embree_closest``
+embree_hit_t = wp.types.vector(length=8, dtype=wp.float64)
+
 _CLOSEST_CPP = _RAY_CPP + r"""
     typedef void (*closest_fn)(void*, RayHit*, void*);
-    if (!valid) return wp::vec_t<4, wp::float64>(0.0, 0.0, 0.0, -1.0);
+    wp::vec_t<8, wp::float64> out;
+    out.c[3] = -1.0;
+    if (!valid) return out;
     RayHit rh;
     fill(rh.ray);
     rh.hit.geom = 0xffffffffu;
     rh.hit.inst[0] = 0xffffffffu;
     ((closest_fn)fn)((void*)scene, &rh, nullptr);
-    if (rh.hit.geom == 0xffffffffu) return wp::vec_t<4, wp::float64>(0.0, 0.0, 0.0, -1.0);
-    return wp::vec_t<4, wp::float64>(rh.ray.tfar, rh.hit.u, rh.hit.v, (double)rh.hit.prim);
+    if (rh.hit.geom == 0xffffffffu) return out;
+    out.c[0] = rh.ray.tfar; out.c[1] = rh.hit.u; out.c[2] = rh.hit.v; out.c[3] = (double)rh.hit.prim;
+    out.c[4] = rh.hit.ngx; out.c[5] = rh.hit.ngy; out.c[6] = rh.hit.ngz;
+    return out;
 """
 
 
 @wp.func_native(_CLOSEST_CPP)
-def embree_closest(fn: wp.uint64, scene: wp.uint64, ro: wp.vec3, rd: wp.vec3, tmax: float) -> wp.vec4d:
-    """Embree's closest hit of an object-space ray in (0, tmax): (t, b1, b2, local triangle), or a negative
-    triangle on a miss (in doubles: a triangle index past 2^24 stays exact; the floats come back unchanged)."""
+def embree_closest(fn: wp.uint64, scene: wp.uint64, ro: wp.vec3, rd: wp.vec3, tmax: float) -> embree_hit_t:
+    """Embree's closest hit of an object-space ray in (0, tmax): (t, b1, b2, local triangle, the triangle's
+    unnormalised geometric normal (p1 - p0) x (p2 - p0) as Embree computes it, 0), or a negative triangle on a
+    miss (in doubles: a triangle index past 2^24 stays exact; the floats come back unchanged)."""
     ...
 
 

@@ -134,6 +134,7 @@ class Hit:
     tri: int  # global triangle index
     b1: float  # barycentric weight of vertex 1
     b2: float  # barycentric weight of vertex 2
+    ng: wp.vec3  # object-space (p1 - p0) x (p2 - p0) where Embree found the hit (it has it at hand), else 0
 
 
 @wp.func
@@ -417,6 +418,7 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, inv_d: wp.vec3
             best.tri = geo.mesh_tri_off[m]
             best.b1 = float(part)
             best.b2 = 0.0
+            best.ng = wp.vec3(0.0)
     while sp > 0:
         sp -= 1
         if dist[sp] < t_best:
@@ -432,6 +434,7 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, inv_d: wp.vec3
                         best.tri = geo.mesh_tri_off[m] + geo.blas_prim[poff + first + int(r[3])]
                         best.b1 = r[1]
                         best.b2 = r[2]
+                        best.ng = wp.vec3(0.0)
                 else:
                     for i in range(count):
                         if is_cloud(kind):  # a sphere or disc of a point cloud
@@ -443,6 +446,7 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, inv_d: wp.vec3
                                 best.tri = geo.mesh_tri_off[m] + lp
                                 best.b1 = 0.0
                                 best.b2 = 0.0
+                                best.ng = wp.vec3(0.0)
                         else:
                             t, b1, b2, lt = leaf_hit(geo, m, poff + first + i, nk, k0, k1, u, ro, rd, t_best)
                             if t < t_best:
@@ -452,6 +456,7 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, inv_d: wp.vec3
                                 best.tri = geo.mesh_tri_off[m] + lt
                                 best.b1 = b1
                                 best.b2 = b2
+                                best.ng = wp.vec3(0.0)
             else:
                 d, c = q_entries(geo.blas_node, noff + ref * nk, k0, k1, u, ro, inv_d, t_best)
                 d, c = far_to_near(d, c)
@@ -473,6 +478,7 @@ def embree_mesh_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: f
         best.tri = geo.mesh_tri_off[m] + int(eh[3])
         best.b1 = float(eh[1])
         best.b2 = float(eh[2])
+        best.ng = wp.vec3(float(eh[4]), float(eh[5]), float(eh[6]))
     return best
 
 
