@@ -185,6 +185,8 @@ def cylinder_frame(lights: Lights, li: int, s: float):
 @wp.func
 def distant_axis(lights: Lights, li: int, s: float):
     """Unit direction toward a distant light."""
+    if lights.xf_count[li] == 1:
+        return lights.axis_still[li]
     return wp.normalize(wp.transform_vector(light_matrix(lights, li, s), wp.vec3(0.0, 0.0, 1.0)))
 
 

@@ -53,6 +53,9 @@ class Lights:
     # rect lights that do not move: world corner, edge vectors and emitting normal at 4 li .. 4 li + 3, computed
     # once here (in float64) instead of from xf_still at every sample (``sample.rect_frame``)
     rect_still: wp.array(dtype=wp.vec3)
+    # lights that do not move: their unit +z axis in the world, the direction toward a distant light
+    # (``sample.distant_axis``: an escaped ray's and a sun sample's, 3 % of the teapot shot's kernel from xf_still)
+    axis_still: wp.array(dtype=wp.vec3)
     keys: MotionKeys
     select_cdf: wp.array(dtype=wp.float32)  # (count,) cumulative selection probability
     select_pdf: wp.array(dtype=wp.float32)  # (count,) probability of choosing each light
@@ -184,6 +187,13 @@ def rect_frames(matrices, sizes) -> np.ndarray:
     return np.stack([corner, ex, ey, front], 1).astype(np.float32)
 
 
+def z_axes(matrices) -> np.ndarray:
+    """(n, 3) float32: each matrix's +z axis in the world, of unit length (0 where it has none)."""
+    z = np.asarray(matrices, np.float64)[:, :3, 2]
+    length = np.linalg.norm(z, axis=1, keepdims=True)
+    return np.divide(z, length, out=np.zeros_like(z), where=length > 0).astype(np.float32)
+
+
 def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
                   clusters: bool = True) -> tuple[Lights, int]:
     """Lights of a scene for the kernels; returns the struct and the number of lights."""
@@ -310,6 +320,7 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
     still = matrices_at(transforms, 0.0) if transforms else np.eye(4)[None]
     lt.xf_still = wp.array(np.array(still, np.float32), dtype=wp.mat44, device=device)
     lt.rect_still = wp.array(rect_frames(still, size or [[0, 0, 0, 0]]).reshape(-1, 3), dtype=wp.vec3, device=device)
+    lt.axis_still = wp.array(z_axes(still), dtype=wp.vec3, device=device)
     p = np.array(powers or [1.0], np.float64)
     p = p / p.sum()
     cdf_sel = np.cumsum(p)
