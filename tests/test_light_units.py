@@ -78,6 +78,27 @@ def test_sphere_light_normalize_divides_by_its_area_and_treat_as_point_keeps_its
     assert results["norm"] == pytest.approx(E / math.pi / (4 * math.pi * r * r), rel=0.02)
 
 
+@pytest.mark.parametrize("rotate_x", [-90.0, 90.0])
+def test_disk_light_irradiance_on_its_axis_and_its_dark_side(tmp_path, rotate_x):
+    """A DiskLight of radius R and radiance L a height h above the floor, emitting along its -Z: the floor below
+    gets E = L pi R^2 / (h^2 + R^2) when it faces down (rotateX -90), nothing when it faces up."""
+    h, r = 0.5, 0.2
+    stage = floor_stage(tmp_path / "disk.usda")
+    d = UsdLux.DiskLight.Define(stage, "/World/Disk")
+    d.CreateIntensityAttr(10.0)
+    d.CreateRadiusAttr(r)
+    xf = UsdGeom.Xformable(d)
+    xf.AddTranslateOp().Set(Gf.Vec3d(0, h, 0))
+    xf.AddRotateXOp().Set(rotate_x)
+    stage.Save()
+    got = floor_radiance(tmp_path / "disk.usda", spp=64)[0]
+    E = 10.0 * math.pi * r * r / (h * h + r * r)
+    if rotate_x == -90.0:
+        assert got == pytest.approx(E / math.pi, rel=0.02)
+    else:
+        assert got < 1e-3 * E / math.pi
+
+
 def test_rect_light_texture_reads_unmirrored_from_behind_the_light(tmp_path):
     """RectLight texture: top-left texel at local (-X, +Y), bottom-right at (+X, -Y) (as husk and kick read it). A
     2x2 image (red, green / blue, white) on a rect 2 cm above the floor, seen from above (from behind the light),

@@ -160,6 +160,10 @@ def rect_frame(lights: Lights, li: int, s: float):
 
 @wp.func
 def disk_frame(lights: Lights, li: int, s: float):
+    """A disk light's world centre, emitting normal (its -z) and radius at time s."""
+    if lights.xf_count[li] == 1:
+        c = lights.centre_still[li]
+        return wp.vec3(c[0], c[1], c[2]), lights.disk_front_still[li], c[3]
     m = light_matrix(lights, li, s)
     ex = wp.transform_vector(m, wp.vec3(1.0, 0.0, 0.0))
     ey = wp.transform_vector(m, wp.vec3(0.0, 1.0, 0.0))
@@ -168,6 +172,10 @@ def disk_frame(lights: Lights, li: int, s: float):
 
 @wp.func
 def sphere_frame(lights: Lights, li: int, s: float):
+    """A sphere light's world centre and radius at time s."""
+    if lights.xf_count[li] == 1:
+        c = lights.centre_still[li]
+        return wp.vec3(c[0], c[1], c[2]), c[3]
     m = light_matrix(lights, li, s)
     return wp.transform_point(m, wp.vec3(0.0)), lights.size[li][2] * wp.length(
         wp.transform_vector(m, wp.vec3(1.0, 0.0, 0.0)))

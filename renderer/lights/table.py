@@ -56,6 +56,10 @@ class Lights:
     # lights that do not move: their unit +z axis in the world, the direction toward a distant light
     # (``sample.distant_axis``: an escaped ray's and a sun sample's, 3 % of the teapot shot's kernel from xf_still)
     axis_still: wp.array(dtype=wp.vec3)
+    # ... their origin in the world and size[2] (radius) times the length of their x axis: a sphere's or disk's
+    # centre and world radius (``sample.sphere_frame``, ``disk_frame``: 2 % of the dof scene's kernel from xf_still)
+    centre_still: wp.array(dtype=wp.vec4)
+    disk_front_still: wp.array(dtype=wp.vec3)  # ... and -(x axis x y axis), unit: a disk's emitting side
     keys: MotionKeys
     select_cdf: wp.array(dtype=wp.float32)  # (count,) cumulative selection probability
     select_pdf: wp.array(dtype=wp.float32)  # (count,) probability of choosing each light
@@ -187,11 +191,29 @@ def rect_frames(matrices, sizes) -> np.ndarray:
     return np.stack([corner, ex, ey, front], 1).astype(np.float32)
 
 
+def _unit(v: np.ndarray) -> np.ndarray:
+    """(n, 3) float32: the rows of v at unit length (0 where a row is 0)."""
+    length = np.linalg.norm(v, axis=1, keepdims=True)
+    return np.divide(v, length, out=np.zeros_like(v), where=length > 0).astype(np.float32)
+
+
 def z_axes(matrices) -> np.ndarray:
     """(n, 3) float32: each matrix's +z axis in the world, of unit length (0 where it has none)."""
-    z = np.asarray(matrices, np.float64)[:, :3, 2]
-    length = np.linalg.norm(z, axis=1, keepdims=True)
-    return np.divide(z, length, out=np.zeros_like(z), where=length > 0).astype(np.float32)
+    return _unit(np.asarray(matrices, np.float64)[:, :3, 2])
+
+
+def disk_fronts(matrices) -> np.ndarray:
+    """(n, 3) float32: -(x axis x y axis) of each matrix, of unit length: a disk light's emitting side."""
+    m = np.asarray(matrices, np.float64)
+    return -_unit(np.cross(m[:, :3, 0], m[:, :3, 1]))
+
+
+def centres(matrices, sizes) -> np.ndarray:
+    """(n, 4) float32: each matrix's origin in the world and size[2] times the length of its x axis (the world
+    radius of a sphere or disk light of that radius)."""
+    m = np.asarray(matrices, np.float64)
+    radius = np.asarray(sizes, np.float64)[:, 2] * np.linalg.norm(m[:, :3, 0], axis=1)
+    return np.concatenate([m[:, :3, 3], radius[:, None]], 1).astype(np.float32)
 
 
 def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
@@ -321,6 +343,8 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
     lt.xf_still = wp.array(np.array(still, np.float32), dtype=wp.mat44, device=device)
     lt.rect_still = wp.array(rect_frames(still, size or [[0, 0, 0, 0]]).reshape(-1, 3), dtype=wp.vec3, device=device)
     lt.axis_still = wp.array(z_axes(still), dtype=wp.vec3, device=device)
+    lt.centre_still = wp.array(centres(still, size or [[0, 0, 0, 0]]), dtype=wp.vec4, device=device)
+    lt.disk_front_still = wp.array(disk_fronts(still), dtype=wp.vec3, device=device)
     p = np.array(powers or [1.0], np.float64)
     p = p / p.sum()
     cdf_sel = np.cumsum(p)
