@@ -78,18 +78,26 @@ def test_sphere_light_normalize_divides_by_its_area_and_treat_as_point_keeps_its
     assert results["norm"] == pytest.approx(E / math.pi / (4 * math.pi * r * r), rel=0.02)
 
 
-@pytest.mark.parametrize("rotate_x", [-90.0, 90.0])
-def test_disk_light_irradiance_on_its_axis_and_its_dark_side(tmp_path, rotate_x):
+@pytest.mark.parametrize("rotate_x,mirror,moving", [(-90.0, False, False), (90.0, False, False),
+                                                     (-90.0, True, False), (90.0, True, False), (-90.0, True, True)])
+def test_disk_light_irradiance_on_its_axis_and_its_dark_side(tmp_path, rotate_x, mirror, moving):
     """A DiskLight of radius R and radiance L a height h above the floor, emitting along its -Z: the floor below
-    gets E = L pi R^2 / (h^2 + R^2) when it faces down (rotateX -90), nothing when it faces up."""
+    gets E = L pi R^2 / (h^2 + R^2) when its -Z points down (rotateX -90), nothing when it points up; a mirroring
+    scale (X -> -X, whose X x Y is then +Z's opposite) leaves it emitting along its -Z, still or moving."""
     h, r = 0.5, 0.2
     stage = floor_stage(tmp_path / "disk.usda")
     d = UsdLux.DiskLight.Define(stage, "/World/Disk")
     d.CreateIntensityAttr(10.0)
     d.CreateRadiusAttr(r)
     xf = UsdGeom.Xformable(d)
-    xf.AddTranslateOp().Set(Gf.Vec3d(0, h, 0))
+    t = xf.AddTranslateOp()
+    t.Set(Gf.Vec3d(0, h, 0))
+    if moving:  # a slide along the floor within the shutter: its frame is computed per sample
+        t.Set(Gf.Vec3d(-0.01, h, 0), 0.0)
+        t.Set(Gf.Vec3d(0.01, h, 0), 1.0)
     xf.AddRotateXOp().Set(rotate_x)
+    if mirror:
+        xf.AddScaleOp().Set(Gf.Vec3f(-1, 1, 1))
     stage.Save()
     got = floor_radiance(tmp_path / "disk.usda", spp=64)[0]
     E = 10.0 * math.pi * r * r / (h * h + r * r)
@@ -97,6 +105,34 @@ def test_disk_light_irradiance_on_its_axis_and_its_dark_side(tmp_path, rotate_x)
         assert got == pytest.approx(E / math.pi, rel=0.02)
     else:
         assert got < 1e-3 * E / math.pi
+
+
+@pytest.mark.parametrize("mirror,moving", [(False, False), (True, False), (True, True)])
+def test_rect_light_emits_along_its_minus_z_under_a_mirroring_transform(tmp_path, mirror, moving):
+    """A RectLight 2 x 2 at height h facing down lights the point of the floor below its centre with
+    E = 2 L (X / sqrt(1 + X^2) atan(Y / sqrt(1 + X^2)) + Y / sqrt(1 + Y^2) atan(X / sqrt(1 + Y^2))), X = a / h and
+    Y = b / h for half-sides a, b (four times a corner rectangle's form factor), mirrored in X (its X x Y then
+    opposite its +Z) or not, still or moving."""
+    h = 0.5
+    stage = floor_stage(tmp_path / "rect.usda")
+    rect = UsdLux.RectLight.Define(stage, "/World/Panel")
+    rect.CreateIntensityAttr(3.0)
+    rect.CreateWidthAttr(2.0)
+    rect.CreateHeightAttr(2.0)
+    xf = UsdGeom.Xformable(rect)
+    t = xf.AddTranslateOp()
+    t.Set(Gf.Vec3d(0, h, 0))
+    if moving:
+        t.Set(Gf.Vec3d(-0.01, h, 0), 0.0)
+        t.Set(Gf.Vec3d(0.01, h, 0), 1.0)
+    xf.AddRotateXOp().Set(-90.0)
+    if mirror:
+        xf.AddScaleOp().Set(Gf.Vec3f(-1, 1, 1))
+    stage.Save()
+    X = Y = 1.0 / h
+    E = 2.0 * 3.0 * (X / math.sqrt(1 + X * X) * math.atan(Y / math.sqrt(1 + X * X))
+                     + Y / math.sqrt(1 + Y * Y) * math.atan(X / math.sqrt(1 + Y * Y)))
+    assert floor_radiance(tmp_path / "rect.usda", spp=64)[0] == pytest.approx(E / math.pi, rel=0.02)
 
 
 def test_rect_light_texture_reads_unmirrored_from_behind_the_light(tmp_path):

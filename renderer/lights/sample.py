@@ -155,19 +155,30 @@ def rect_frame(lights: Lights, li: int, s: float):
     ex = wp.transform_vector(m, wp.vec3(size[0], 0.0, 0.0))
     ey = wp.transform_vector(m, wp.vec3(0.0, size[1], 0.0))
     corner = wp.transform_point(m, wp.vec3(-0.5 * size[0], -0.5 * size[1], 0.0))
-    return corner, ex, ey, -wp.normalize(wp.cross(ex, ey))
+    return corner, ex, ey, emitting_side(m)
+
+
+@wp.func
+def emitting_side(m: wp.mat44):
+    """Unit normal of a rect or disk light's plane (the xy plane of its light-to-world m) on the side it emits
+    from: "along the -Z axis" (usdLux), the side -m z points to. That is -(m x) x (m y), but under a mirroring m
+    (negative determinant) whose (m x) x (m y) points away from m z (``table.emitting_sides``)."""
+    n = wp.normalize(wp.cross(wp.transform_vector(m, wp.vec3(1.0, 0.0, 0.0)),
+                              wp.transform_vector(m, wp.vec3(0.0, 1.0, 0.0))))
+    if wp.dot(n, wp.transform_vector(m, wp.vec3(0.0, 0.0, 1.0))) < 0.0:
+        return n
+    return -n
 
 
 @wp.func
 def disk_frame(lights: Lights, li: int, s: float):
-    """A disk light's world centre, emitting normal (its -z) and radius at time s."""
+    """A disk light's world centre, emitting normal (its -z side) and radius at time s."""
     if lights.xf_count[li] == 1:
         c = lights.centre_still[li]
         return wp.vec3(c[0], c[1], c[2]), lights.disk_front_still[li], c[3]
     m = light_matrix(lights, li, s)
-    ex = wp.transform_vector(m, wp.vec3(1.0, 0.0, 0.0))
-    ey = wp.transform_vector(m, wp.vec3(0.0, 1.0, 0.0))
-    return wp.transform_point(m, wp.vec3(0.0)), -wp.normalize(wp.cross(ex, ey)), lights.size[li][2] * wp.length(ex)
+    return wp.transform_point(m, wp.vec3(0.0)), emitting_side(m), lights.size[li][2] * wp.length(
+        wp.transform_vector(m, wp.vec3(1.0, 0.0, 0.0)))
 
 
 @wp.func

@@ -185,10 +185,7 @@ def rect_frames(matrices, sizes) -> np.ndarray:
     ex = m[:, :3, 0] * wh[:, :1]
     ey = m[:, :3, 1] * wh[:, 1:2]
     corner = m[:, :3, 3] - 0.5 * ex - 0.5 * ey
-    n = np.cross(ex, ey)
-    length = np.linalg.norm(n, axis=1, keepdims=True)
-    front = -np.divide(n, length, out=np.zeros_like(n), where=length > 0)
-    return np.stack([corner, ex, ey, front], 1).astype(np.float32)
+    return np.stack([corner, ex, ey, emitting_sides(m)], 1).astype(np.float32)
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -202,10 +199,14 @@ def z_axes(matrices) -> np.ndarray:
     return _unit(np.asarray(matrices, np.float64)[:, :3, 2])
 
 
-def disk_fronts(matrices) -> np.ndarray:
-    """(n, 3) float32: -(x axis x y axis) of each matrix, of unit length: a disk light's emitting side."""
+def emitting_sides(matrices) -> np.ndarray:
+    """(n, 3) float32: the unit normal of each matrix's xy plane on the side its -z axis points to: the side a
+    rect or disk light emits from ("along the -Z axis", usdLux). That is -(x axis x y axis), but for a mirroring
+    matrix (negative determinant), whose x x y points away from its z (``sample.emitting_side``)."""
     m = np.asarray(matrices, np.float64)
-    return -_unit(np.cross(m[:, :3, 0], m[:, :3, 1]))
+    n = np.cross(m[:, :3, 0], m[:, :3, 1])
+    side = np.where(np.einsum("ij,ij->i", n, m[:, :3, 2]) < 0.0, 1.0, -1.0)
+    return _unit(n * side[:, None])
 
 
 def centres(matrices, sizes) -> np.ndarray:
@@ -344,7 +345,7 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
     lt.rect_still = wp.array(rect_frames(still, size or [[0, 0, 0, 0]]).reshape(-1, 3), dtype=wp.vec3, device=device)
     lt.axis_still = wp.array(z_axes(still), dtype=wp.vec3, device=device)
     lt.centre_still = wp.array(centres(still, size or [[0, 0, 0, 0]]), dtype=wp.vec4, device=device)
-    lt.disk_front_still = wp.array(disk_fronts(still), dtype=wp.vec3, device=device)
+    lt.disk_front_still = wp.array(emitting_sides(still), dtype=wp.vec3, device=device)
     p = np.array(powers or [1.0], np.float64)
     p = p / p.sum()
     cdf_sel = np.cumsum(p)
