@@ -59,7 +59,7 @@ class Lights:
     # ... their origin in the world and size[2] (radius) times the length of their x axis: a sphere's or disk's
     # centre and world radius (``sample.sphere_frame``, ``disk_frame``: 2 % of the dof scene's kernel from xf_still)
     centre_still: wp.array(dtype=wp.vec4)
-    disk_front_still: wp.array(dtype=wp.vec3)  # ... and -(x axis x y axis), unit: a disk's emitting side
+    disk_front_still: wp.array(dtype=wp.vec3)  # ... and a disk's emitting side (``emitting_sides``)
     keys: MotionKeys
     select_cdf: wp.array(dtype=wp.float32)  # (count,) cumulative selection probability
     select_pdf: wp.array(dtype=wp.float32)  # (count,) probability of choosing each light
