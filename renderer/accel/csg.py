@@ -28,6 +28,7 @@ from renderer.accel.intersect import (
     Geometry,
     Hit,
     corner_index,
+    found,
     instance_visible,
     instance_world_to_object,
     leaf_hit,
@@ -184,12 +185,7 @@ def csg_closest(geo: Geometry, ro: wp.vec3, rd: wp.vec3, s: float, best: Hit):
             mask = mask ^ (1 << geo.inst_csg_operand[inst])
             now = csg_inside(op, mask, nops)
             if now != inside:
-                best.t = t
-                best.inst = inst
-                best.tri = tri
-                best.b1 = b1
-                best.b2 = b2
-                best.ng = wp.vec3(0.0)
+                best = found(t, inst, tri, b1, b2, wp.vec3(0.0))
                 break
             t_cur = t
     return best

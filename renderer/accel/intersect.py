@@ -138,6 +138,19 @@ class Hit:
 
 
 @wp.func
+def found(t: float, inst: int, tri: int, b1: float, b2: float, ng: wp.vec3):
+    """The ``Hit`` a walk records: every field anew, so that no nearer hit keeps a farther one's normal."""
+    h = Hit()
+    h.t = t
+    h.inst = inst
+    h.tri = tri
+    h.b1 = b1
+    h.b2 = b2
+    h.ng = ng
+    return h
+
+
+@wp.func
 def safe_inverse(d: wp.vec3):
     e = float(1.0e-30)
     return wp.vec3(1.0 / wp.where(wp.abs(d[0]) < e, e, d[0]),
@@ -413,12 +426,7 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, inv_d: wp.vec3
         sp = 0
         t, part, n = shape_hits(kind, geo.mesh_shape_axis[m], geo.mesh_shape_param[m], ro, rd, t_best)
         if t < t_best:
-            best.t = t
-            best.inst = inst
-            best.tri = geo.mesh_tri_off[m]
-            best.b1 = float(part)
-            best.b2 = 0.0
-            best.ng = wp.vec3(0.0)
+            best = found(t, inst, geo.mesh_tri_off[m], float(part), 0.0, wp.vec3(0.0))
     while sp > 0:
         sp -= 1
         if dist[sp] < t_best:
@@ -429,34 +437,20 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, inv_d: wp.vec3
                     r = leaf_closest(geo.leaf_v0, geo.leaf_e1, geo.leaf_e2, poff + first, count, ro, rd, t_best)
                     if r[3] >= 0.0:
                         t_best = r[0]
-                        best.t = r[0]
-                        best.inst = inst
-                        best.tri = geo.mesh_tri_off[m] + geo.blas_prim[poff + first + int(r[3])]
-                        best.b1 = r[1]
-                        best.b2 = r[2]
-                        best.ng = wp.vec3(0.0)
+                        best = found(r[0], inst, geo.mesh_tri_off[m] + geo.blas_prim[poff + first + int(r[3])],
+                                     r[1], r[2], wp.vec3(0.0))
                 else:
                     for i in range(count):
                         if is_cloud(kind):  # a sphere or disc of a point cloud
                             tp, np_, lp = point_hit(geo, m, kind, poff + first + i, nk, k0, k1, u, ro, rd, t_best)
                             if tp < t_best:
                                 t_best = tp
-                                best.t = tp
-                                best.inst = inst
-                                best.tri = geo.mesh_tri_off[m] + lp
-                                best.b1 = 0.0
-                                best.b2 = 0.0
-                                best.ng = wp.vec3(0.0)
+                                best = found(tp, inst, geo.mesh_tri_off[m] + lp, 0.0, 0.0, wp.vec3(0.0))
                         else:
                             t, b1, b2, lt = leaf_hit(geo, m, poff + first + i, nk, k0, k1, u, ro, rd, t_best)
                             if t < t_best:
                                 t_best = t
-                                best.t = t
-                                best.inst = inst
-                                best.tri = geo.mesh_tri_off[m] + lt
-                                best.b1 = b1
-                                best.b2 = b2
-                                best.ng = wp.vec3(0.0)
+                                best = found(t, inst, geo.mesh_tri_off[m] + lt, b1, b2, wp.vec3(0.0))
             else:
                 d, c = q_entries(geo.blas_node, noff + ref * nk, k0, k1, u, ro, inv_d, t_best)
                 d, c = far_to_near(d, c)
@@ -473,12 +467,8 @@ def embree_mesh_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: f
     """``blas_closest`` of a mesh Embree holds (``geo.mesh_embree[m]`` != 0): its walk instead of ours."""
     eh = embree_closest(geo.embree_closest_fn, geo.mesh_embree[m], ro, rd, tmax)
     if eh[3] >= wp.float64(0.0):
-        best.t = float(eh[0])
-        best.inst = inst
-        best.tri = geo.mesh_tri_off[m] + int(eh[3])
-        best.b1 = float(eh[1])
-        best.b2 = float(eh[2])
-        best.ng = wp.vec3(float(eh[4]), float(eh[5]), float(eh[6]))
+        return found(float(eh[0]), inst, geo.mesh_tri_off[m] + int(eh[3]), float(eh[1]), float(eh[2]),
+                     wp.vec3(float(eh[4]), float(eh[5]), float(eh[6])))
     return best
 
 
