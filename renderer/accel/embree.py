@@ -7,6 +7,11 @@ same way. We take the library from the ``embreex`` wheel, which ships Embree 4.4
 its C API through ``ctypes`` (building) and through function pointers handed to the kernels (tracing): nothing of
 ours is linked against it, so the shipped kernels stay portable and a machine without it renders with our walk.
 
+Embree holds a mesh's triangles paired into quads (``accel.quads``: two triangles in the memory of one and a half,
+and the rays a little faster) and reads its vertices in place from the upload's points. On the heavy bench scene
+that took Embree's share from 73.1 to 55.4 bytes per triangle, the quads' index buffer and the codes that map a hit
+back to a triangle included.
+
 What Embree answers, per mesh (``EmbreeScenes``): the closest hit of a still triangle mesh (not an exact shape,
 not a point cloud, not deforming), and the shadow test of such a mesh when every material it uses is opaque for
 shadow rays (``materials.opaque_for_shadows``), where the first crossing found settles the
@@ -30,13 +35,17 @@ import threading
 import numpy as np
 import warp as wp
 
+from renderer.accel import quads
+
 log = logging.getLogger(__name__)
 
 # rtcore_common.h / rtcore_buffer.h / rtcore_geometry.h / rtcore_scene.h
 RTC_GEOMETRY_TYPE_TRIANGLE = 0
+RTC_GEOMETRY_TYPE_QUAD = 1
 RTC_BUFFER_TYPE_INDEX = 0
 RTC_BUFFER_TYPE_VERTEX = 1
 RTC_FORMAT_UINT3 = 0x5003
+RTC_FORMAT_UINT4 = 0x5004
 RTC_FORMAT_FLOAT3 = 0x9003
 RTC_BUILD_QUALITY_MEDIUM = 1
 
@@ -119,45 +128,67 @@ class EmbreeScenes:
         self._monitor = _MONITOR(monitor)  # referenced here: Embree calls it for the device's lifetime
         lib.rtcSetDeviceMemoryMonitorFunction(self.device, self._monitor, None)
         self._scenes: list[int] = []
-        self._shared: list[np.ndarray] = []  # index buffers Embree reads from our memory
+        self._shared: list[np.ndarray] = []  # vertex and index buffers Embree reads from our memory
         self.closest_fn = ctypes.cast(lib.rtcIntersect1, ctypes.c_void_p).value
         self.occluded_fn = ctypes.cast(lib.rtcOccluded1, ctypes.c_void_p).value
 
-    def add_mesh(self, points: np.ndarray, triangles: np.ndarray) -> int:
-        """A committed scene of one triangle mesh (points (V, 3), triangles (T, 3) indices); its handle, or 0 when
-        Embree refuses it."""
+    def add_mesh(self, points: np.ndarray, triangles: np.ndarray,
+                 padded: bool = False) -> tuple[int, np.ndarray | None]:
+        """A committed scene of one triangle mesh (points (V, 3), triangles (T, 3) indices): its handle (0 when
+        Embree refuses it) and, when its triangles went in paired as quads (``accel.quads``), the codes that map a
+        quad's hit back to a triangle (None: Embree holds the triangles themselves and reports their indices).
+        ``padded``: ``points`` is float32 (V, 3) in rows of 12 bytes and at least 4 readable bytes follow its
+        last row (Embree loads a vertex 16 bytes at a time), so Embree reads it in place instead of copying it."""
         lib = self.lib
+        if padded and not (points.dtype == np.float32 and points.ndim == 2 and points.shape[1] == 3
+                           and points.flags.c_contiguous):
+            raise ValueError("padded points must be a C-contiguous float32 (V, 3) array")
         pts = np.ascontiguousarray(points, np.float32).reshape(-1, 3)
         tris = np.ascontiguousarray(triangles).reshape(-1, 3)
         if len(tris) and (tris.min() < 0 or tris.max() >= len(pts)):
-            return 0  # indices Embree would read out of bounds with (a mesh's are checked when it is loaded)
-        if tris.dtype not in (np.int32, np.uint32):
-            tris = tris.astype(np.uint32)
+            return 0, None  # indices Embree would read out of bounds with (a mesh's are checked when it is loaded)
+        codes = None
+        if len(tris) < quads.MAX_TRIANGLES:
+            index, codes = quads.pair_triangles(pts, tris)
+            kind, fmt = RTC_GEOMETRY_TYPE_QUAD, RTC_FORMAT_UINT4
+        else:
+            index = tris if tris.dtype in (np.int32, np.uint32) else tris.astype(np.uint32)
+            kind, fmt = RTC_GEOMETRY_TYPE_TRIANGLE, RTC_FORMAT_UINT3
         scene = lib.rtcNewScene(self.device)
         # Embree's fast triangle test (Moller-Trumbore, as ours): its robust mode (watertight edges, what Cycles
         # asks for) traced the heavy scene's rays 18 % slower (``bench/embree_rays.py``: 1.14 against 1.39 M/s)
         lib.rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_MEDIUM)
-        geom = lib.rtcNewGeometry(self.device, RTC_GEOMETRY_TYPE_TRIANGLE)
-        # The vertices in an Embree-owned copy, which it pads for its 16-byte loads of the last vertex (counted in
-        # ``nbytes``); the indices shared with the mesh, kept alive here (int32 indices >= 0 are uint32 bits)
-        vb = lib.rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 12, len(pts))
-        if not vb:
-            lib.rtcReleaseGeometry(geom)
-            lib.rtcReleaseScene(scene)
-            return 0
-        ctypes.memmove(vb, pts.ctypes.data, pts.nbytes)
-        self._shared.append(tris)
-        lib.rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, tris.ctypes.data, 0, 12,
-                                       len(tris))
+        geom = lib.rtcNewGeometry(self.device, kind)
+        # The vertices read in place when padded, else an Embree-owned copy, which it pads itself (counted in
+        # ``nbytes``); the index buffer shared, kept alive here (int32 indices >= 0 are uint32 bits) and counted
+        # when it is not the mesh's own
+        if padded:
+            self._shared.append(pts)
+            lib.rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, pts.ctypes.data, 0,
+                                           12, len(pts))
+        else:
+            vb = lib.rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 12, len(pts))
+            if not vb:
+                lib.rtcReleaseGeometry(geom)
+                lib.rtcReleaseScene(scene)
+                return 0, None
+            ctypes.memmove(vb, pts.ctypes.data, pts.nbytes)
+        lib.rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, fmt, index.ctypes.data, 0, index.strides[0],
+                                       len(index))
         lib.rtcCommitGeometry(geom)
         lib.rtcAttachGeometry(scene, geom)
         lib.rtcReleaseGeometry(geom)  # the scene holds it
         lib.rtcCommitScene(scene)
         if lib.rtcGetDeviceError(self.device) != 0:
             lib.rtcReleaseScene(scene)
-            return 0
+            return 0, None
         self._scenes.append(scene)
-        return int(scene)
+        if codes is not None:  # a copy of the mesh's own indices, unlike the triangles' buffer
+            self._shared.append(index)
+            self.nbytes += index.nbytes
+        else:
+            self._shared.append(tris)
+        return int(scene), codes
 
     def close(self) -> None:
         for s in self._scenes:

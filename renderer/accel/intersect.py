@@ -23,6 +23,7 @@ import warp as wp
 
 from renderer.accel.analytic import SHAPE_DISCS, is_cloud, shape_hits, sphere_roots
 from renderer.accel.embree import embree_closest
+from renderer.accel.quads import quad_triangle
 from renderer.accel.quantize import QNode, q_entries
 from renderer.accel.wide import (WideBoxes, dist_stack_t, entries, far_to_near, leaf_range, root_entered,
                                  wide_stack_t)
@@ -83,6 +84,9 @@ class Geometry:
     # Embree's rtcIntersect1 and rtcOccluded1
     mesh_embree: wp.array(dtype=wp.uint64)
     mesh_embree_shadow: wp.array(dtype=wp.int32)
+    # per mesh: where its quads' codes start in embree_quad_codes (``accel.quads``), or -1 (Embree holds triangles)
+    mesh_embree_quad_off: wp.array(dtype=wp.int32)
+    embree_quad_codes: wp.array(dtype=wp.int32)
     embree_closest_fn: wp.uint64
     embree_occluded_fn: wp.uint64
     # --- top level
@@ -466,10 +470,16 @@ def blas_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, inv_d: wp.vec3
 def embree_mesh_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: float, best: Hit, inst: int):
     """``blas_closest`` of a mesh Embree holds (``geo.mesh_embree[m]`` != 0): its walk instead of ours."""
     eh = embree_closest(geo.embree_closest_fn, geo.mesh_embree[m], ro, rd, tmax)
-    if eh[3] >= wp.float64(0.0):
-        return found(float(eh[0]), inst, geo.mesh_tri_off[m] + int(eh[3]), float(eh[1]), float(eh[2]),
-                     wp.vec3(float(eh[4]), float(eh[5]), float(eh[6])))
-    return best
+    if eh[3] < wp.float64(0.0):
+        return best
+    tri = int(eh[3])
+    b1 = float(eh[1])
+    b2 = float(eh[2])
+    off = geo.mesh_embree_quad_off[m]
+    if off >= 0:
+        tri, b1, b2 = quad_triangle(geo.embree_quad_codes, off, tri, b1, b2)
+    ng = wp.vec3(float(eh[4]), float(eh[5]), float(eh[6]))
+    return found(float(eh[0]), inst, geo.mesh_tri_off[m] + tri, b1, b2, ng)
 
 
 @wp.func(inline=True)  # no copy of the Geometry struct
