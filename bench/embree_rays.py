@@ -36,6 +36,7 @@ def main() -> None:
     wp.config.quiet = True
     from renderer.accel import embree
     from renderer.accel.intersect import Geometry, intersect_closest
+    from renderer.accel.quads import order_for_quads
     from renderer.accel.upload import upload_geometry
     from renderer.render import load_kernels
     from renderer.scene.flatten import flatten_still_instances
@@ -51,7 +52,7 @@ def main() -> None:
         t[i] = h.t
 
     load_kernels()
-    scene = flatten_still_instances(load_scene(args.scene))
+    scene = order_for_quads(flatten_still_instances(load_scene(args.scene)))  # as a render prepares it
     big = max(range(len(scene.meshes)), key=lambda i: len(scene.meshes[i].triangles))
     mesh = scene.meshes[big]
     scene.meshes = [mesh]  # the largest mesh alone, in its own space

@@ -22,6 +22,7 @@ import warp as wp
 
 from renderer import integrator, kernel_cache
 from renderer.accel import build_kernels, quantize, triangle_kernels, wide
+from renderer.accel.quads import order_for_quads
 from renderer.accel.upload import GeometryStats, upload_geometry
 from renderer.camera import CameraSetup, ndc_matrix, setup_camera
 from renderer.device import init_warp
@@ -117,7 +118,7 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> Prepar
     if width * height > MAX_PIXELS:
         raise SettingsError(f"image of {width}x{height} pixels is too large")
     dof = options.dof and not scene.render_settings.disable_depth_of_field
-    flat = flatten_still_instances(scene)
+    flat = order_for_quads(flatten_still_instances(scene))  # before anything reads triangle indices
     geometry, stats = upload_geometry(flat, device)
     warnings = list(scene.warnings)
     textures = upload_material_textures(flat.materials, device, warn=warnings.append)

@@ -163,7 +163,7 @@ def test_the_interval_is_open_and_bad_rays_miss():
     quad = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float32)
     scenes = embree.EmbreeScenes(embree.library())
     handle, codes = scenes.add_mesh(quad, np.array([[0, 1, 2], [0, 2, 3]]))  # int64 indices: converted
-    assert handle != 0 and codes.shape == (1, 2)  # one quad: the two triangles paired across their diagonal
+    assert handle != 0 and list(codes) == [0]  # one run of two triangles (not laid out in pairs)
     assert scenes.add_mesh(quad, np.array([[0, 1, 4]])) == (0, None)  # an index past the vertices: refused
     down = [0.0, 0.0, -1.0]
     ro = np.array([[0.3, 0.2, 1.0], [0.3, 0.2, 1.0], [0.3, 0.2, 0.0], [np.nan, 0, 1], [0.3, 0.2, np.inf],
@@ -173,7 +173,7 @@ def test_the_interval_is_open_and_bad_rays_miss():
     hits, occ = _trace(scenes, handle, ro, rd, tmax)
     assert list(hits[:, 3] >= 0) == [False, True, False, False, False, False, True]  # an endless ray hits too
     assert list(occ) == [0, 1, 0, 0, 0, 0, 1]
-    assert hits[1, 0] == 1.0 and hits[1, 3] == 0
+    assert hits[1, 0] == 1.0 and hits[1, 3] in (0, 1) and hits[1, 7] == 0
     np.testing.assert_allclose(hits[1, 1] + hits[1, 2] <= 1.0, True)
     scenes.close()
 

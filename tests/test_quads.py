@@ -1,6 +1,7 @@
-"""Triangles paired into quads for Embree (``renderer.accel.quads``): which triangles pair, that each quad's halves
-are its triangles' own corners, that a hit's quad parameters map back to the right triangle and barycentrics, and
-that Embree holding quads finds what our walk finds on a real (connected, curved) mesh."""
+"""Triangles laid out in pairs for Embree's quads (``renderer.accel.quads``): which triangles pair, that the layout
+keeps the surface, its per-corner data and the mesh lights' ranges, that the runs found read as quads made of the
+mesh's own triangles, that a hit's quad parameters map back to the right triangle and barycentrics, and that
+Embree holding quads finds what our walk finds on a real (connected, curved) mesh, in less memory."""
 from __future__ import annotations
 
 import numpy as np
@@ -9,10 +10,10 @@ import warp as wp
 
 from renderer.accel import embree
 from renderer.accel.intersect import Geometry, intersect_closest
-from renderer.accel.quads import pair_triangles, quad_triangle
+from renderer.accel.quads import embree_triangle, order_for_quads, quad_order, quad_runs, reorder_mesh
 from renderer.accel.upload import upload_geometry
 from renderer.integrator import surface_at
-from renderer.scene.model import Camera, Instance, Material, Mesh, MotionTransform, Scene
+from renderer.scene.model import LIGHT_MESH, Camera, Instance, Light, Material, Mesh, MotionTransform, Scene
 from tests.test_accel import rot_y
 
 
@@ -35,97 +36,181 @@ def bumpy_grid(rng, nx=40, ny=30, flip=None):
     return pts, tris
 
 
-def _check_halves(tris, quads, codes):
-    """Each quad's first half (v0, v1, v3) and second (v2, v3, v1) are the coded triangle's corners k + 2, k, k + 1
-    (a lone triangle's second half degenerate: v3 == v2); every triangle is in exactly one half."""
-    for half, cols in ((0, [0, 1, 3]), (1, [2, 3, 1])):
-        t, k = codes[:, half] >> 2, codes[:, half] & 3
-        lone = codes[:, 0] == codes[:, 1]
-        rot = tris[t[:, None], (k[:, None] + np.array([2, 0, 1])) % 3]
-        want = quads[:, cols]
-        if half == 1:
-            np.testing.assert_array_equal(quads[lone, 2], quads[lone, 3])
-            rot, want = rot[~lone], want[~lone]
-        np.testing.assert_array_equal(rot, want)
-    lone = codes[:, 0] == codes[:, 1]
-    listed = np.concatenate([codes[:, 0] >> 2, codes[~lone, 1] >> 2])
-    np.testing.assert_array_equal(np.sort(listed), np.arange(len(tris)))
+def _canonical(tris):
+    """Each triangle as the rotation of its corners that starts at its smallest index: equal rows are the same
+    triangle, wound the same way."""
+    tris = np.asarray(tris)
+    r = tris.argmin(1)[:, None]
+    return tris[np.arange(len(tris))[:, None], (r + np.arange(3)) % 3]
 
 
-def test_a_triangulated_grid_pairs_every_triangle_with_its_cells_other_half():
+def _same_triangles(a, b):
+    np.testing.assert_array_equal(np.unique(_canonical(a), axis=0), np.unique(_canonical(b), axis=0))
+
+
+def _check_runs(tris, runs):
+    """The runs cover the triangles in order, and each quad read as Embree reads it, (v0, v1, v2, v3) from the
+    pair's second index, has halves (v0, v1, v3) and (v2, v3, v1) that are the pair's triangles as stored, up to
+    rotation."""
+    t = 0
+    flat = np.asarray(tris).reshape(-1)
+    for first, count, is_quad in runs:
+        assert first == t and count > 0
+        if is_quad:
+            for q in range(count):
+                v = flat[3 * (first + 2 * q) + 1:3 * (first + 2 * q) + 5]
+                np.testing.assert_array_equal(_canonical(v[[0, 1, 3]][None]), _canonical(tris[first + 2 * q][None]))
+                np.testing.assert_array_equal(_canonical(v[[2, 3, 1]][None]),
+                                              _canonical(tris[first + 2 * q + 1][None]))
+            t += 2 * count
+        else:
+            t += count
+    assert t == len(tris)
+
+
+def test_a_triangulated_grid_is_laid_out_as_one_run_of_quads_with_its_corner_data():
     rng = np.random.default_rng(1)
     pts, tris = bumpy_grid(rng)
-    quads, codes = pair_triangles(pts, tris)
-    assert quads.dtype == np.uint32 and codes.dtype == np.int32
-    assert len(quads) == len(tris) // 2  # every cell's diagonal is both its triangles' longest edge
-    _check_halves(tris, quads, codes)
-    # each quad is a grid cell: four distinct corners
-    assert all(len(set(q)) == 4 for q in quads.tolist())
-    again = pair_triangles(pts, tris)
-    np.testing.assert_array_equal(again[0], quads)
-    np.testing.assert_array_equal(again[1], codes)
+    order, shift = quad_order(pts, tris)
+    np.testing.assert_array_equal(np.sort(order), np.arange(len(tris)))
+    uvs = pts[tris][:, :, :2].copy()  # per-corner data: the corner's own x, y
+    mesh = Mesh("grid", np.zeros(1, np.float32), pts[None], tris, np.arange(len(tris), dtype=np.int32), uvs=uvs,
+                solid=np.arange(len(tris)) % 2 == 0)
+    out = reorder_mesh(mesh, order, shift)
+    _same_triangles(out.triangles, tris)
+    np.testing.assert_array_equal(out.uvs, pts[out.triangles][:, :, :2])  # each corner kept its data
+    np.testing.assert_array_equal(_canonical(out.triangles), _canonical(tris[out.material_ids]))
+    np.testing.assert_array_equal(out.solid, mesh.solid[out.material_ids])
+    runs = quad_runs(out.triangles)
+    assert runs == [(0, len(tris) // 2, True)]  # every cell's diagonal is both its triangles' longest edge
+    _check_runs(out.triangles, runs)
+    again = quad_order(pts, tris)
+    np.testing.assert_array_equal(again[0], order)
+    np.testing.assert_array_equal(again[1], shift)
 
 
-def test_only_consistently_wound_edges_of_exactly_two_triangles_pair():
-    """A neighbour wound the other way, a third triangle on the edge, a degenerate triangle and a soup stay
-    alone, as quads (t0, t1, t2, t2)."""
+def test_only_consistently_wound_edges_of_exactly_two_triangles_in_one_range_pair():
+    """A neighbour wound the other way, a third triangle on the edge, a degenerate triangle and a soup stay alone;
+    no pair reaches across a cut, and every triangle stays in its range."""
     rng = np.random.default_rng(2)
-    pts, tris = bumpy_grid(rng, 12, 10, flip=np.arange(0, 240, 7))
-    quads, codes = pair_triangles(pts, tris)
-    _check_halves(tris, quads, codes)
-    lone = codes[:, 0] == codes[:, 1]
-    flipped = np.zeros(len(tris), bool)
-    flipped[np.arange(0, 240, 7)] = True
-    pairs = codes[~lone] >> 2
-    assert len(pairs) > 80
-    np.testing.assert_array_equal(flipped[pairs[:, 0]], flipped[pairs[:, 1]])  # never one of each
-    assert not flipped[pairs[:, 0]].all()
-    # a fin: three triangles on the edge 0-1; a degenerate triangle; a soup of separate triangles
+    flip = np.zeros(240, bool)
+    flip[np.arange(0, 240, 7)] = True
+    pts, tris = bumpy_grid(rng, 12, 10, flip=np.nonzero(flip)[0])
+    cuts = (50, 131)
+    order, shift = quad_order(pts, tris, cuts)
+    out = tris[order[:, None], (np.arange(3)[None] + shift[:, None]) % 3]
+    for lo, hi in ((0, 50), (50, 131), (131, 240)):
+        assert ((order[lo:hi] >= lo) & (order[lo:hi] < hi)).all()
+    runs = quad_runs(out)
+    _check_runs(out, runs)
+    pairs = [(order[f + 2 * q], order[f + 2 * q + 1]) for f, c, quad in runs if quad for q in range(c)]
+    assert len(pairs) > 20  # the grid is shuffled: many partners lie in another range
+    for i, j in pairs:
+        assert flip[i] == flip[j]  # never one of each winding
+        assert np.searchsorted(cuts, i, "right") == np.searchsorted(cuts, j, "right")
+    assert not all(flip[i] for i, _ in pairs)
+    # a fin: three triangles on the edge 0-1; a degenerate triangle
     p = np.array([[0, 0, 0], [2, 0, 0], [1, 1, 0], [1, -1, 0], [1, 0, 1], [5, 5, 5]], np.float32)
     fin = np.array([[0, 1, 2], [1, 0, 3], [1, 0, 4], [0, 5, 5]])
-    quads, codes = pair_triangles(p, fin)
-    assert len(quads) == 4 and (codes[:, 0] == codes[:, 1]).all()
-    np.testing.assert_array_equal(quads, fin[:, [0, 1, 2, 2]])
-    np.testing.assert_array_equal(codes[:, 0], np.arange(4) * 4 + 1)
+    order, shift = quad_order(p, fin)
+    np.testing.assert_array_equal(order, np.arange(4))
+    np.testing.assert_array_equal(shift, 0)
+    assert quad_runs(fin) == [(0, 4, False)]
     soup = np.arange(30).reshape(10, 3)
-    quads, codes = pair_triangles(rng.normal(size=(30, 3)), soup)
-    assert len(quads) == 10
-    assert pair_triangles(np.zeros((0, 3)), np.zeros((0, 3), np.int32))[0].shape == (0, 4)
+    assert quad_runs(soup[quad_order(rng.normal(size=(30, 3)), soup)[0]]) == [(0, 10, False)]
+    assert quad_runs(np.zeros((0, 3), np.int32)) == []
+
+
+def test_runs_are_found_leftmost_wherever_pairs_stand():
+    """Pairs of the layout's shape between lone triangles, and three shapes in a row (two overlapping pairs):
+    the runs are right quads, found leftmost first."""
+    a = [[13, 10, 11], [12, 13, 11]]  # the quad (10, 11, 12, 13)
+    b = [[23, 20, 21], [22, 23, 21]]
+    lone = [[0, 1, 2]]
+    tris = np.array(lone + a + b + lone + lone + a, np.int32)
+    runs = quad_runs(tris)
+    assert runs == [(0, 1, False), (1, 2, True), (5, 2, False), (7, 1, True)]
+    _check_runs(tris, runs)
+    near = np.array([[3, 0, 1], [2, 3, 5], [3, 0, 1], [3, 2, 1]], np.int32)  # one shared corner, or reversed
+    assert quad_runs(near) == [(0, 4, False)]
+    # a fan around corner 1: every neighbour has the shape, so the pairs are (0, 1) and (2, 3), not (1, 2)
+    chain = np.array([[3, 0, 1], [2, 3, 1], [4, 2, 1], [5, 4, 1]], np.int32)
+    runs = quad_runs(chain)
+    assert runs == [(0, 2, True)]
+    _check_runs(chain, runs)
+
+
+def test_mesh_lights_keep_their_triangles():
+    """A mesh light's range holds the same triangles after the layout (the light samples them by index); the
+    layout changes no other mesh (a deforming one) and not the scene it was given."""
+    rng = np.random.default_rng(6)
+    pts, tris = bumpy_grid(rng, 10, 10)
+    still = Mesh("grid", np.zeros(1, np.float32), pts[None], tris, np.zeros(len(tris), np.int32))
+    moving = Mesh("moving", np.array([0, 1], np.float32), np.stack([pts, pts + 0.1]), tris,
+                  np.zeros(len(tris), np.int32))
+    lights = [Light(LIGHT_MESH, "glow", (1, 1, 1), MotionTransform.static(np.eye(4)), instance=0,
+                    triangles=(37, 121))]
+    scene = Scene([still, moving], [Instance(0, MotionTransform.static(np.eye(4))),
+                                    Instance(1, MotionTransform.static(np.eye(4)))],
+                  [Material("m")], lights, Camera("cam", MotionTransform.static(np.eye(4))), 0, 0, 1)
+    out = order_for_quads(scene, min_triangles=2)
+    assert scene.meshes[0] is still and out.meshes[1] is moving
+    assert order_for_quads(scene).meshes[0] is still  # below the size where quads pay
+    for lo, hi in ((0, 37), (37, 121), (121, len(tris))):
+        _same_triangles(out.meshes[0].triangles[lo:hi], tris[lo:hi])
+    assert sum(c for _, c, q in quad_runs(out.meshes[0].triangles) if q) > 0.2 * len(tris)  # pairs (shuffled)
 
 
 @wp.kernel
-def _map_kernel(codes: wp.array(dtype=wp.int32), quad: wp.array(dtype=int), uv: wp.array(dtype=wp.vec2),
-                out: wp.array(dtype=wp.vec3)):
+def _map_kernel(geoms: wp.array(dtype=wp.int32), geom: wp.array(dtype=int), prim: wp.array(dtype=int),
+                uv: wp.array(dtype=wp.vec2), out: wp.array(dtype=wp.vec3)):
     i = wp.tid()
-    tri, b1, b2 = quad_triangle(codes, 0, quad[i], uv[i][0], uv[i][1])
+    tri, b1, b2 = embree_triangle(geoms, 0, geom[i], prim[i], uv[i][0], uv[i][1])
     out[i] = wp.vec3(float(tri), b1, b2)
 
 
 def test_a_quads_parameters_map_to_the_point_on_the_right_triangle():
-    """Points on either half of every quad, given as Embree reports them (the quad's (u, v): the first half's
-    barycentrics, or one minus the second's): the triangle found and its barycentrics give the same point, and the
-    point is on that triangle."""
+    """Points on either half of every quad and on every lone triangle, given as Embree reports them (a quad's
+    (u, v): the first half's barycentrics, or one minus the second's): the triangle found and its barycentrics
+    give the same point, and the point is on that triangle."""
     rng = np.random.default_rng(3)
-    pts, tris = bumpy_grid(rng, 10, 8)
-    quads, codes = pair_triangles(pts, tris)
-    n = 4000
-    q = rng.integers(0, len(quads), n)
-    s, t = rng.random(n), rng.random(n)
-    s, t = np.where(s + t > 1, 1 - s, s), np.where(s + t > 1, 1 - t, t)  # uniform on a triangle
-    second = rng.random(n) < 0.5
-    corners = np.where(second[:, None, None], pts[quads[q][:, [2, 3, 1]]], pts[quads[q][:, [0, 1, 3]]])
-    point = (1 - s - t)[:, None] * corners[:, 0] + s[:, None] * corners[:, 1] + t[:, None] * corners[:, 2]
-    uv = np.where(second[:, None], np.stack([1 - s, 1 - t], 1), np.stack([s, t], 1)).astype(np.float32)
+    pts, tris = bumpy_grid(rng, 10, 8, flip=np.arange(0, 160, 9))
+    order, shift = quad_order(pts, tris)
+    tris = tris[order[:, None], (np.arange(3)[None] + shift[:, None]) % 3]
+    runs = quad_runs(tris)
+    assert any(q for *_, q in runs) and not all(q for *_, q in runs)
+    codes = np.array([2 * f + int(q) for f, _, q in runs], np.int32)
+    flat = tris.reshape(-1)
+    geom, prim, uv, point, want = [], [], [], [], []
+    for g, (first, count, is_quad) in enumerate(runs):
+        for p in range(count):
+            for _ in range(8):
+                s, t = rng.random(2)
+                s, t = (1 - s, 1 - t) if s + t > 1 else (s, t)
+                if is_quad:
+                    v = pts[flat[3 * (first + 2 * p) + 1:3 * (first + 2 * p) + 5]]
+                    second = rng.random() < 0.5
+                    c = v[[2, 3, 1]] if second else v[[0, 1, 3]]
+                    uv.append((1 - s, 1 - t) if second else (s, t))
+                    want.append(first + 2 * p + int(second))
+                else:
+                    c = pts[tris[first + p]]
+                    uv.append((s, t))
+                    want.append(first + p)
+                geom.append(g)
+                prim.append(p)
+                point.append((1 - s - t) * c[0] + s * c[1] + t * c[2])
+    n = len(geom)
     out = wp.zeros(n, dtype=wp.vec3)
-    wp.launch(_map_kernel, dim=n, inputs=[wp.array(codes.ravel(), dtype=wp.int32), wp.array(q, dtype=int),
-                                          wp.array(uv, dtype=wp.vec2), out])
+    wp.launch(_map_kernel, dim=n, inputs=[wp.array(codes, dtype=wp.int32), wp.array(geom, dtype=int),
+                                          wp.array(prim, dtype=int), wp.array(np.array(uv, np.float32),
+                                                                              dtype=wp.vec2), out])
     out = out.numpy()
     tri, b1, b2 = out[:, 0].astype(int), out[:, 1], out[:, 2]
-    want = np.where(second, codes[q, 1] >> 2, codes[q, 0] >> 2)
     np.testing.assert_array_equal(tri, want)
     c = pts[tris[tri]]
     mapped = (1 - b1 - b2)[:, None] * c[:, 0] + b1[:, None] * c[:, 1] + b2[:, None] * c[:, 2]
-    np.testing.assert_allclose(mapped, point, atol=1e-6)
+    np.testing.assert_allclose(mapped, np.array(point), atol=1e-6)
     assert (b1 >= -1e-6).all() and (b2 >= -1e-6).all() and (b1 + b2 <= 1 + 1e-6).all()
 
 
@@ -156,21 +241,25 @@ def _hits(geo, ro, rd):
 
 @pytest.mark.skipif(embree.library() is None, reason="Embree (embreex) is not available")
 def test_embree_holding_quads_finds_the_triangle_point_and_side_our_walk_finds(monkeypatch):
-    """A curved grid, some triangles wound the other way, through a rotated, scaled instance and a plain one: the
-    same triangle as our walk (but for ties on shared edges, at the same distance), the same barycentrics, the
-    same facing normal from Embree's hit as from the corners and the same side, and the same shadow answers."""
+    """A curved grid laid out in pairs, some triangles wound the other way (left alone), through a rotated, scaled
+    instance and a plain one: the same triangle as our walk (but for ties on shared edges, at the same distance),
+    the same barycentrics, the same facing normal from Embree's hit as from the corners and the same side, the
+    same shadow answers; and Embree's share of the memory below what it takes for the triangles unpaired."""
     from tests.test_accel import _probe
 
     rng = np.random.default_rng(4)
     pts, tris = bumpy_grid(rng, 30, 24, flip=np.arange(5, 1440, 11))
     mesh = Mesh("grid", np.zeros(1, np.float32), pts[None], tris, np.zeros(len(tris), np.int32))
     place = np.diag([1.5, 0.7, 1.0, 1.0]) @ rot_y(35, (0.2, 0, 0))
-    scene = Scene([mesh], [Instance(0, MotionTransform.static(place)),
-                           Instance(0, MotionTransform.static(rot_y(0, (0.5, 0.3, -1.0))))],
-                  [Material("m")], [], Camera("cam", MotionTransform.static(np.eye(4))), 0, 0, 1)
+    unordered = Scene([mesh], [Instance(0, MotionTransform.static(place)),
+                               Instance(0, MotionTransform.static(rot_y(0, (0.5, 0.3, -1.0))))],
+                      [Material("m")], [], Camera("cam", MotionTransform.static(np.eye(4))), 0, 0, 1)
+    scene = order_for_quads(unordered, min_triangles=2)
     geo, stats = upload_geometry(scene)
-    assert geo.mesh_embree.numpy()[0] != 0 and geo.mesh_embree_quad_off.numpy()[0] == 0
-    assert len(geo.embree_quad_codes.numpy()) < 1.2 * len(tris)  # two codes per quad: most are pairs
+    assert geo.mesh_embree.numpy()[0] != 0
+    codes = geo.embree_geoms.numpy()
+    assert 1 < len(codes) <= 2 and codes[0] == 1  # a run of quads from triangle 0, then the lone triangles
+    assert stats.embree_nbytes < 0.9 * upload_geometry(unordered)[1].embree_nbytes  # a sixth left alone here
     with monkeypatch.context() as m:
         m.setattr(embree, "library", lambda: None)
         ours = upload_geometry(scene)[0]

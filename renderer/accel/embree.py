@@ -7,10 +7,10 @@ same way. We take the library from the ``embreex`` wheel, which ships Embree 4.4
 its C API through ``ctypes`` (building) and through function pointers handed to the kernels (tracing): nothing of
 ours is linked against it, so the shipped kernels stay portable and a machine without it renders with our walk.
 
-Embree holds a mesh's triangles paired into quads (``accel.quads``: two triangles in the memory of one and a half,
-and the rays a little faster) and reads its vertices in place from the upload's points. On the heavy bench scene
-that took Embree's share from 73.1 to 55.4 bytes per triangle, the quads' index buffer and the codes that map a hit
-back to a triangle included.
+Embree holds the runs of a mesh's triangles that ``order_for_quads`` laid out in pairs as quads (``accel.quads``:
+two triangles in the leaf memory of one and a quarter, the rays a little faster), the rest as triangles, and reads
+both the vertices and the indices in place from the upload's own arrays. On the heavy bench scene that took
+Embree's share from 73.1 to 43.0 bytes per triangle (``bench/embree_rays.py``).
 
 What Embree answers, per mesh (``EmbreeScenes``): the closest hit of a still triangle mesh (not an exact shape,
 not a point cloud, not deforming), and the shadow test of such a mesh when every material it uses is opaque for
@@ -48,6 +48,9 @@ RTC_FORMAT_UINT3 = 0x5003
 RTC_FORMAT_UINT4 = 0x5004
 RTC_FORMAT_FLOAT3 = 0x9003
 RTC_BUILD_QUALITY_MEDIUM = 1
+# geometries (runs of pairs and of lone triangles) a mesh's scene may hold, beyond one per 64 triangles, before it
+# takes plain triangles: each costs Embree a geometry record, and a run of a few triangles saves nothing
+MAX_RUNS = 64
 
 _MONITOR = ctypes.CFUNCTYPE(ctypes.c_bool, ctypes.c_void_p, ctypes.c_ssize_t, ctypes.c_bool)
 _lock = threading.Lock()
@@ -98,7 +101,10 @@ def library() -> ctypes.CDLL | None:
             ("rtcCommitScene", None, [vp]),
             ("rtcNewGeometry", vp, [vp, ctypes.c_int]),
             ("rtcReleaseGeometry", None, [vp]),
-            ("rtcSetNewGeometryBuffer", vp, [vp, ctypes.c_int, u32, ctypes.c_int, sz, sz]),
+            ("rtcNewBuffer", vp, [vp, sz]),
+            ("rtcGetBufferData", vp, [vp]),
+            ("rtcReleaseBuffer", None, [vp]),
+            ("rtcSetGeometryBuffer", None, [vp, ctypes.c_int, u32, ctypes.c_int, vp, sz, sz, sz]),
             ("rtcSetSharedGeometryBuffer", None, [vp, ctypes.c_int, u32, ctypes.c_int, vp, sz, sz, sz]),
             ("rtcCommitGeometry", None, [vp]),
             ("rtcAttachGeometry", u32, [vp, vp]),
@@ -133,62 +139,75 @@ class EmbreeScenes:
         self.occluded_fn = ctypes.cast(lib.rtcOccluded1, ctypes.c_void_p).value
 
     def add_mesh(self, points: np.ndarray, triangles: np.ndarray,
-                 padded: bool = False) -> tuple[int, np.ndarray | None]:
-        """A committed scene of one triangle mesh (points (V, 3), triangles (T, 3) indices): its handle (0 when
-        Embree refuses it) and, when its triangles went in paired as quads (``accel.quads``), the codes that map a
-        quad's hit back to a triangle (None: Embree holds the triangles themselves and reports their indices).
-        ``padded``: ``points`` is float32 (V, 3) in rows of 12 bytes and at least 4 readable bytes follow its
-        last row (Embree loads a vertex 16 bytes at a time), so Embree reads it in place instead of copying it."""
+                 shared: bool = False) -> tuple[int, np.ndarray | None]:
+        """A committed scene of one triangle mesh (points (V, 3), triangles (T, 3) indices): its handle, 0 when
+        Embree refuses it, and its geometries' codes for ``quads.embree_triangle`` (per geometry, its first
+        triangle * 2, plus 1 for a run of quads). Runs of triangles laid out in pairs (``quads.quad_runs``) go in
+        as quads. ``shared``: ``points`` is float32 (V, 3) with at least 4 readable bytes after its last row
+        (Embree loads a vertex 16 bytes at a time) and ``triangles`` int32 (T, 3), both C-contiguous and alive as
+        long as this object: Embree then reads them in place; else it reads copies."""
         lib = self.lib
-        if padded and not (points.dtype == np.float32 and points.ndim == 2 and points.shape[1] == 3
-                           and points.flags.c_contiguous):
-            raise ValueError("padded points must be a C-contiguous float32 (V, 3) array")
+        if shared and not (points.dtype == np.float32 and points.ndim == 2 and points.shape[1] == 3
+                           and points.flags.c_contiguous and triangles.dtype == np.int32
+                           and triangles.ndim == 2 and triangles.shape[1] == 3 and triangles.flags.c_contiguous):
+            raise ValueError("shared points must be C-contiguous float32 (V, 3), triangles int32 (T, 3)")
         pts = np.ascontiguousarray(points, np.float32).reshape(-1, 3)
-        tris = np.ascontiguousarray(triangles).reshape(-1, 3)
+        tris = np.ascontiguousarray(triangles, np.int32).reshape(-1, 3)
         if len(tris) and (tris.min() < 0 or tris.max() >= len(pts)):
             return 0, None  # indices Embree would read out of bounds with (a mesh's are checked when it is loaded)
-        codes = None
-        if len(tris) < quads.MAX_TRIANGLES:
-            index, codes = quads.pair_triangles(pts, tris)
-            kind, fmt = RTC_GEOMETRY_TYPE_QUAD, RTC_FORMAT_UINT4
-        else:
-            index = tris if tris.dtype in (np.int32, np.uint32) else tris.astype(np.uint32)
-            kind, fmt = RTC_GEOMETRY_TYPE_TRIANGLE, RTC_FORMAT_UINT3
+        runs = quads.quad_runs(tris) if len(tris) < quads.MAX_TRIANGLES else [(0, len(tris), False)]
+        if len(runs) > max(MAX_RUNS, len(tris) // 64):  # pairs scattered through the mesh: plain triangles
+            runs = [(0, len(tris), False)]
         scene = lib.rtcNewScene(self.device)
         # Embree's fast triangle test (Moller-Trumbore, as ours): its robust mode (watertight edges, what Cycles
         # asks for) traced the heavy scene's rays 18 % slower (``bench/embree_rays.py``: 1.14 against 1.39 M/s)
         lib.rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_MEDIUM)
-        geom = lib.rtcNewGeometry(self.device, kind)
-        # The vertices read in place when padded, else an Embree-owned copy, which it pads itself (counted in
-        # ``nbytes``); the index buffer shared, kept alive here (int32 indices >= 0 are uint32 bits) and counted
-        # when it is not the mesh's own
-        if padded:
-            self._shared.append(pts)
-            lib.rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, pts.ctypes.data, 0,
-                                           12, len(pts))
-        else:
-            vb = lib.rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 12, len(pts))
-            if not vb:
-                lib.rtcReleaseGeometry(geom)
+        vertices = None
+        if not shared:  # an Embree-owned copy, which it pads itself (counted in ``nbytes``)
+            vertices = lib.rtcNewBuffer(self.device, pts.nbytes + 16)
+            if not vertices:
                 lib.rtcReleaseScene(scene)
                 return 0, None
-            ctypes.memmove(vb, pts.ctypes.data, pts.nbytes)
-        lib.rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, fmt, index.ctypes.data, 0, index.strides[0],
-                                       len(index))
-        lib.rtcCommitGeometry(geom)
-        lib.rtcAttachGeometry(scene, geom)
-        lib.rtcReleaseGeometry(geom)  # the scene holds it
+            ctypes.memmove(lib.rtcGetBufferData(vertices), pts.ctypes.data, pts.nbytes)
+        # Embree builds a tree per primitive type and walks every tree of a scene, so with any run of pairs the
+        # lone triangles go in as quads too, (t0, t1, t2, t2), whose second half has no area: as triangles beside
+        # the quads they took a second walk per ray (heavy: Embree's instructions +56 %, callgrind)
+        as_quads = any(q for *_, q in runs)
+        codes = []
+        for first, count, is_pair in runs:
+            geom = lib.rtcNewGeometry(self.device, RTC_GEOMETRY_TYPE_QUAD if as_quads else RTC_GEOMETRY_TYPE_TRIANGLE)
+            if shared:
+                lib.rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, pts.ctypes.data,
+                                               0, 12, len(pts))
+            else:
+                lib.rtcSetGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, vertices, 0, 12,
+                                         len(pts))
+            if is_pair:  # a quad's (v0, v1, v2, v3) from its pair's second index, a stride of two triangles
+                lib.rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4, tris.ctypes.data,
+                                               first * 12 + 4, 24, count)
+            elif as_quads:
+                lone = np.ascontiguousarray(tris[first:first + count][:, [0, 1, 2, 2]])
+                self._shared.append(lone)
+                self.nbytes += lone.nbytes
+                lib.rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4, lone.ctypes.data,
+                                               0, 16, count)
+            else:
+                lib.rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, tris.ctypes.data,
+                                               first * 12, 12, count)
+            lib.rtcCommitGeometry(geom)
+            gid = lib.rtcAttachGeometry(scene, geom)
+            lib.rtcReleaseGeometry(geom)  # the scene holds it
+            assert gid == len(codes), "Embree numbers a new scene's geometries from 0"
+            codes.append(first * 2 + int(is_pair))
+        if vertices is not None:
+            lib.rtcReleaseBuffer(vertices)  # the geometries hold it
         lib.rtcCommitScene(scene)
         if lib.rtcGetDeviceError(self.device) != 0:
             lib.rtcReleaseScene(scene)
             return 0, None
         self._scenes.append(scene)
-        if codes is not None:  # a copy of the mesh's own indices, unlike the triangles' buffer
-            self._shared.append(index)
-            self.nbytes += index.nbytes
-        else:
-            self._shared.append(tris)
-        return int(scene), codes
+        self._shared += [pts, tris]
+        return int(scene), np.array(codes, np.int32)
 
     def close(self) -> None:
         for s in self._scenes:
@@ -227,7 +246,7 @@ _RAY_CPP = r"""
     };
 """
 
-# (t, b1, b2, local triangle, Ng x, y, z, unused) of ``embree_closest``
+# (t, u, v, primitive, Ng x, y, z, geometry) of ``embree_closest``
 embree_hit_t = wp.types.vector(length=8, dtype=wp.float64)
 
 _CLOSEST_CPP = _RAY_CPP + r"""
@@ -242,16 +261,17 @@ _CLOSEST_CPP = _RAY_CPP + r"""
     ((closest_fn)fn)((void*)scene, &rh, nullptr);
     if (rh.hit.geom == 0xffffffffu) return out;
     out.c[0] = rh.ray.tfar; out.c[1] = rh.hit.u; out.c[2] = rh.hit.v; out.c[3] = (double)rh.hit.prim;
-    out.c[4] = rh.hit.ngx; out.c[5] = rh.hit.ngy; out.c[6] = rh.hit.ngz;
+    out.c[4] = rh.hit.ngx; out.c[5] = rh.hit.ngy; out.c[6] = rh.hit.ngz; out.c[7] = (double)rh.hit.geom;
     return out;
 """
 
 
 @wp.func_native(_CLOSEST_CPP)
 def embree_closest(fn: wp.uint64, scene: wp.uint64, ro: wp.vec3, rd: wp.vec3, tmax: float) -> embree_hit_t:
-    """Embree's closest hit of an object-space ray in (0, tmax): (t, b1, b2, local triangle, the triangle's
-    unnormalised geometric normal (p1 - p0) x (p2 - p0) as Embree computes it, 0), or a negative triangle on a
-    miss (in doubles: a triangle index past 2^24 stays exact; the floats come back unchanged)."""
+    """Embree's closest hit of an object-space ray in (0, tmax): (t, u, v, primitive, the hit triangle's
+    unnormalised geometric normal (p1 - p0) x (p2 - p0) as Embree computes it, geometry), or a negative primitive
+    on a miss (in doubles: an index past 2^24 stays exact; the floats come back unchanged).
+    ``quads.embree_triangle`` turns (geometry, primitive, u, v) into the mesh's triangle and barycentrics."""
     ...
 
 

@@ -23,7 +23,7 @@ import warp as wp
 
 from renderer.accel.analytic import SHAPE_DISCS, is_cloud, shape_hits, sphere_roots
 from renderer.accel.embree import embree_closest
-from renderer.accel.quads import quad_triangle
+from renderer.accel.quads import embree_triangle
 from renderer.accel.quantize import QNode, q_entries
 from renderer.accel.wide import (WideBoxes, dist_stack_t, entries, far_to_near, leaf_range, root_entered,
                                  wide_stack_t)
@@ -84,9 +84,9 @@ class Geometry:
     # Embree's rtcIntersect1 and rtcOccluded1
     mesh_embree: wp.array(dtype=wp.uint64)
     mesh_embree_shadow: wp.array(dtype=wp.int32)
-    # per mesh: where its quads' codes start in embree_quad_codes (``accel.quads``), or -1 (Embree holds triangles)
-    mesh_embree_quad_off: wp.array(dtype=wp.int32)
-    embree_quad_codes: wp.array(dtype=wp.int32)
+    # per mesh: where the codes of its Embree scene's geometries start in embree_geoms (``quads.embree_triangle``)
+    mesh_embree_geom_off: wp.array(dtype=wp.int32)
+    embree_geoms: wp.array(dtype=wp.int32)
     embree_closest_fn: wp.uint64
     embree_occluded_fn: wp.uint64
     # --- top level
@@ -472,12 +472,8 @@ def embree_mesh_closest(geo: Geometry, m: int, ro: wp.vec3, rd: wp.vec3, tmax: f
     eh = embree_closest(geo.embree_closest_fn, geo.mesh_embree[m], ro, rd, tmax)
     if eh[3] < wp.float64(0.0):
         return best
-    tri = int(eh[3])
-    b1 = float(eh[1])
-    b2 = float(eh[2])
-    off = geo.mesh_embree_quad_off[m]
-    if off >= 0:
-        tri, b1, b2 = quad_triangle(geo.embree_quad_codes, off, tri, b1, b2)
+    tri, b1, b2 = embree_triangle(geo.embree_geoms, geo.mesh_embree_geom_off[m], int(eh[7]), int(eh[3]),
+                                  float(eh[1]), float(eh[2]))
     ng = wp.vec3(float(eh[4]), float(eh[5]), float(eh[6]))
     return found(float(eh[0]), inst, geo.mesh_tri_off[m] + tri, b1, b2, ng)
 

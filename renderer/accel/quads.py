@@ -1,83 +1,174 @@
-"""Triangles paired into quads for Embree, and the way back from a quad's hit to the triangle of ours.
+"""Triangles laid out in pairs, so that Embree can hold them as quads read in place from the mesh's own indices.
 
 Embree stores a quad (v0, v1, v2, v3) as the two triangles (v0, v1, v3) and (v2, v3, v1), four quads to a leaf:
 eight triangles in the memory and the box tests that four triangles of a triangle mesh take. Most meshes are
 triangulated quads or close to it, so pairing each triangle with the neighbour across its longest edge (a quad's
-diagonal) pairs nearly all of them: 98.7 % of the heavy bench scene's million triangles. A triangle left alone is
-the quad (t0, t1, t2, t2), whose second half has no area and is never hit.
+diagonal) pairs nearly all of them: 98.7 % of the heavy bench scene's million triangles.
 
-``pair_triangles`` returns the quads and, per quad, a code for each half: the triangle's index times 4 plus k, the
-corner its shared edge starts from. The half's corners are the triangle's own, rotated to start at corner k + 2, so
-``quad_triangle`` maps Embree's (u, v) back to the triangle's barycentrics without reading its corners. Pairs
-are made only across an edge that exactly two triangles share, in opposite directions (consistently wound), and
-that is the longest edge of both.
+``order_for_quads`` (run on the flattened scene before anything is uploaded) puts each pair side by side in the
+mesh, the first triangle as (v3, v0, v1) and the second as (v2, v3, v1): each is its own corners rotated, so the
+surface is the same, and the pair's six indices hold the quad's four in a row, (v0, v1, v2, v3) from the second
+index on. Embree then reads a run of pairs as a quad buffer with a stride of two triangles, straight from the
+uploaded indices (``quad_runs`` finds the runs), and a hit's quad index and parameters give the triangle and
+its barycentrics by arithmetic alone (``embree_triangle``). Triangles left alone follow the pairs and go to
+Embree as quads too, (t0, t1, t2, t2), whose second half has no area (Embree walks a tree per primitive type). Pairs are made only across an edge that exactly two triangles of one emitting range share
+(a mesh light's triangles stay where its range says), in opposite directions (consistently wound), and that is
+the longest edge of both.
 """
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 import warp as wp
 
-MAX_TRIANGLES = 1 << 29  # a code (index * 4 + k) fits an int32
+from renderer.scene.model import LIGHT_MESH, Mesh, Scene
 
-
-def pair_triangles(points: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Quads (Q, 4) uint32 over ``triangles`` (T, 3) and their codes (Q, 2) int32: for the first half
-    (v0, v1, v3) and the second (v2, v3, v1) the triangle index * 4 + k (see the module docstring); a lone
-    triangle's second code repeats its first. Quads appear in the order of their first triangle."""
-    tris = np.ascontiguousarray(triangles, np.int64).reshape(-1, 3)
-    n = len(tris)
-    if n >= MAX_TRIANGLES:
-        raise ValueError(f"{n} triangles: at most {MAX_TRIANGLES - 1} can be paired")
-    idx = np.arange(n)
-    pts = np.asarray(points, np.float32)
-    c0, c1, c2 = pts[tris[:, 0]], pts[tris[:, 1]], pts[tris[:, 2]]
-    lengths = np.stack([_norm2(c1 - c0), _norm2(c2 - c1), _norm2(c0 - c2)], 1)  # edge k: corner k to k + 1
-    k = lengths.argmax(1)
-    a, b = tris[idx, k], tris[idx, (k + 1) % 3]
-    proper = (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 2] != tris[:, 0])
-    nv = max(int(tris.max(initial=0)) + 1, 1)
-    key = np.where(proper, np.minimum(a, b) * nv + np.maximum(a, b), -1 - idx)  # a lone key for a degenerate one
-    order = np.argsort(key, kind="stable")
-    sk = key[order]
-    same = sk[1:] == sk[:-1]  # neighbours in sorted order that share their longest edge
-    before = np.concatenate([[False], same[:-1]])
-    after = np.concatenate([same[1:], [False]])
-    two = same & ~before & ~after  # exactly two triangles on that edge
-    i, j = order[:-1][two], order[1:][two]
-    wound = a[i] == b[j]  # opposite directions along the edge
-    i, j = i[wound], j[wound]
-    first, second = np.minimum(i, j), np.maximum(i, j)
-    partner = np.full(n, -1, np.int64)
-    partner[first] = second
-    lead = np.ones(n, bool)
-    lead[second] = False  # a pair's quad is listed at its first triangle
-    t = idx[lead]
-    u = partner[t]
-    paired = u >= 0
-    ka, kb = k[t], np.where(paired, k[np.maximum(u, 0)], 1)
-    other = np.where(paired, u, t)
-    quads = np.stack([tris[t, (ka + 2) % 3], tris[t, ka], tris[other, (kb + 2) % 3], tris[t, (ka + 1) % 3]], 1)
-    lone = ~paired  # (t0, t1, t2, t2): the whole triangle is the first half, with k = 1
-    quads[lone] = tris[t[lone]][:, [0, 1, 2, 2]]
-    ka = np.where(paired, ka, 1)
-    codes = np.stack([t * 4 + ka, np.where(paired, u * 4 + kb, t * 4 + ka)], 1)
-    return quads.astype(np.uint32), codes.astype(np.int32)
+MAX_TRIANGLES = 1 << 30  # a run's first triangle, times 2 plus its kind, fits an int32
+# Meshes with fewer triangles stay as they are, triangles to Embree: a quad leaf tests both halves of each quad,
+# which costs more than it saves where leaves hold a few primitives (the Cornell box's 34 triangles: Embree's
+# instructions +55 %, the frame's +8.9 %; gloss's 3984 and dof's 9922 triangles +0.7-0.8 %, callgrind), and the
+# memory saved only matters for large meshes (heavy's million: 67.1 -> 43.4 bytes per triangle in Embree, its
+# incoherent rays 10 % faster, its frame +0.75 % counted, 1.000x timed)
+MIN_TRIANGLES = 1 << 16
 
 
 def _norm2(v: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", v, v)
 
 
+def pair_up(points: np.ndarray, triangles: np.ndarray, segment: np.ndarray | None = None):
+    """Pairs of triangles sharing their longest edge: (first, second, k_first, k_second), where edge k runs from
+    corner k to corner k + 1. Only an edge of exactly two proper triangles, wound in opposite directions along it,
+    both in the same ``segment`` (T,) when given."""
+    tris = np.asarray(triangles).reshape(-1, 3)
+    n = len(tris)
+    idx = np.arange(n)
+    pts = np.asarray(points, np.float32)
+    c0, c1, c2 = pts[tris[:, 0]], pts[tris[:, 1]], pts[tris[:, 2]]
+    k = np.stack([_norm2(c1 - c0), _norm2(c2 - c1), _norm2(c0 - c2)], 1).argmax(1)
+    a, b = tris[idx, k].astype(np.int64), tris[idx, (k + 1) % 3].astype(np.int64)
+    proper = (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 2] != tris[:, 0])
+    nv = max(int(tris.max(initial=0)) + 1, 1)
+    key = np.where(proper, np.minimum(a, b) * nv + np.maximum(a, b), -1 - idx)  # a lone key for a degenerate one
+    order = np.argsort(key)  # ties only within an edge's group, whose order does not matter
+    sk = key[order]
+    same = sk[1:] == sk[:-1]  # neighbours in sorted order that share their longest edge
+    before = np.concatenate([[False], same[:-1]])
+    after = np.concatenate([same[1:], [False]])
+    two = same & ~before & ~after  # exactly two triangles on that edge
+    i, j = order[:-1][two], order[1:][two]
+    ok = a[i] == b[j]  # opposite directions along the edge
+    if segment is not None:
+        ok &= segment[i] == segment[j]
+    i, j = i[ok], j[ok]
+    first, second = np.minimum(i, j), np.maximum(i, j)
+    return first, second, k[first], k[second]
+
+
+def quad_order(points: np.ndarray, triangles: np.ndarray, cuts=()) -> tuple[np.ndarray, np.ndarray]:
+    """The order and corner rotation that lay ``triangles`` out in pairs (module docstring): new triangle i is old
+    triangle ``order[i]`` with corners ``(c + shift[i]) % 3`` for c = 0, 1, 2. Within each range between ``cuts``
+    (triangle indices), its pairs come first, in the order of their first triangle, then its lone triangles in
+    their order; no triangle leaves its range."""
+    n = len(triangles)
+    segment = np.zeros(n, np.int64)
+    for c in sorted(set(int(c) for c in cuts if 0 < c < n)):
+        segment[c:] += 1
+    first, second, ka, kb = pair_up(points, triangles, segment)
+    # sort keys: (range, lone, position): a pair at 2 * its first triangle (+1 for the second), a lone one at its own
+    lone = np.ones(n, np.int64)
+    pos = np.arange(n, dtype=np.int64)
+    shift = np.zeros(n, np.int64)
+    lone[first] = lone[second] = 0
+    pos[first], pos[second] = 2 * first, 2 * first + 1
+    shift[first] = ka + 1  # (v3, v0, v1) = corners (k + 1, k + 2, k) of the first, whose edge k is the diagonal
+    shift[second] = kb + 2  # (v2, v3, v1) = corners (k + 2, k, k + 1) of the second
+    order = np.argsort(segment * (4 * n) + lone * (2 * n) + pos)  # the keys are distinct
+    return order, shift[order] % 3
+
+
+def reorder_mesh(mesh: Mesh, order: np.ndarray, shift: np.ndarray) -> Mesh:
+    """``mesh`` with its triangles in ``order``, each one's corners rotated by ``shift`` (``quad_order``): the
+    same surface, per-triangle and per-corner data carried along."""
+    corner = (np.arange(3)[None, :] + shift[:, None]) % 3
+    rows = order[:, None]
+
+    def corners(a):
+        return None if a is None else np.ascontiguousarray(a[rows, corner])
+
+    def per_triangle(a):
+        return None if a is None else np.ascontiguousarray(np.asarray(a)[order])
+
+    return replace(mesh, triangles=corners(mesh.triangles), material_ids=per_triangle(mesh.material_ids),
+                   normals=corners(mesh.normals), uvs=corners(mesh.uvs), colors=corners(mesh.colors),
+                   solid=per_triangle(mesh.solid), tangents=per_triangle(mesh.tangents))
+
+
+def order_for_quads(scene: Scene, min_triangles: int = MIN_TRIANGLES) -> Scene:
+    """``scene`` with each still triangle mesh of at least ``min_triangles`` laid out in pairs (``quad_order``),
+    the ranges of mesh lights kept. The meshes Embree would not hold (deforming, exact shapes, point clouds) stay
+    as they are."""
+    cuts: dict[int, set] = {}
+    for light in scene.lights:
+        if light.kind == LIGHT_MESH and light.triangles is not None and 0 <= light.instance < len(scene.instances):
+            cuts.setdefault(scene.instances[light.instance].mesh, set()).update(light.triangles)
+    meshes = list(scene.meshes)
+    for mi, mesh in enumerate(meshes):
+        if (mesh.shape is not None or mesh.tessellate is not None or len(mesh.point_times) != 1
+                or not max(2, min_triangles) <= len(mesh.triangles) < MAX_TRIANGLES):
+            continue
+        order, shift = quad_order(mesh.points[0], mesh.triangles, cuts.get(mi, ()))
+        meshes[mi] = reorder_mesh(mesh, order, shift)
+    return replace(scene, meshes=meshes)
+
+
+def quad_runs(triangles: np.ndarray) -> list[tuple[int, int, bool]]:
+    """The runs that cover ``triangles`` (T, 3) in order: (first triangle, count, True) for count pairs laid out
+    as ``order_for_quads`` lays them, whose indices read from the first's second index on with a stride of six are
+    quads (v0, v1, v2, v3); (first, count, False) for count triangles between them. Any two neighbours of that
+    shape are a right quad, however they came to be; runs are found leftmost first."""
+    tris = np.asarray(triangles).reshape(-1, 3)
+    n = len(tris)
+    if n < 2:
+        return [(0, n, False)] if n else []
+    a, b = tris[:-1], tris[1:]
+    # a = (v3, v0, v1), b = (v2, v3, v1), the four corners distinct
+    p = ((a[:, 0] == b[:, 1]) & (a[:, 2] == b[:, 2]) & (a[:, 0] != a[:, 1]) & (a[:, 1] != a[:, 2])
+         & (a[:, 2] != a[:, 0]) & (b[:, 0] != a[:, 0]) & (b[:, 0] != a[:, 1]) & (b[:, 0] != a[:, 2]))
+    idx = np.arange(n - 1)
+    starts_run = p & ~np.concatenate([[False], p[:-1]])
+    run_start = np.maximum.accumulate(np.where(starts_run, idx, 0))
+    pair = p & ((idx - run_start) % 2 == 0)  # leftmost: a run of k shapes in a row holds ceil(k / 2) pairs
+    starts = np.nonzero(pair)[0]
+    if not len(starts):
+        return [(0, n, False)]
+    cut = np.nonzero(np.diff(starts) != 2)[0]  # pair starts two apart make one run of quads
+    firsts = starts[np.concatenate([[0], cut + 1])]
+    lasts = starts[np.concatenate([cut, [len(starts) - 1]])]
+    runs: list[tuple[int, int, bool]] = []
+    t = 0
+    for f, last in zip(firsts.tolist(), lasts.tolist()):
+        if f > t:
+            runs.append((t, f - t, False))
+        runs.append((f, (last - f) // 2 + 1, True))
+        t = last + 2
+    if t < n:
+        runs.append((t, n - t, False))
+    return runs
+
+
 @wp.func
-def quad_triangle(codes: wp.array(dtype=wp.int32), off: int, quad: int, u: float, v: float):
-    """A hit on ``quad`` at Embree's quad parameters (u, v): the triangle of the mesh it lies on and that
-    triangle's barycentrics (b1, b2) of its corners 1 and 2. ``codes`` holds two entries per quad from ``off``
-    (``pair_triangles``). Embree's first half (v0, v1, v3) covers u + v <= 1, where (u, v) are its own
-    barycentrics; on the second (v2, v3, v1) they are 1 - u and 1 - v."""
-    second = u + v > 1.0
-    code = codes[off + 2 * quad + wp.where(second, 1, 0)]
-    s = wp.where(second, 1.0 - u, u)
-    t = wp.where(second, 1.0 - v, v)
-    k = code & 3
-    w = wp.vec3(1.0 - s - t, s, t)  # weights of the half's corners: the triangle's corners k + 2, k, k + 1
-    return code >> 2, w[(2 - k) % 3], w[(3 - k) % 3]
+def embree_triangle(geoms: wp.array(dtype=wp.int32), off: int, geom: int, prim: int, u: float, v: float):
+    """A hit on primitive ``prim`` of Embree geometry ``geom`` at Embree's (u, v): the mesh's triangle and its
+    barycentrics (b1, b2) of corners 1 and 2. ``geoms[off + geom]`` is the run's first triangle * 2, plus 1 for a
+    run of quads (``quad_runs``). A quad's first half (v0, v1, v3) is the triangle (v3, v0, v1) and covers
+    u + v <= 1 with (u, v) its own barycentrics; the second (v2, v3, v1) is the triangle (v2, v3, v1), with
+    barycentrics 1 - u and 1 - v."""
+    code = geoms[off + geom]
+    base = code >> 1
+    if (code & 1) == 0:
+        return base + prim, u, v
+    if u + v <= 1.0:
+        return base + 2 * prim, 1.0 - u - v, u
+    return base + 2 * prim + 1, 1.0 - u, 1.0 - v

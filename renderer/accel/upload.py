@@ -175,7 +175,7 @@ class EmbreeMeshes:
     owner: object  # the ``embree.EmbreeScenes`` the handles point into, or None
     handles: np.ndarray  # (M,) uint64
     shadow: np.ndarray  # (M,) int32
-    quad_codes: list  # per mesh: its quads' codes (``accel.quads``), or None where Embree holds triangles
+    geoms: list  # per mesh: its Embree geometries' codes (``quads.embree_triangle``), or None
 
     @property
     def nbytes(self) -> int:
@@ -183,16 +183,18 @@ class EmbreeMeshes:
 
 
 def embree_meshes(scene: Scene, shapes: list, device: str = "cpu", points: np.ndarray | None = None,
-                  vert_off: np.ndarray | None = None) -> EmbreeMeshes:
+                  vert_off: np.ndarray | None = None, triangles: np.ndarray | None = None,
+                  tri_off: np.ndarray | None = None) -> EmbreeMeshes:
     """Embree scenes for the still triangle meshes (``accel.embree``); with opaque materials only, their shadow
-    rays too. Without Embree every handle is 0 and the walks are all ours. ``points``: every mesh's points
-    concatenated (mesh i's from ``vert_off[i]``) with a row of padding after the last, which Embree then reads in
-    place (the upload's own array, kept alive by the handles' owner)."""
+    rays too. Without Embree every handle is 0 and the walks are all ours. ``points`` and ``triangles``: every
+    mesh's points and triangles concatenated (mesh i's from ``vert_off[i]`` and ``tri_off[i]``), the points with a
+    row of padding after the last, which Embree then reads in place (the upload's own arrays, kept alive by the
+    handles' owner too)."""
     lib = embree.library() if device == "cpu" else None
     handles = np.zeros(max(1, len(scene.meshes)), np.uint64)
     shadow = np.zeros(max(1, len(scene.meshes)), np.int32)
     owner = None
-    codes = [None] * len(scene.meshes)
+    geoms = [None] * len(scene.meshes)
     if lib is not None:
         opaque = np.array([opaque_for_shadows(m) for m in scene.materials] or [True], bool)
         for mi, (mesh, shape) in enumerate(zip(scene.meshes, shapes)):
@@ -201,14 +203,15 @@ def embree_meshes(scene: Scene, shapes: list, device: str = "cpu", points: np.nd
             if owner is None:
                 owner = embree.EmbreeScenes(lib)
             if points is not None:
-                own = points[vert_off[mi]:vert_off[mi] + mesh.points.shape[1]]
-                handles[mi], codes[mi] = owner.add_mesh(own, mesh.triangles, padded=True)
+                handles[mi], geoms[mi] = owner.add_mesh(
+                    points[vert_off[mi]:vert_off[mi] + mesh.points.shape[1]],
+                    triangles[tri_off[mi]:tri_off[mi] + len(mesh.triangles)], shared=True)
             else:
-                handles[mi], codes[mi] = owner.add_mesh(mesh.points[0], mesh.triangles)
+                handles[mi], geoms[mi] = owner.add_mesh(mesh.points[0], mesh.triangles)
             ids = np.asarray(mesh.material_ids)
             known = bool(((ids >= 0) & (ids < len(scene.materials))).all())
             shadow[mi] = int(handles[mi] != 0 and known and bool(opaque[ids].all()))
-    return EmbreeMeshes(owner, handles, shadow, codes)
+    return EmbreeMeshes(owner, handles, shadow, geoms)
 
 
 def _walked_by_embree(scene: Scene, em: EmbreeMeshes, o2w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -243,7 +246,12 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     # every mesh's points, and a row of padding that lets Embree read the last vertex 16 bytes at a time
     points = np.concatenate([m.points.reshape(-1, 3) for m in scene.meshes]
                             + [np.zeros((1, 3), np.float32)]).astype(np.float32, copy=False)
-    em = embree_meshes(scene, shapes, device, points if device == "cpu" else None, n_verts)
+    n_tris = np.cumsum([0] + [len(m.triangles) for m in scene.meshes])
+    triangles = np.concatenate([m.triangles for m in scene.meshes] or [np.zeros((1, 3), np.int32)]).astype(
+        np.int32, copy=False)
+    on_cpu = device == "cpu"
+    em = embree_meshes(scene, shapes, device, points if on_cpu else None, n_verts, triangles if on_cpu else None,
+                       n_tris)
     o2w = matrices_at([inst.transform for inst in scene.instances], 0.0) if scene.instances else np.eye(4)[None]
     by_embree, identity_placed = _walked_by_embree(scene, em, o2w)
     walked: list[Bvh] = []  # the trees uploaded, walked by our kernels (``blas`` is for placing instances)
@@ -273,7 +281,6 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     nodes = [quantize(w, device) for w in wide]
     n_nodes = np.cumsum([0] + [w.num_nodes for w in wide])
     n_records = np.cumsum([0] + [len(q) for q in nodes])
-    n_tris = np.cumsum([0] + [len(m.triangles) for m in scene.meshes])
     n_keys = np.cumsum([0] + [len(m.point_times) for m in scene.meshes])
 
     def cat(xs, shape, dt):
@@ -281,7 +288,7 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
 
     g.points = _v3(points, device)  # the same memory on the CPU, where Embree reads it too
     g.point_times = _f32(cat([m.point_times for m in scene.meshes], (1,), np.float32), device)
-    g.tri_vidx = _wp(cat([m.triangles for m in scene.meshes], (1, 3), np.int32), wp.vec3i, device)
+    g.tri_vidx = _wp(triangles, wp.vec3i, device)  # the same memory on the CPU, where Embree reads it too
     g.tri_material = _i32(cat([m.material_ids for m in scene.meshes], (1,), np.int32), device)
     # per-corner normals and uvs of the meshes that have them (others take no memory: 60 bytes per triangle), and
     # the colours of the meshes whose displayColor varies
@@ -327,11 +334,9 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     g.mesh_shape_param = _wp(params if len(params) else np.zeros((1, 4), np.float32), wp.vec4, device)
     g.mesh_embree = wp.array(em.handles, dtype=wp.uint64, device=device)
     g.mesh_embree_shadow = _i32(em.shadow, device)
-    quad_codes = [c for c in em.quad_codes if c is not None]
-    g.embree_quad_codes = _i32(cat([c.reshape(-1) for c in quad_codes], (1,), np.int32), device)
-    n_codes = np.cumsum([0] + [0 if c is None else c.size for c in em.quad_codes])
-    g.mesh_embree_quad_off = _i32([-1 if c is None else int(n_codes[i]) for i, c in enumerate(em.quad_codes)]
-                                  or [-1], device)
+    g.embree_geoms = _i32(cat([c for c in em.geoms if c is not None], (1,), np.int32), device)
+    n_geoms = np.cumsum([0] + [0 if c is None else len(c) for c in em.geoms])
+    g.mesh_embree_geom_off = _i32(n_geoms[:-1] if len(em.geoms) else [0], device)
     g.embree_closest_fn = wp.uint64(em.owner.closest_fn if em.owner else 0)
     g.embree_occluded_fn = wp.uint64(em.owner.occluded_fn if em.owner else 0)
     object.__setattr__(g, "embree_owner", em.owner)  # the handles above point into it: it lives as long as g
@@ -398,7 +403,7 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
 
     leaf_bytes = 3 * 12 * sum(len(x) for x in v0)  # the leaf-ordered still triangles
     nbytes = (sum(q.nbytes for q in nodes) + sum(b.prim_order.nbytes for b in walked) + tlas.nbytes + leaf_bytes
-              + em.nbytes + sum(c.nbytes for c in quad_codes))
+              + em.nbytes + 4 * int(n_geoms[-1]))
     stats = GeometryStats(
         triangles=int(n_tris[-1]),
         blas_nodes=int(n_nodes[-1]),
