@@ -283,3 +283,64 @@ def test_embree_holding_quads_finds_the_triangle_point_and_side_our_walk_finds(m
     assert 0.02 < fronts[hit, 0].mean() < 0.98  # both sides seen: the flipped triangles face away
     times = np.full(n, 0.5, np.float32)
     np.testing.assert_array_equal(_probe(geo, scene, ro, rd, times)[3], _probe(ours, scene, ro, rd, times)[3])
+
+
+def _grid_mesh(stage, path, n, half, y, mat, down, lone=False):
+    """An n x n grid of quads over [-half, half]^2 at height y, its front facing down (-Y) or up; ``lone``: and
+    a triangle beside it, which pairs with nothing."""
+    from pxr import Gf, UsdGeom, UsdShade, Vt
+
+    xs = np.linspace(-half, half, n + 1)
+    pts = [Gf.Vec3f(float(x), y, float(z)) for x in xs for z in xs]
+    faces = []
+    for i in range(n):
+        for j in range(n):
+            a, b, c, d = i * (n + 1) + j, (i + 1) * (n + 1) + j, (i + 1) * (n + 1) + j + 1, i * (n + 1) + j + 1
+            faces += [a, b, c, d] if down else [a, d, c, b]
+    counts = [4] * (n * n)
+    if lone:
+        pts += [Gf.Vec3f(half + 0.1, y, 0.0), Gf.Vec3f(half + 1.1, y, 0.0), Gf.Vec3f(half + 0.1, y, 1.0)]
+        v = len(pts) - 3
+        faces += [v, v + 1, v + 2] if down else [v, v + 2, v + 1]
+        counts.append(3)
+    m = UsdGeom.Mesh.Define(stage, path)
+    m.CreatePointsAttr(Vt.Vec3fArray(pts))
+    m.CreateFaceVertexCountsAttr(counts)
+    m.CreateFaceVertexIndicesAttr(faces)
+    m.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    UsdShade.MaterialBindingAPI.Apply(m.GetPrim()).Bind(mat)
+
+
+@pytest.mark.skipif(embree.library() is None, reason="Embree (embreex) is not available")
+def test_a_merged_mesh_light_in_quads_lights_the_floor_as_in_triangles(tmp_path, monkeypatch):
+    """An emissive panel and a floor, merged into one mesh by the flattening with the panel's light on the first
+    range of it: laid out in pairs and held by Embree as quads (every mesh, the size floor lowered), the floor's
+    irradiance is what the plain layout gives, within the noise (the light samples its triangles in another
+    order). The panel's lone triangle stays in its range, not after the floor's pairs."""
+    import stages
+    from renderer.accel import quads
+    from test_render_analytic import render_rgb
+
+    stage = stages.new_stage(tmp_path / "panel.usda")
+    stages.camera(stage, ortho=True, h_ap_mm=0.4, v_ap_mm=0.4, translate=(0, 0.5, 0), rotate_x=-90.0,
+                  tenths_per_mm=1.0)
+    _grid_mesh(stage, "/World/Panel", 8, 0.5, 1.0, stages.material(stage, "Glow", emissive=(4, 4, 4)), down=True,
+               lone=True)
+    _grid_mesh(stage, "/World/Floor", 24, 10.0, 0.0, stages.material(stage, "White", (1, 1, 1)), down=False)
+    stage.Save()
+    plain, prep = render_rgb(tmp_path / "panel.usda", width=8, height=8, spp=256, max_depth=1)
+    assert not (prep.geometry.embree_geoms.numpy() & 1).any()
+    monkeypatch.setattr(quads, "MIN_TRIANGLES", 2)
+    paired, prep = render_rgb(tmp_path / "panel.usda", width=8, height=8, spp=256, max_depth=1)
+    assert (prep.geometry.embree_geoms.numpy() & 1).any() and prep.light_count == 1
+    from renderer.scene.flatten import flatten_still_instances
+    from renderer.usd.importer import load_scene
+
+    flat = order_for_quads(flatten_still_instances(load_scene(tmp_path / "panel.usda")))
+    (light,) = flat.lights
+    lo, hi = light.triangles
+    mats = flat.meshes[flat.instances[light.instance].mesh].material_ids
+    assert hi - lo == 129 and len(set(mats[lo:hi])) == 1 and mats[lo] not in set(mats[hi:]) | set(mats[:lo])
+    a, b = plain.mean(), paired.mean()
+    assert a > 0.05
+    assert abs(a - b) < 0.02 * a

@@ -105,10 +105,12 @@ def reorder_mesh(mesh: Mesh, order: np.ndarray, shift: np.ndarray) -> Mesh:
                    solid=per_triangle(mesh.solid), tangents=per_triangle(mesh.tangents))
 
 
-def order_for_quads(scene: Scene, min_triangles: int = MIN_TRIANGLES) -> Scene:
-    """``scene`` with each still triangle mesh of at least ``min_triangles`` laid out in pairs (``quad_order``),
-    the ranges of mesh lights kept. The meshes Embree would not hold (deforming, exact shapes, point clouds) stay
-    as they are."""
+def order_for_quads(scene: Scene, min_triangles: int | None = None) -> Scene:
+    """``scene`` with each still triangle mesh of at least ``min_triangles`` (None: ``MIN_TRIANGLES``) laid out in
+    pairs (``quad_order``), the ranges of mesh lights kept. The meshes Embree would not hold (deforming, exact
+    shapes, point clouds) stay as they are."""
+    if min_triangles is None:
+        min_triangles = MIN_TRIANGLES
     cuts: dict[int, set] = {}
     for light in scene.lights:
         if light.kind == LIGHT_MESH and light.triangles is not None and 0 <= light.instance < len(scene.instances):
