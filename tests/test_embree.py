@@ -8,11 +8,10 @@ import pytest
 import warp as wp
 
 from renderer.accel import embree
-from renderer.accel.intersect import Geometry, intersect_closest
 from renderer.accel.upload import upload_geometry
-from renderer.integrator import surface_at
 from renderer.scene.model import Camera, Instance, Material, Mesh, MotionTransform, Scene
 from tests.test_accel import _probe, brute_force, random_mesh, rot_y
+from tests.test_quads import hits
 
 pytestmark = pytest.mark.skipif(embree.library() is None, reason="Embree (embreex) is not available")
 
@@ -190,21 +189,6 @@ def test_drt_embree_0_turns_it_off(monkeypatch):
     assert embree.library() is not None
 
 
-@wp.kernel
-def _surface_kernel(geo: Geometry, ro: wp.array(dtype=wp.vec3), rd: wp.array(dtype=wp.vec3),
-                    with_ng: wp.array(dtype=wp.vec3), without: wp.array(dtype=wp.vec3), fronts: wp.array(dtype=wp.vec2i),
-                    hit_ng: wp.array(dtype=wp.vec3)):
-    i = wp.tid()
-    hit = intersect_closest(geo, ro[i], rd[i], 1.0e30, 0.5)
-    if hit.inst >= 0:
-        a = surface_at(geo, hit.inst, hit.tri, hit.b1, hit.b2, hit.ng, ro[i], rd[i], hit.t, 0.5)
-        b = surface_at(geo, hit.inst, hit.tri, hit.b1, hit.b2, wp.vec3(0.0), ro[i], rd[i], hit.t, 0.5)
-        with_ng[i] = a.ng
-        without[i] = b.ng
-        fronts[i] = wp.vec2i(a.front, b.front)
-        hit_ng[i] = hit.ng
-
-
 def test_embrees_normal_of_the_hit_is_the_one_from_the_corners(monkeypatch):
     """Embree hands back the hit triangle's (p1 - p0) x (p2 - p0), which ``surface_at`` uses for a mesh without
     uvs instead of reading the corners: the same facing normal (up to rounding) and the same side (front or back,
@@ -221,10 +205,8 @@ def test_embrees_normal_of_the_hit_is_the_one_from_the_corners(monkeypatch):
     assert list(geo.mesh_embree.numpy() != 0) == [True, False]
     n = 3000
     ro, rd = _rays(rng, n)
-    outs = [wp.zeros(n, dtype=wp.vec3), wp.zeros(n, dtype=wp.vec3), wp.zeros(n, dtype=wp.vec2i),
-            wp.zeros(n, dtype=wp.vec3)]
-    wp.launch(_surface_kernel, dim=n, inputs=[geo, wp.array(ro, dtype=wp.vec3), wp.array(rd, dtype=wp.vec3)] + outs)
-    a, b, fronts, hit_ng = (o.numpy() for o in outs)
+    _, _, normals, fronts = hits(geo, ro, rd)
+    a, b, hit_ng = normals[:, 0], normals[:, 1], normals[:, 2]
     hit = np.linalg.norm(b, axis=1) > 0
     by_embree = np.linalg.norm(hit_ng, axis=1) > 0
     assert hit.sum() > n // 2 and by_embree.sum() > n // 4 and (hit & ~by_embree).sum() > 50  # both walks hit

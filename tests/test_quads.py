@@ -225,18 +225,22 @@ def _hit_kernel(geo: Geometry, ro: wp.array(dtype=wp.vec3), rd: wp.array(dtype=w
     if hit.inst >= 0:
         a = surface_at(geo, hit.inst, hit.tri, hit.b1, hit.b2, hit.ng, ro[i], rd[i], hit.t, 0.5)
         b = surface_at(geo, hit.inst, hit.tri, hit.b1, hit.b2, wp.vec3(0.0), ro[i], rd[i], hit.t, 0.5)
-        normals[2 * i] = a.ng
-        normals[2 * i + 1] = b.ng
+        normals[3 * i] = a.ng
+        normals[3 * i + 1] = b.ng
+        normals[3 * i + 2] = hit.ng
         fronts[i] = wp.vec2i(a.front, b.front)
 
 
-def _hits(geo, ro, rd):
+def hits(geo, ro, rd):
+    """Per ray: (t, b1, b2), (instance, triangle), the facing normals ``surface_at`` gives with the hit's normal
+    (Embree's) and from the corners, and the hit's normal (zero from our walks), and the two sides (front or
+    back) they give."""
     n = len(ro)
-    outs = [wp.zeros(n, dtype=wp.vec3), wp.zeros(n, dtype=wp.vec2i), wp.zeros(2 * n, dtype=wp.vec3),
+    outs = [wp.zeros(n, dtype=wp.vec3), wp.zeros(n, dtype=wp.vec2i), wp.zeros(3 * n, dtype=wp.vec3),
             wp.zeros(n, dtype=wp.vec2i)]
     wp.launch(_hit_kernel, dim=n, inputs=[geo, wp.array(ro, dtype=wp.vec3), wp.array(rd, dtype=wp.vec3)] + outs)
     tbb, ids, normals, fronts = (o.numpy() for o in outs)
-    return tbb, ids, normals.reshape(n, 2, 3), fronts
+    return tbb, ids, normals.reshape(n, 3, 3), fronts
 
 
 @pytest.mark.skipif(embree.library() is None, reason="Embree (embreex) is not available")
@@ -267,8 +271,8 @@ def test_embree_holding_quads_finds_the_triangle_point_and_side_our_walk_finds(m
     ro = np.tile([0.0, 0.0, 4.0], (n, 1)) + rng.normal(0, 0.3, (n, 3))
     rd = rng.uniform([-1.5, -1.2, -1.5], [1.5, 1.2, 0.5], (n, 3)) - ro
     rd /= np.linalg.norm(rd, axis=1, keepdims=True)
-    tbb, ids, normals, fronts = _hits(geo, ro, rd)
-    tbb0, ids0, normals0, fronts0 = _hits(ours, ro, rd)
+    tbb, ids, normals, fronts = hits(geo, ro, rd)
+    tbb0, ids0, normals0, fronts0 = hits(ours, ro, rd)
     hit = ids[:, 0] >= 0
     np.testing.assert_array_equal(hit, ids0[:, 0] >= 0)
     assert hit.sum() > n // 2
