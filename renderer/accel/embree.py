@@ -8,9 +8,10 @@ its C API through ``ctypes`` (building) and through function pointers handed to 
 ours is linked against it, so the shipped kernels stay portable and a machine without it renders with our walk.
 
 Embree holds the runs of a mesh's triangles that ``order_for_quads`` laid out in pairs as quads (``accel.quads``:
-two triangles in the leaf memory of one and a quarter, the rays a little faster), the rest as triangles, and reads
-both the vertices and the indices in place from the upload's own arrays. On the heavy bench scene that took
-Embree's share from 73.1 to 43.0 bytes per triangle (``bench/embree_rays.py``).
+two triangles in the leaf memory of one and a quarter, the rays a little faster) and the lone triangles beside
+them as quads with a repeated corner (a mesh without pairs as triangles), and reads both the vertices and the
+indices in place from the upload's own arrays. On the heavy bench scene that took Embree's share from 73.1 to 43.4
+bytes per triangle (``bench/embree_rays.py``).
 
 What Embree answers, per mesh (``EmbreeScenes``): the closest hit of a still triangle mesh (not an exact shape,
 not a point cloud, not deforming), and the shadow test of such a mesh when every material it uses is opaque for
@@ -163,7 +164,7 @@ class EmbreeScenes:
         # asks for) traced the heavy scene's rays 18 % slower (``bench/embree_rays.py``: 1.14 against 1.39 M/s)
         lib.rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_MEDIUM)
         vertices = None
-        if not shared:  # an Embree-owned copy, which it pads itself (counted in ``nbytes``)
+        if not shared:  # an Embree-owned copy, padded for its 16-byte loads (counted in ``nbytes``)
             vertices = lib.rtcNewBuffer(self.device, pts.nbytes + 16)
             if not vertices:
                 lib.rtcReleaseScene(scene)

@@ -72,9 +72,8 @@ def quad_order(points: np.ndarray, triangles: np.ndarray, cuts=()) -> tuple[np.n
     (triangle indices), its pairs come first, in the order of their first triangle, then its lone triangles in
     their order; no triangle leaves its range."""
     n = len(triangles)
-    segment = np.zeros(n, np.int64)
-    for c in sorted(set(int(c) for c in cuts if 0 < c < n)):
-        segment[c:] += 1
+    edges = np.array(sorted(set(int(c) for c in cuts if 0 < c < n)), np.int64)
+    segment = np.searchsorted(edges, np.arange(n), side="right")  # the range each triangle is in
     first, second, ka, kb = pair_up(points, triangles, segment)
     # sort keys: (range, lone, position): a pair at 2 * its first triangle (+1 for the second), a lone one at its own
     lone = np.ones(n, np.int64)
