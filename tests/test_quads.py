@@ -4,6 +4,8 @@ mesh's own triangles, that a hit's quad parameters map back to the right triangl
 Embree holding quads finds what our walk finds on a real (connected, curved) mesh, in less memory."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import warp as wp
@@ -263,7 +265,14 @@ def test_embree_holding_quads_finds_the_triangle_point_and_side_our_walk_finds(m
     assert geo.mesh_embree.numpy()[0] != 0
     codes = geo.embree_geoms.numpy()
     assert 1 < len(codes) <= 2 and codes[0] == 1  # a run of quads from triangle 0, then the lone triangles
-    assert stats.embree_nbytes < 0.9 * upload_geometry(unordered)[1].embree_nbytes  # a sixth left alone here
+    # a sixth of the triangles left alone (the flipped ones and their neighbours): less memory all the same, and
+    # the unordered mesh, whose neighbours have the pair's shape here and there by chance, stays triangles
+    plain_geo, plain = upload_geometry(unordered)
+    assert list(plain_geo.embree_geoms.numpy()) == [0] and stats.embree_nbytes < plain.embree_nbytes
+    clean = replace(mesh, triangles=bumpy_grid(np.random.default_rng(4), 30, 24)[1])
+    clean_scene = replace(unordered, meshes=[clean])
+    assert (upload_geometry(order_for_quads(clean_scene, min_triangles=2))[1].embree_nbytes
+            < 0.8 * upload_geometry(clean_scene)[1].embree_nbytes)  # every triangle paired
     with monkeypatch.context() as m:
         m.setattr(embree, "library", lambda: None)
         ours = upload_geometry(scene)[0]
@@ -348,3 +357,18 @@ def test_a_merged_mesh_light_in_quads_lights_the_floor_as_in_triangles(tmp_path,
     a, b = plain.mean(), paired.mean()
     assert a > 0.05
     assert abs(a - b) < 0.02 * a
+
+
+@pytest.mark.skipif(embree.library() is None, reason="Embree (embreex) is not available")
+def test_embree_takes_quads_only_from_a_mesh_laid_out_in_pairs():
+    """A mesh at least half in pairs goes in as quads (a run of pairs, then the lone triangles); one whose
+    neighbours have the pair's shape only here and there goes in as plain triangles, one geometry."""
+    pts = np.random.default_rng(7).normal(size=(40, 3)).astype(np.float32)
+    pair = [[13, 10, 11], [12, 13, 11]]
+    lone = [[0, 1, 2], [3, 4, 5], [6, 7, 8]]
+    scenes = embree.EmbreeScenes(embree.library())
+    handle, codes = scenes.add_mesh(pts, np.array(pair + pair + lone[:1], np.int32))
+    assert handle != 0 and list(codes) == [1, 2 * 4]
+    handle, codes = scenes.add_mesh(pts, np.array(lone * 3 + pair, np.int32))
+    assert handle != 0 and list(codes) == [0]
+    scenes.close()

@@ -8,8 +8,8 @@ its C API through ``ctypes`` (building) and through function pointers handed to 
 ours is linked against it, so the shipped kernels stay portable and a machine without it renders with our walk.
 
 Embree holds the runs of a mesh's triangles that ``order_for_quads`` laid out in pairs as quads (``accel.quads``:
-two triangles in the leaf memory of one and a quarter, the rays a little faster) and the lone triangles beside
-them as quads with a repeated corner (a mesh without pairs as triangles), and reads both the vertices and the
+two triangles in the leaf memory of one and a quarter, the rays a little faster) and the lone triangles beside them
+as quads with a repeated corner (a mesh less than half in pairs as triangles), and reads both the vertices and the
 indices in place from the upload's own arrays. On the heavy bench scene that took Embree's share from 73.1 to 43.4
 bytes per triangle (``bench/embree_rays.py``).
 
@@ -142,11 +142,11 @@ class EmbreeScenes:
     def add_mesh(self, points: np.ndarray, triangles: np.ndarray,
                  shared: bool = False) -> tuple[int, np.ndarray | None]:
         """A committed scene of one triangle mesh (points (V, 3), triangles (T, 3) indices): its handle, 0 when
-        Embree refuses it, and its geometries' codes for ``quads.embree_triangle`` (per geometry, its first
-        triangle * 2, plus 1 for a run of quads). Runs of triangles laid out in pairs (``quads.quad_runs``) go in
-        as quads. ``shared``: ``points`` is float32 (V, 3) with at least 4 readable bytes after its last row
-        (Embree loads a vertex 16 bytes at a time) and ``triangles`` int32 (T, 3), both C-contiguous and alive as
-        long as this object: Embree then reads them in place; else it reads copies."""
+        Embree refuses it, and its geometries' codes for ``quads.embree_triangle`` (per geometry, twice its first
+        triangle, plus 1 for a run of quads). A mesh at least half laid out in pairs (``quads.quad_runs``) goes in as
+        quads, else as triangles. ``shared``: ``points`` is float32 (V, 3) with at least 4 readable bytes after its
+        last row (Embree loads a vertex 16 bytes at a time) and ``triangles`` int32 (T, 3), both C-contiguous and
+        alive as long as this object: Embree then reads them in place; else it reads copies."""
         lib = self.lib
         if shared and not (points.dtype == np.float32 and points.ndim == 2 and points.shape[1] == 3
                            and points.flags.c_contiguous and triangles.dtype == np.int32
@@ -157,7 +157,10 @@ class EmbreeScenes:
         if len(tris) and (tris.min() < 0 or tris.max() >= len(pts)):
             return 0, None  # indices Embree would read out of bounds with (a mesh's are checked when it is loaded)
         runs = quads.quad_runs(tris) if len(tris) < quads.MAX_TRIANGLES else [(0, len(tris), False)]
-        if len(runs) > max(MAX_RUNS, len(tris) // 64):  # pairs scattered through the mesh: plain triangles
+        paired = 2 * sum(count for _, count, pair in runs if pair)
+        if 2 * paired < len(tris) or len(runs) > max(MAX_RUNS, len(tris) // 64):
+            # not laid out in pairs (``order_for_quads`` leaves small meshes alone; a few neighbours may have the
+            # pair's shape by chance), or pairs scattered through the mesh: plain triangles
             runs = [(0, len(tris), False)]
         scene = lib.rtcNewScene(self.device)
         # Embree's fast triangle test (Moller-Trumbore, as ours): its robust mode (watertight edges, what Cycles

@@ -249,9 +249,7 @@ def upload_geometry(scene: Scene, device: str = "cpu") -> tuple[Geometry, Geomet
     n_tris = np.cumsum([0] + [len(m.triangles) for m in scene.meshes])
     triangles = np.concatenate([m.triangles for m in scene.meshes] or [np.zeros((1, 3), np.int32)]).astype(
         np.int32, copy=False)
-    on_cpu = device == "cpu"
-    em = embree_meshes(scene, shapes, device, points if on_cpu else None, n_verts, triangles if on_cpu else None,
-                       n_tris)
+    em = embree_meshes(scene, shapes, device, points, n_verts, triangles, n_tris)
     o2w = matrices_at([inst.transform for inst in scene.instances], 0.0) if scene.instances else np.eye(4)[None]
     by_embree, identity_placed = _walked_by_embree(scene, em, o2w)
     walked: list[Bvh] = []  # the trees uploaded, walked by our kernels (``blas`` is for placing instances)
