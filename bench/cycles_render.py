@@ -40,6 +40,9 @@ if fx:
 sc.render.engine = "CYCLES"; sc.cycles.device = "CPU"; sc.render.threads_mode = "FIXED"; sc.render.threads = 2
 sc.cycles.samples = spp; sc.cycles.seed = seed; sc.cycles.use_adaptive_sampling = False; sc.cycles.use_denoising = False
 sc.view_settings.view_transform = "Standard"
+if os.environ.get("CYCLES_DEPTH"):  # every bounce limit at this depth (ours: max_depth for all lobes; Cycles' defaults are diffuse 4, glossy 4, total 12)
+    d = int(os.environ["CYCLES_DEPTH"])
+    sc.cycles.max_bounces = d; sc.cycles.diffuse_bounces = d; sc.cycles.glossy_bounces = d; sc.cycles.transmission_bounces = d
 if os.environ.get("CYCLES_UNBIASED"):  # no glossy filter, no indirect clamp: the same estimator as a plain path tracer
     sc.cycles.blur_glossy = 0.0; sc.cycles.sample_clamp_indirect = 0.0; sc.cycles.sample_clamp_direct = 0.0
 print("defaults: blur_glossy", sc.cycles.blur_glossy, "clamp_indirect", sc.cycles.sample_clamp_indirect, "max_bounces", sc.cycles.max_bounces, file=__import__("sys").stderr)

@@ -13,9 +13,9 @@ kernel's code (``warp-clang.so [unknown]`` is Warp's ``_wp_isfinite``, called ou
 
 Needs ``perf`` (root, or kernel.perf_event_paranoid <= 2), ``nm`` and ``addr2line`` (binutils or llvm-) on PATH.
 
-How: the integrator is compiled with the production flags (``kernel_cache.PORTABLE_FLAGS``, or ``-march=native``
-with ``--native``) plus DEBUG_FLAGS into a kernel cache of its own (``--cache``; the first run pays the ~20 s
-compile; Warp's own cache is not touched). Line tables change no code: the script compares the object's code bytes
+How: the integrator is compiled with the production flags (``kernel_cache.PORTABLE_FLAGS`` and its sample
+profile, or ``-march=native`` and the profile with ``--native``) plus DEBUG_FLAGS into a kernel cache of its own
+(``--cache``; the first run pays the ~20 s compile; Warp's own cache is not touched). Line tables change no code: the script compares the object's code bytes
 with the production object's (shipped prebuilt or Warp's cache) when it finds one. Warp keeps the generated C++
 beside the object: each Python statement appears as ``// <source>  <L n>`` (one per source line) above its C++,
 each function below a ``// <file>.py:<n>`` header. Warp's JIT (LLVM ORC JITLink) loads the object's one code
@@ -75,10 +75,13 @@ def load_profiled_integrator(cache: pathlib.Path, native: bool):
     from renderer.device import init_warp
     init_warp()
     from renderer import integrator, kernel_cache
+    from renderer.sample_profile import compiling_in
     mod = wp.get_module(integrator.__name__)
-    # --native: Warp's default flags (config.cpu_compiler_flags: -march=native, its inlining thresholds)
-    wp.set_module_options({"cpu_compiler_flags": None if native else kernel_cache.PORTABLE_FLAGS}, module=mod)
-    flags = (wp.config.cpu_compiler_flags or "-march=native") if native else kernel_cache.PORTABLE_FLAGS
+    # --native: Warp's default flags (config.cpu_compiler_flags: -march=native, its inlining thresholds) and the
+    # sample profile, as ``drt warmup`` builds it; else the shipped portable build's
+    flags = kernel_cache._native_flags(mod) if native else kernel_cache._portable_flags(mod)
+    flags = flags or wp.config.cpu_compiler_flags or "-march=native"
+    wp.set_module_options({"cpu_compiler_flags": flags}, module=mod)
     prod = kernel_cache._cpu_object(mod).relative_to(wp.config.kernel_cache_dir)
     from warp._src.thirdparty import appdirs
     user = pathlib.Path(os.environ["WARP_CACHE_PATH"]) / wp.config.version if "WARP_CACHE_PATH" in os.environ \
@@ -86,7 +89,10 @@ def load_profiled_integrator(cache: pathlib.Path, native: bool):
     prod = next((d / prod for d in (kernel_cache.prebuilt_dir(), user) if (d / prod).exists()), None)
     wp.set_module_options({"cpu_compiler_flags": f"{flags} {DEBUG_FLAGS}"}, module=mod)
     t0 = time.perf_counter()
-    wp.load_module(mod, device="cpu")
+    if native:
+        kernel_cache._prepare_native_compile(mod)
+    with compiling_in([mod]):  # the portable build names its profile without a directory
+        wp.load_module(mod, device="cpu")
     kernel_cache._chosen[mod.name] = "profiled"  # so that prepare()'s load_kernels() keeps this build
     print(f"# integrator loaded in {time.perf_counter() - t0:.1f} s, flags: {flags} {DEBUG_FLAGS}", file=sys.stderr)
     return next(e for (ctx, _), e in mod.execs.items() if ctx is None), integrator.trace_wave_kernel, prod

@@ -17,6 +17,8 @@ For each module, ``load_modules`` takes the first that applies:
 
 ``drt warmup --prebuilt`` rebuilds ``renderer/prebuilt`` after a change to kernel code;
 ``tests/test_kernel_cache.py`` fails while the shipped build does not match the source.
+
+A module with a sample profile (``sample_profile``: the integrator) is compiled with it, host-tuned or portable.
 """
 from __future__ import annotations
 
@@ -29,6 +31,8 @@ import threading
 import types
 
 import warp as wp
+
+from renderer.sample_profile import compiling_in, profile_flags, write_profile
 
 PREBUILT_ROOT = pathlib.Path(__file__).parent / "prebuilt"
 # Warp's default inlining flags (9000 keeps the integrator's call tree inlined: 35-40 % faster than LLVM's
@@ -74,6 +78,30 @@ def _cpu_object(mod) -> pathlib.Path | None:
         return None
 
 
+def _portable_flags(mod) -> str:
+    return f"{PORTABLE_FLAGS} {profile_flags(mod)}".strip()
+
+
+def _profile_dir() -> pathlib.Path:
+    return pathlib.Path(wp.config.kernel_cache_dir) / "sample-profiles"
+
+
+def _native_flags(mod) -> str | None:
+    """Warp's own flags (None) for a module without a sample profile; with one, Warp's flags and the profile,
+    which host-tuned builds read from Warp's cache directory (an absolute path: they are built where they run)."""
+    pgo = profile_flags(mod, _profile_dir())
+    return f"{wp.config.cpu_compiler_flags or '-march=native'} {pgo}" if pgo else None
+
+
+def _prepare_native_compile(mod) -> None:
+    """Write the profile a host-tuned compile of ``mod`` reads; where that cannot be done (a read-only cache),
+    compile without it."""
+    try:
+        write_profile(mod, _profile_dir())
+    except OSError:
+        _set_flags(mod, None)
+
+
 def _set_flags(mod, flags: str | None) -> None:
     if mod.options.get("cpu_compiler_flags") != flags:
         wp.set_module_options({"cpu_compiler_flags": flags}, module=mod)
@@ -116,18 +144,19 @@ def load_modules(modules, device: str = "cpu", *, prebuilt_root: pathlib.Path = 
         for m in modules:
             mod = _module(m)
             if mod.name not in _chosen and device == "cpu":
-                _set_flags(mod, None)
+                _set_flags(mod, _native_flags(mod))
                 native = _cpu_object(mod)
                 if native is not None and native.exists():
                     _chosen[mod.name] = "native"
                 elif host_has_x86_64_v3():
-                    _set_flags(mod, PORTABLE_FLAGS)
+                    _set_flags(mod, _portable_flags(mod))
                     if _seed_from(mod, prebuilt_root):
                         _chosen[mod.name] = "prebuilt"
                     else:
-                        _set_flags(mod, None)
+                        _set_flags(mod, _native_flags(mod))
                 if mod.name not in _chosen:
                     _chosen[mod.name] = "compiled"
+                    _prepare_native_compile(mod)
             wp.load_module(mod, device=device)
         return {_module(m).name: _chosen.get(_module(m).name, "compiled") for m in modules}
 
@@ -137,7 +166,8 @@ def warm_native(modules, device: str = "cpu") -> list[pathlib.Path]:
     out = []
     for m in modules:
         mod = _module(m)
-        _set_flags(mod, None)
+        _set_flags(mod, _native_flags(mod))
+        _prepare_native_compile(mod)
         wp.load_module(mod, device=device)
         obj = _cpu_object(mod)
         if obj is not None:
@@ -157,8 +187,9 @@ def write_prebuilt(modules, root: pathlib.Path = PREBUILT_ROOT) -> list[pathlib.
         try:
             for m in modules:
                 mod = _module(m)
-                _set_flags(mod, PORTABLE_FLAGS)
-                wp.load_module(mod, device="cpu")
+                _set_flags(mod, _portable_flags(mod))
+                with compiling_in([mod]):
+                    wp.load_module(mod, device="cpu")
                 obj = _cpu_object(mod)
                 if obj is None or not obj.exists():
                     raise RuntimeError(f"Warp did not leave a CPU object for {mod.name} where expected")

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import pathlib
 import subprocess
 import sys
@@ -39,7 +40,9 @@ if os.environ.get("NO_COMPILE"):
     def refuse(*a, **k):
         raise RuntimeError("compiled although a build was expected in the cache")
     build.build_cpu = refuse
-from renderer import kernel_cache
+from renderer import kernel_cache, sample_profile
+if os.environ.get("PROFILES"):  # sample profiles of the tiny module
+    sample_profile.PROFILES = pathlib.Path(os.environ["PROFILES"])
 action = os.environ["ACTION"]
 out = {}
 if action == "kernels":
@@ -63,11 +66,17 @@ else:
         a = wp.array([1.0, 2.0], dtype=float)
         wp.launch(tiny.affine, dim=2, inputs=[a])
         out["values"] = a.numpy().tolist()
+        if os.environ.get("PROFILES"):
+            mod = wp.get_module(tiny.__name__)
+            out["flags"] = mod.options["cpu_compiler_flags"]
+            out["kernel"] = tiny.affine.get_mangled_name()
+            out["object"] = str(kernel_cache._cpu_object(mod))
 print("RESULT " + json.dumps(out))
 '''
 
 
-def _run(tmp: pathlib.Path, action: str, cache: pathlib.Path | None, *, no_compile=False, prebuilt=None, scene=None):
+def _run(tmp: pathlib.Path, action: str, cache: pathlib.Path | None, *, no_compile=False, prebuilt=None, scene=None,
+         profiles=None):
     (tmp / "tiny").mkdir(exist_ok=True)
     (tmp / "tiny" / "tiny_kernels.py").write_text(TINY)
     env = dict(os.environ, CACHE=str(cache or ""), TINY_DIR=str(tmp / "tiny"), ACTION=action,
@@ -77,16 +86,23 @@ def _run(tmp: pathlib.Path, action: str, cache: pathlib.Path | None, *, no_compi
         env["NO_COMPILE"] = "1"
     if scene:
         env["SCENE"] = str(scene)
+    env.pop("PROFILES", None)
+    if profiles:
+        env["PROFILES"] = str(profiles)
     p = subprocess.run([sys.executable, "-c", DRIVER], env=env, capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stderr[-3000:]
     line = [ln for ln in p.stdout.splitlines() if ln.startswith("RESULT ")][-1]
     return json.loads(line[len("RESULT "):])
 
 
-def _needs_v3():
+def _host_is_v3() -> bool:
     from renderer.kernel_cache import host_has_x86_64_v3
 
-    if not host_has_x86_64_v3():
+    return host_has_x86_64_v3()
+
+
+def _needs_v3():
+    if not _host_is_v3():
         pytest.skip("the shipped kernels are for x86-64-v3 CPUs; this host is not one")
 
 
@@ -150,3 +166,39 @@ def test_drt_warmup_makes_later_renders_load_the_host_tuned_kernels(tmp_path):
     assert p.stdout.startswith(f"{len(RENDER_MODULES)} render kernel modules for this CPU in "), p.stdout
     out = _run(tmp_path, "kernels", None, no_compile=True)
     assert set(out["loaded"].values()) == {"native"}, out
+
+
+# The tiny kernel's forward function as clang names it, with a hash from before an edit: the profile is written
+# out with today's hash before each compile
+STALE_PROFILE = """_ZL34affine_00000000_cpu_kernel_forwardILb0EEvN2wp15launch_bounds_tILi1EEEmP23wp_args_affine_00000000:100:1
+ 1: 50
+ 2: 50
+"""
+
+
+def test_a_module_with_a_sample_profile_compiles_with_it_in_every_build(tmp_path):
+    """Host-tuned and portable builds read the module's profile (renamed to today's hashes); Warp's JIT loads
+    what clang makes of it and the kernel computes the same; the portable build's cache key names the profile
+    without a directory, so it is the same on every machine."""
+    profiles = tmp_path / "profiles"
+    profiles.mkdir()
+    (profiles / "tiny_kernels.prof").write_text(STALE_PROFILE)
+    out = _run(tmp_path, "load", tmp_path / "cache", prebuilt=tmp_path / "empty", profiles=profiles)
+    assert out["loaded"] == {"tiny_kernels": "compiled"} and out["values"] == [3.0, 5.0]
+    used = re.search(r"-fprofile-sample-use=(\S+)", out["flags"])
+    assert used, out["flags"]
+    written = pathlib.Path(used.group(1))
+    assert written.is_absolute() and written.parent.name == "sample-profiles"  # in Warp's cache
+    assert (tmp_path / "cache") in written.parents
+    text = written.read_text()
+    assert "00000000" not in text and f"34{out['kernel']}_cpu_kernel_forward" in text
+    assert f"wp_args_{out['kernel']}" in text
+    assert pathlib.Path(out["object"]).is_file()
+
+    if not _host_is_v3():
+        return
+    written = _run(tmp_path, "write", tmp_path / "scratch", profiles=profiles)["written"]
+    out = _run(tmp_path, "load", tmp_path / "fresh", no_compile=True, profiles=profiles)
+    assert out["loaded"] == {"tiny_kernels": "prebuilt"} and out["values"] == [3.0, 5.0]
+    assert re.search(r"-fprofile-sample-use=tiny_kernels-[0-9a-f]{8}\.prof$", out["flags"]), out["flags"]
+    assert pathlib.Path(written[0]).name == pathlib.Path(out["object"]).name
