@@ -1,6 +1,8 @@
 """(Copied from ../shared/bench, fixed for Blender 5.2's motion-blur settings.) Run inside the bpy venv: import a USD scene, render with Cycles CPU (2 threads, no denoise/adaptive) to an EXR.
 Usage: cycles_render.py SCENE OUT.exr W H SPP SEED [motion]. Prints JSON with the render seconds.
-$DRT_BLENDER_FIXUPS (JSON, from noise.py's ``blender_fixups``): what the USD import dropped, rebuilt after it."""
+$DRT_BLENDER_FIXUPS (JSON, from noise.py's ``blender_fixups``): what the USD import dropped, rebuilt after it.
+$CYCLES_DEPTH: every bounce limit of Cycles at this number (its defaults: diffuse 4, glossy 4, total 12); 7 is
+our max_depth 8 (ours counts direct lighting as depth 1, Cycles as 0 bounces)."""
 import sys, time, json, bpy
 scene_path, out, w, h, spp, seed = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5]), int(sys.argv[6])
 motion = len(sys.argv) > 7 and sys.argv[7] == "motion"
