@@ -15,8 +15,10 @@ Needs ``perf`` (root, or kernel.perf_event_paranoid <= 2), ``nm`` and ``addr2lin
 
 How: the integrator is compiled with the production flags (``kernel_cache.PORTABLE_FLAGS`` and its sample
 profile, or ``-march=native`` and the profile with ``--native``) plus DEBUG_FLAGS into a kernel cache of its own
-(``--cache``; the first run pays the ~20 s compile; Warp's own cache is not touched). Line tables change no code: the script compares the object's code bytes
-with the production object's (shipped prebuilt or Warp's cache) when it finds one. Warp keeps the generated C++
+(``--cache``; the first run pays the ~20 s compile; Warp's own cache is not touched). Line tables change no code:
+the script compares the object's code bytes with the production object's (shipped prebuilt or Warp's cache) when
+it finds one (the host-tuned build names its profile by an absolute path in Warp's cache, so with ``--native`` it
+finds none). Warp keeps the generated C++
 beside the object: each Python statement appears as ``// <source>  <L n>`` (one per source line) above its C++,
 each function below a ``// <file>.py:<n>`` header. Warp's JIT (LLVM ORC JITLink) loads the object's one code
 section (``.ltext``, large code model) as one block, so a sample's address - (the kernel's ``*_cpu_forward``
