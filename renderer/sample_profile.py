@@ -3,7 +3,7 @@
 ``renderer/profiles/<module>.prof`` is an LLVM sample profile (text format) of a module's kernel: how often each
 line of its generated C++ ran, per inline call site, measured with ``perf`` on the bench scenes by
 ``bench/sample_profile.py``. Given it (``-fprofile-sample-use``), clang lays the hot paths out straight and keeps
-cold code out of their way; the integrator renders 3-6 % faster with the same pixels (the profile changes where
+cold code out of their way; the integrator renders 1-12 % faster with the same pixels (the profile changes where
 code goes, never what it computes).
 
 A profile names functions as Warp generates them, with hashes: the kernel's (``trace_wave_kernel_9ce3eecc``)
