@@ -33,17 +33,23 @@ def _number(text: str) -> float:
 
 
 def _parse_as(setting: Setting):
-    """An argparse type for one number of ``setting``: its kind, within its bounds (the table's words on failure)."""
+    """An argparse type for one value (or number of a pair) of ``setting``: its kind, within its bounds and rules
+    (the table's words on failure)."""
     def parse(text: str):
-        if setting.kind is int:
+        if setting.kind is str:
+            v = text
+        elif setting.kind is int:
             try:
                 v = int(text)
             except ValueError:
                 raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
         else:
             v = _number(text)
-        if setting.problem((v, v) if setting.shape == "pair" else v):
-            raise argparse.ArgumentTypeError(f"must be {setting.bounds_text()}: {text!r}")
+        problem = setting.problem((v, v) if setting.shape == "pair" else v)
+        if problem:
+            bounds = setting.bounds_text()
+            raise argparse.ArgumentTypeError(f"must be {bounds}: {text!r}" if bounds and setting.kind is not str
+                                             else problem)
         return v
 
     return parse
@@ -62,8 +68,6 @@ def add_setting_flags(p: argparse.ArgumentParser, exclude: tuple[str, ...] = ())
             p.add_argument(s.cli_flag, action="append", choices=list(s.choices), metavar=s.metavar, **common)
         elif s.choices:
             p.add_argument(s.cli_flag, choices=list(s.choices), **common)
-        elif s.kind is str:
-            p.add_argument(s.cli_flag, metavar=s.metavar, **common)
         else:
             p.add_argument(s.cli_flag, type=_parse_as(s), nargs=2 if s.shape == "pair" else None,
                            metavar=s.metavar, **common)
