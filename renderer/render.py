@@ -197,7 +197,7 @@ def render_tile(prep: PreparedScene, tile: Tile,
     settings.indirect_clamp = opts.path_indirect_clamp
     settings.glossy_filter = opts.path_glossy_filter
     settings.time_filter = TIME_FILTERS[opts.time_filter]
-    settings.frame_s = frame_shutter_time(prep.scene)
+    settings.frame_s = prep.scene.shutter.frame_s
     settings.seed = wp.uint32(opts.seed)
     slot_of = np.full(sw * sh, -1, np.int32)
     # the tile's own pixels among the sample pixels (its samples-per-pixel count and progress)
@@ -347,18 +347,10 @@ def frame_channels(prep: PreparedScene, sums: dict[str, np.ndarray]) -> dict[str
     return ch
 
 
-def frame_shutter_time(scene: Scene) -> float:
-    """The frame's time code as normalised shutter time (clamped to the shutter)."""
-    span = scene.shutter_close - scene.shutter_open
-    if span <= 0:
-        return 0.0
-    return min(1.0, max(0.0, (scene.frame - scene.shutter_open) / span))
-
-
 def frame_attributes(prep: PreparedScene) -> dict:
     """EXR header attributes: camera matrices at the frame time, frame rate, time code, render settings."""
     scene, o = prep.scene, prep.options
-    w2c = np.linalg.inv(matrix_at(scene.camera.transform, frame_shutter_time(scene)))
+    w2c = np.linalg.inv(matrix_at(scene.camera.transform, scene.shutter.frame_s))
     return {
         "worldToCamera": w2c,
         "worldToNDC": ndc_matrix(scene.camera, prep.camera) @ w2c,
@@ -376,7 +368,7 @@ def frame_attributes(prep: PreparedScene) -> dict:
         "drt/seed": int(o.seed),
         "drt/filter": o.filter,
         "drt/timeFilter": o.time_filter,
-        "drt/shutter": (float(scene.shutter_open - scene.frame), float(scene.shutter_close - scene.frame)),
+        "drt/shutter": scene.shutter.offsets,
         "drt/depthOfField": int(prep.camera.lens_radius > 0),
         "drt/metersPerUnit": float(scene.meters_per_unit),
     }

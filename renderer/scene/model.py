@@ -3,7 +3,7 @@
 This is the contract between the USD importer (``usd_scene``) and everything that renders. Nothing here
 knows about pxr, Warp or HTTP. All positions are in scene units (the stage's units; ``meters_per_unit``
 converts), times are **normalised shutter time** ``s`` in [0, 1] over the frame's shutter interval
-``[shutter_open, shutter_close]`` (absolute time codes), and colours are linear Rec.709 RGB.
+``[shutter.open, shutter.close]`` (absolute time codes; ``renderer.motion.shutter``), and colours are linear Rec.709 RGB.
 
 Motion (the paper's time dimension) is described by *keys*:
 
@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from renderer.motion.shutter import Shutter
 from renderer.motion.transform import MotionTransform  # noqa: F401  (part of the scene contract)
 
 # Light kinds (the integer ``kind`` the kernels dispatch on).
@@ -332,18 +333,24 @@ class Scene:
     materials: list[Material]
     lights: list[Light]
     camera: Camera
-    frame: float  # time code of the frame
-    shutter_open: float  # absolute time code of s = 0
-    shutter_close: float  # absolute time code of s = 1
+    shutter: Shutter  # the frame's time code, its shutter interval and the stage's time codes per second
     meters_per_unit: float = 0.01
     up_axis: str = "Y"
-    time_codes_per_second: float = 24.0
     render_settings: RenderSettingsInfo = field(default_factory=RenderSettingsInfo)
     # CSG groups: the operation of each ("union", "intersection", "difference"); members name it on Instance
     csg_operations: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     source: str = ""  # file it came from, for messages
 
+    @property
+    def frame(self) -> float:
+        """Time code of the frame."""
+        return self.shutter.frame
+
+    @property
+    def time_codes_per_second(self) -> float:
+        return self.shutter.time_codes_per_second
+
     def time_code(self, s: float) -> float:
         """Absolute time code of normalised shutter time s."""
-        return self.shutter_open + s * (self.shutter_close - self.shutter_open)
+        return self.shutter.time_code(s)

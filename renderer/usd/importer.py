@@ -16,7 +16,7 @@ Policies worth knowing:
 * **Instancing**: instance proxies of the same prototype prim with the same material assignment share one Mesh;
   PointInstancer instances share the prototypes' meshes; identical static implicit primitives share one Mesh.
 * **Static frames**: with motion blur off (argument, RenderSettings ``disableMotionBlur``) or an empty shutter,
-  ``shutter_open == shutter_close == frame`` and every key is a single key at the frame.
+  ``shutter.open == shutter.close == frame`` and every key is a single key at the frame.
 """
 from __future__ import annotations
 
@@ -39,7 +39,9 @@ from renderer.usd.materials import MaterialTable
 from renderer.usd.mesh import read_mesh
 from renderer.usd.mesh_lights import apply_mesh_light
 from renderer.usd.mtlx import compose_mtlx
-from renderer.usd.motion import Shutter, TransformSampler, collapse_keys, motion_transforms, refine_keys
+from renderer.motion.shutter import Shutter
+from renderer.usd.motion import (TransformSampler, collapse_keys, motion_transforms, refine_keys,
+                                 samples_in_shutter, shutter_interval)
 from renderer.usd.primitives import PRIMITIVE_TYPES, primitive_signature, read_primitive
 from renderer.usd.primvars import default_uv_name, read_display_colors, read_named_uvs
 from renderer.usd.skel import Skinning
@@ -241,12 +243,9 @@ class _Importer:
             materials=self.materials.materials or [sc.Material(name="default grey")],
             lights=self.lights,
             camera=camera,
-            frame=self.frame,
-            shutter_open=self.shutter.open,
-            shutter_close=self.shutter.close,
+            shutter=self.shutter,
             meters_per_unit=float(UsdGeom.GetStageMetersPerUnit(stage)),
             up_axis=self._up_axis(),
-            time_codes_per_second=float(stage.GetTimeCodesPerSecond()),
             render_settings=settings,
             csg_operations=self.csg.finish(self.instances, self.meshes),
             warnings=warn.lines(),
@@ -280,9 +279,8 @@ class _Importer:
             if o > c:
                 self.warn(f"camera shutter:open {o} is after shutter:close {c}; motion blur disabled")
                 o = c = 0.0
-        if not self.motion_blur or settings.disable_motion_blur or o == c:
-            return Shutter(self.frame, self.frame, self.frame, tcps)
-        return Shutter(self.frame, self.frame + o, self.frame + c, tcps)
+        still = not self.motion_blur or settings.disable_motion_blur or o == c
+        return Shutter.around(self.frame, None if still else (o, c), tcps)
 
     # -- traversal ------------------------------------------------------------------------------------------------
     def _traverse(self) -> None:
@@ -411,7 +409,7 @@ class _Importer:
             attr = img.GetVisibilityAttr() if img else None
             if attr and attr.HasAuthoredValue() and attr.ValueMightBeTimeVarying():
                 varying = True
-                samples = tuple(sorted(set(samples) | set(self.shutter.samples_of(attr))))
+                samples = tuple(sorted(set(samples) | set(samples_in_shutter(self.shutter, attr))))
             hit = self._vis_chain[key] = (varying, samples)
         return hit
 
@@ -605,7 +603,7 @@ class _Importer:
                 curved = curved or name != "velocities"
             if a.ValueMightBeTimeVarying():
                 moving = True
-                samples += sh.samples_of(a)
+                samples += samples_in_shutter(sh, a)
         for target in UsdGeom.PointInstancer(prim).GetPrototypesRel().GetForwardedTargets():
             proto = self.stage.GetPrimAtPath(target)
             if not proto:
@@ -614,7 +612,7 @@ class _Importer:
                 xf = UsdGeom.Xformable(p)
                 if xf and xf.TransformMightBeTimeVarying():
                     moving = True
-                    samples += sh.inner(xf.GetTimeSamplesInInterval(sh.interval()))
+                    samples += sh.inner(xf.GetTimeSamplesInInterval(shutter_interval(sh)))
         if not moving:
             return np.array([self.frame])
         keys = sh.keys(samples)
