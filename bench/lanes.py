@@ -2,7 +2,7 @@
 """SIMD lanes inside Warp, proven or killed (issue 48): next-event estimation one record per thread against an
 in-thread loop over 64 records, and Embree's ray packets against single rays.
 
-    python bench/lanes.py [--scene cornell] [--width 160 --height 90 --spp 16] [--repeats 5]
+    python bench/lanes.py [--scene cornell] [--width 320 --spp 16] [--repeats 5]
                           [--target v3,native] [--count] [--embree cornell,heavy]
 
 1. **Capture.** A capture kernel here re-traces the scene's paths as ``integrator.trace_wave_kernel`` does (the same
@@ -16,16 +16,16 @@ in-thread loop over 64 records, and Embree's ray packets against single rays.
    unshadowed contribution f Le cos w / pdf, the direction and the distance (the shadow ray is part 4).
    - *scalar*: one record per thread, the integrator's own ``@wp.func`` code (``sample_3d``, ``select_light``,
      ``sample_light``, ...), records read from plain float arrays;
-   - *lanes*: one thread per 64 records in the layout a per-thread wavefront would keep, each field a
-     ``vector(64, float)`` per batch, loaded into locals and looped over; the loop body is the same renderer code
-     except where it cannot vectorize: the sampler's and the rectangle's 4-lane natives (clang vector types stop
-     LLVM's loop vectorizer) are replaced by their scalar twins ``owen_scramble3_reference`` /
-     ``_sph_rect_angles_reference`` (bit-identical by the renderer's tests), and the light choice, whose loops
-     (one cluster, one light in cornell and heavy: checked) are replaced by their one-light arithmetic;
-   - *lanes, no loop vectorizer*: the same object code with ``-fno-vectorize`` (what the vectorizer adds);
-   - *flat loop*: the same loop reading plain float arrays (``array_t``): Warp's run-time byte strides make LLVM
+   - *lanes-vec3*: one thread per 64 records in the layout a per-thread wavefront would keep (each field a
+     ``vector(64, float)`` per batch, loaded into locals), looped over with the renderer's own vec3 code, except
+     the sampler's and the rectangle's 4-lane natives (their scalar twins ``owen_scramble3_reference`` /
+     ``_sph_rect_angles_reference``, bit-identical by the renderer's tests) and the light choice's loops (its
+     one-light arithmetic: one cluster of one light, checked). LLVM does not vectorize it (see ``nee_soa``);
+   - *soa*: the same loop over ``nee_soa``, the computation rewritten in plain floats, vectorized 8 wide (forced:
+     ``FORCE``); *soa-w16* 16 wide; *soa-novec* the same source with ``-fno-vectorize``;
+   - *soa-flat*: ``nee_soa`` reading plain float arrays (``array_t``): Warp's run-time byte strides make LLVM
      version the loop on a byte stride of 1, so the ymm code it emits is never reached by float arrays.
-   The lanes' outputs are compared with the scalar ones (float order may differ: relative 1e-5 allowed).
+   Every variant's outputs are compared with the scalar ones (relative 1e-5 would do; they are bit-equal).
 3. **Evidence**: per build target (``v3``: the shipped x86-64-v3/AVX2 flags; ``native``: Warp's ``-march=native``,
    AVX-512 where the host has it), ymm/zmm/xmm instruction counts, packed vs scalar float ops and gathers in
    each module's object (``objdump -d``), and with ``--count`` the instructions per record under callgrind
@@ -153,6 +153,7 @@ class Capture:
     i: wp.array2d(dtype=wp.int32)  # (NI, ...)
     ray: wp.array2d(dtype=wp.float32)  # (6, ...) the continuation ray leaving the vertex: origin, direction
     ray_ok: wp.array(dtype=wp.int32)
+    first: int  # the launch's first path
     width: int
     spp: int
     max_depth: int
@@ -164,8 +165,9 @@ class Capture:
 def capture_kernel(geo: Geometry, mats: Materials, tex: Textures, cam: CameraParams, cap: Capture):
     """``trace_wave_kernel``'s path without light gathering: the vertices where it samples lights, and its rays."""
     tid = wp.tid()
-    j = tid % cap.spp
-    pr = tid // cap.spp
+    path = cap.first + tid
+    j = path % cap.spp
+    pr = path // cap.spp
     px = pr % cap.width
     py = pr // cap.width
     pixel = wp.uint32(py * cam.width + px)
@@ -275,30 +277,38 @@ def capture_kernel(geo: Geometry, mats: Materials, tex: Textures, cam: CameraPar
                             beta = beta / (1.0 - q)
 
 
-def capture(prep, spp: int) -> dict:
-    """Shading records (columns, in path order) and continuation rays of the prepared image at ``spp``."""
+def capture(prep, spp: int, chunk: int = 1 << 17) -> dict:
+    """Shading records (columns, in path order) and continuation rays of the prepared image at ``spp``, captured
+    ``chunk`` paths at a time (a slot per bounce and path)."""
     opts = prep.options
-    width = prep.width
     paths = prep.width * prep.height * spp
-    slots = paths * opts.max_depth
+    depth = int(opts.max_depth)
     cap = Capture()
-    cap.f = wp.zeros((NF, slots), dtype=wp.float32)
-    cap.i = wp.zeros((NI, slots), dtype=wp.int32)
-    cap.ray = wp.zeros((6, slots), dtype=wp.float32)
-    cap.ray_ok = wp.zeros(slots, dtype=wp.int32)
-    cap.width, cap.spp, cap.max_depth = width, spp, int(opts.max_depth)
+    cap.width, cap.spp, cap.max_depth = prep.width, spp, depth
     cap.glossy_filter = float(opts.path_glossy_filter)
     cap.seed = wp.uint32(opts.seed)
-    wp.launch(capture_kernel, dim=paths, inputs=[prep.geometry, prep.materials, prep.textures, prep.camera.params,
-                                                 cap])
-    ii = cap.i.numpy()
-    keep = ii[I_VALID] != 0
-    rays = cap.ray.numpy()
-    ray_ok = cap.ray_ok.numpy() != 0
-    bounce_of_slot = np.tile(np.arange(opts.max_depth), paths)
-    later = ray_ok & (bounce_of_slot >= 1)  # rays leaving bounce 1 on
-    return {"f": np.ascontiguousarray(cap.f.numpy()[:, keep]), "i": np.ascontiguousarray(ii[:, keep]),
-            "rays": rays[:, later], "ray_bounce": bounce_of_slot[later], "paths": paths}
+    cap.f = wp.zeros((NF, chunk * depth), dtype=wp.float32)
+    cap.i = wp.zeros((NI, chunk * depth), dtype=wp.int32)
+    cap.ray = wp.zeros((6, chunk * depth), dtype=wp.float32)
+    cap.ray_ok = wp.zeros(chunk * depth, dtype=wp.int32)
+    fs, is_, rays, ray_bounce = [], [], [], []
+    for first in range(0, paths, chunk):
+        count = min(chunk, paths - first)
+        cap.first = first
+        cap.i.zero_()
+        cap.ray_ok.zero_()
+        wp.launch(capture_kernel, dim=count, inputs=[prep.geometry, prep.materials, prep.textures,
+                                                     prep.camera.params, cap])
+        ii = cap.i.numpy()[:, :count * depth]
+        keep = ii[I_VALID] != 0
+        fs.append(cap.f.numpy()[:, :count * depth][:, keep])
+        is_.append(ii[:, keep])
+        bounce_of_slot = np.tile(np.arange(depth), count)
+        later = (cap.ray_ok.numpy()[:count * depth] != 0) & (bounce_of_slot >= 1)  # rays leaving bounce 1 on
+        rays.append(cap.ray.numpy()[:, :count * depth][:, later])
+        ray_bounce.append(bounce_of_slot[later])
+    return {"f": np.ascontiguousarray(np.concatenate(fs, axis=1)),
+            "i": np.ascontiguousarray(np.concatenate(is_, axis=1)), "rays": np.concatenate(rays, axis=1), "ray_bounce": np.concatenate(ray_bounce), "paths": paths}
 
 
 # ================================================================================================================
@@ -1235,33 +1245,34 @@ def embree_packets(scene, rays: dict, repeats: int) -> list[tuple]:
            (8, False): lib.rtcIntersect8, (8, True): lib.rtcOccluded8,
            (16, False): lib.rtcIntersect16, (16, True): lib.rtcOccluded16}
     rows = []
+    calls = (("1 x8", 8), ("8", 8), ("1 x16", 16), ("16", 16))
     for set_name, (o, d, tmax, occluded) in rays.items():
         n = len(o)
         ro = wp.array(np.ascontiguousarray(o, np.float32).ravel(), dtype=wp.float32)
         rd = wp.array(np.ascontiguousarray(d, np.float32).ravel(), dtype=wp.float32)
         tm = wp.array(np.ascontiguousarray(tmax, np.float32), dtype=wp.float32)
-        results = {}
-        for call, width in (("1 x8", 8), ("8", 8), ("1 x16", 16), ("16", 16)):
+        runs = {}
+        for call, width in calls:
             key = ("single" if call.startswith("1") else width, occluded)
-            kernel = _RAY_KERNELS[key]
             fn = ctypes.cast(fns[key], ctypes.c_void_p).value
             res = wp.zeros(n, dtype=wp.int32)
             t = wp.zeros(n, dtype=wp.float32)
             args = [wp.uint64(fn), wp.uint64(handle), wp.uint64(ro.ptr), wp.uint64(rd.ptr), wp.uint64(tm.ptr),
                     wp.uint64(res.ptr), wp.uint64(t.ptr), n, width]
-            threads = (n + width - 1) // width
-            wp.launch(kernel, dim=threads, inputs=args)  # load, warm
-            wp.synchronize()
-            best = float("inf")
-            for _ in range(repeats):
+            runs[call] = (_RAY_KERNELS[key], (n + width - 1) // width, args, res, t)  # t: alive while traced
+            wp.launch(runs[call][0], dim=runs[call][1], inputs=args)  # load, warm
+        wp.synchronize()
+        best = dict.fromkeys(runs, float("inf"))
+        for _ in range(repeats):  # interleaved, as the NEE timings
+            for call, (kernel, threads, args, *_out) in runs.items():
                 c = time.perf_counter()
                 wp.launch(kernel, dim=threads, inputs=args)
                 wp.synchronize()
-                best = min(best, time.perf_counter() - c)
-            results[call] = (res.numpy(), t.numpy())
-            ref = results.get("1 x8")[0]
-            rows.append((set_name, n, ("rtcOccluded" if occluded else "rtcIntersect") + call, n / best / 1e6,
-                         float(np.mean(results[call][0] == ref))))
+                best[call] = min(best[call], time.perf_counter() - c)
+        ref = runs["1 x8"][3].numpy()
+        for call, (*_, res, _t) in runs.items():
+            rows.append((set_name, n, ("rtcOccluded" if occluded else "rtcIntersect") + call, n / best[call] / 1e6,
+                         float(np.mean(res.numpy() == ref))))
     dev.close()
     return rows
 
@@ -1323,7 +1334,7 @@ def main() -> None:
         return
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scene", default="cornell", help="bench scene name or USD path (NEE part)")
-    ap.add_argument("--width", type=int, default=160, help="capture width in pixels (height from the camera)")
+    ap.add_argument("--width", type=int, default=320, help="capture width in pixels (height from the camera)")
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--target", default="v3,native", help="comma-separated build targets: v3, native")
