@@ -667,23 +667,27 @@ def nee_soa(seed: wp.uint32, pinhole: int, pixel: wp.uint32, index: wp.uint32, b
             use_spec: int, metallic: float, roughness: float, opacity: float, ior: float, L: OneRect):
     """``nee_lane`` for a diffuse + GGX specular opaque surface and one rect light, in floats: (cr, cg, cb, wix,
     wiy, wiz, dist)."""
-    # ---- bsdf_setup
+    # ---- bsdf_setup (its frame's normal: the geometric one where wo is below the shading normal; the cosine of
+    # the contribution keeps the shading normal)
+    fnx = nx
+    fny = ny
+    fnz = nz
     if dot3(nx, ny, nz, wox, woy, woz) <= 0.0:
-        nx = ngx
-        ny = ngy
-        nz = ngz
-    sign = wp.where(nz >= 0.0, 1.0, -1.0)
-    fa = -1.0 / (sign + nz)
-    fb = nx * ny * fa
-    sx = 1.0 + sign * nx * nx * fa
-    sy = sign * fb
-    sz = -sign * nx
-    tx = fb
-    ty = sign + ny * ny * fa
-    tz = -ny
+        fnx = ngx
+        fny = ngy
+        fnz = ngz
+    sign = wp.where(fnz >= 0.0, 1.0, -1.0)
+    oa = -1.0 / (sign + fnz)  # frame_from_normal's a and b
+    ob = fnx * fny * oa
+    sx = 1.0 + sign * fnx * fnx * oa
+    sy = sign * ob
+    sz = -sign * fnx
+    tx = ob
+    ty = sign + fny * fny * oa
+    tz = -fny
     wlx = dot3(sx, sy, sz, wox, woy, woz)
     wly = dot3(tx, ty, tz, wox, woy, woz)
-    wlz = dot3(nx, ny, nz, wox, woy, woz)
+    wlz = dot3(fnx, fny, fnz, wox, woy, woz)
     valid = wlz > 0.0 and dot3(ngx, ngy, ngz, wox, woy, woz) > 0.0
     op = wp.clamp(opacity, 0.0, 1.0)
     dcr = wp.clamp(dr, 0.0, 1.0)
@@ -820,7 +824,7 @@ def nee_soa(seed: wp.uint32, pinhole: int, pixel: wp.uint32, index: wp.uint32, b
     cb = float(0.0)
     ilx = dot3(sx, sy, sz, wix, wiy, wiz)
     ily = dot3(tx, ty, tz, wix, wiy, wiz)
-    ilz = dot3(nx, ny, nz, wix, wiy, wiz)
+    ilz = dot3(fnx, fny, fnz, wix, wiy, wiz)
     cgn = dot3(ngx, ngy, ngz, wix, wiy, wiz)
     leaks = ilz == 0.0 or cgn == 0.0 or (ilz > 0.0) != (cgn > 0.0)
     if pdf_l > 0.0 and valid and not leaks and ilz > 0.0 and wlz > 0.0:
