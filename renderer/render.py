@@ -33,6 +33,8 @@ from renderer.film.exr import timecode_from_frame, write_exr
 from renderer.framing import Framing, resolve_framing
 from renderer.integrator import PathSettings, Wave, trace_wave_kernel
 from renderer.lights.table import upload_lights
+from renderer.media import upload as media_upload
+from renderer.media.upload import MediaUpload, upload_media
 from renderer.motion.transform import matrix_at
 # MAX_SPP and RenderOptions are re-exported: ``renderer.render`` is the library API the README shows.
 from renderer.options import AOV_NAMES, MAX_DEPTH, MAX_PIXELS, MAX_SPP, TIME_FILTERS, RenderOptions  # noqa: F401
@@ -87,6 +89,7 @@ class PreparedScene:
     stats: GeometryStats
     device: str = "cpu"
     warnings: list[str] = field(default_factory=list)
+    media: MediaUpload | None = None  # participating media (volumes, and materials' interior media)
 
 
 def resolve_resolution(scene: Scene, options: RenderOptions) -> tuple[int, int]:
@@ -96,7 +99,7 @@ def resolve_resolution(scene: Scene, options: RenderOptions) -> tuple[int, int]:
 
 
 # every Warp module a render launches kernels of (hierarchy build, integrator, film)
-RENDER_MODULES = (build_kernels, triangle_kernels, wide, quantize, integrator, film)
+RENDER_MODULES = (build_kernels, triangle_kernels, wide, quantize, integrator, film, media_upload)
 
 
 def load_kernels(device: str = "cpu") -> dict[str, str]:
@@ -124,13 +127,16 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> Prepar
     textures = upload_material_textures(flat.materials, device, warn=warnings.append)
     materials = upload_materials(flat.materials, device)
     lights, light_count = upload_lights(flat, device, warn=lambda what, name="": warnings.append(f"{what}: {name}"))
+    media = upload_media(scene, flat.materials, device,
+                         warn=lambda what, name="": warnings.append(f"{what}: {name}"))
     cam = setup_camera(scene.camera, framing, policy=scene.render_settings.aspect_ratio_conform_policy, dof=dof,
                        device=device)
     if cam.warning:
         warnings.append(cam.warning)
     return PreparedScene(scene=scene, options=options, width=width, height=height, framing=framing,
                          geometry=geometry, materials=materials, textures=textures, lights=lights,
-                         light_count=light_count, camera=cam, stats=stats, device=device, warnings=warnings)
+                         light_count=light_count, camera=cam, stats=stats, device=device, warnings=warnings,
+                         media=media)
 
 
 def with_options(prep: PreparedScene, options: RenderOptions) -> PreparedScene:
@@ -224,7 +230,8 @@ def render_tile(prep: PreparedScene, tile: Tile,
         launch.start, launch.count = start, wave
         launch.counters = counters
         wp.launch(trace_wave_kernel, dim=pixels.size * wave, device=dev,
-                  inputs=[prep.geometry, prep.materials, prep.textures, prep.lights, prep.camera.params, buf,
+                  inputs=[prep.geometry, prep.materials, prep.textures, prep.lights, prep.media.media,
+                          prep.camera.params, buf,
                           settings, launch])
         wp.launch(film.axis_weights_kernel, dim=pixels.size * wave, device=dev,
                   inputs=[buf, kind, float(film.FILTER_RADIUS[kind])])

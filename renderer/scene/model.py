@@ -204,9 +204,86 @@ class Material:
     # diffuseColor is the prim's displayColor times this (a fallback material, or a UsdPrimvarReader of
     # displayColor): where a mesh has per-corner ``colors`` they replace ``diffuse_color`` (its mean); None: no
     display_scale: tuple[float, float, float] | None = None
+    # A scattering medium inside closed solids (extension inputs, see ``usd_materials``): scattering coefficient
+    # sigma_s = scatter_color / scatter_distance per scene unit (black: none, the interior only absorbs) and the
+    # Henyey-Greenstein anisotropy g of its phase function, in (-1, 1).
+    scatter_color: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    scatter_distance: float = 1.0
+    scatter_anisotropy: float = 0.0
     # Inputs driven by textures, by UsdPreviewSurface input name ("diffuseColor", "roughness", "normal", ...).
     # The constant field of a textured input holds the texture's mean value (what constant-only code uses).
     textures: dict[str, TextureInput] = field(default_factory=dict)
+
+
+@dataclass
+class VolumeField:
+    """A sparse grid of a ``Volume``: one value per active voxel, in the grid's index space.
+
+    Voxel (i, j, k) has its centre at ``index_to_object @ (i, j, k, 1)`` in the volume's object space (OpenVDB's
+    convention: voxel centres on integer index coordinates); between centres values are trilinear, and outside
+    the active voxels they are ``background``. Sparse grids stay sparse: only active voxels are stored.
+    """
+
+    name: str  # the field's name (OpenVDB grid name), for messages
+    coords: np.ndarray  # (N, 3) int32 index coordinates of the active voxels
+    values: np.ndarray  # (N,) float32 scalars, or (N, 3) float32 vectors (a velocity field)
+    index_to_object: np.ndarray  # (4, 4) float64, column vectors: index space to the volume's object space
+    background: float = 0.0
+
+    @property
+    def vector(self) -> bool:
+        return self.values.ndim == 2
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.coords.nbytes + self.values.nbytes)
+
+
+@dataclass
+class VolumeMedium:
+    """What a Volume's fields mean to light (coefficients per scene unit, see docs/rendering.md "Volumes").
+
+    At an object-space point with density field value d (times ``density_scale``): absorption sigma_a = d *
+    ``absorption``, scattering sigma_s = d * ``scattering`` (RGB: chromatic extinction when they differ by channel),
+    a Henyey-Greenstein phase of anisotropy ``anisotropy``; emitted radiance per scene unit = ``emission`` x the
+    emission field's value (or x d when there is no emission field and ``emission_from_density``) plus
+    ``blackbody_intensity`` x the blackbody colour of temperature field value x ``temperature_scale`` kelvin.
+    The default is the fog of a Volume without a material: extinction = the density field per scene unit, white
+    scattering (albedo 1), isotropic.
+    """
+
+    density_scale: float = 1.0
+    absorption: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    scattering: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    anisotropy: float = 0.0
+    emission: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    emission_from_density: bool = False
+    temperature_scale: float = 1.0  # kelvin per unit of the temperature field
+    blackbody_intensity: float = 0.0  # 0: no blackbody emission
+    velocity_scale: float = 1.0  # the velocity field's units are scene units per second times this
+    name: str = "fog"  # the material it comes from, for messages
+
+
+@dataclass
+class Volume:
+    """A participating medium placed in the world: a UsdVol ``Volume`` prim and its fields.
+
+    ``density`` drives extinction and scattering; ``temperature`` and ``emission`` emission; ``velocity`` (scene
+    units per second in object space) advects the density lookups over the shutter, as a moving fluid blurs.
+    Every field lives in the volume's object space, which ``transform`` places in the world over the shutter.
+    """
+
+    name: str  # prim path
+    transform: MotionTransform  # object to world
+    medium: VolumeMedium
+    density: VolumeField | None = None
+    temperature: VolumeField | None = None
+    emission: VolumeField | None = None
+    velocity: VolumeField | None = None
+
+    @property
+    def fields(self) -> list[VolumeField]:
+        return [f for f in (self.density, self.temperature, self.emission, self.velocity) if f is not None]
 
 
 @dataclass
@@ -337,6 +414,7 @@ class Scene:
     meters_per_unit: float = 0.01
     up_axis: str = "Y"
     render_settings: RenderSettingsInfo = field(default_factory=RenderSettingsInfo)
+    volumes: list[Volume] = field(default_factory=list)  # participating media (UsdVol), see ``renderer.media``
     # CSG groups: the operation of each ("union", "intersection", "difference"); members name it on Instance
     csg_operations: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)

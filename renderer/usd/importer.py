@@ -40,12 +40,13 @@ from renderer.usd.mesh import read_mesh
 from renderer.usd.mesh_lights import apply_mesh_light
 from renderer.usd.mtlx import compose_mtlx
 from renderer.motion.shutter import Shutter
-from renderer.usd.motion import (TransformSampler, collapse_keys, motion_transforms, refine_keys,
-                                 samples_in_shutter, shutter_interval)
+from renderer.usd.motion import (TransformSampler, collapse_keys, motion_transform, motion_transforms,
+                                 refine_keys, samples_in_shutter, shutter_interval)
 from renderer.usd.primitives import PRIMITIVE_TYPES, primitive_signature, read_primitive
 from renderer.usd.primvars import default_uv_name, read_display_colors, read_named_uvs
 from renderer.usd.skel import Skinning
 from renderer.usd.subdiv import SubdivisionDetail
+from renderer.usd import volumes as usd_volumes  # noqa: I100
 
 _PI_ATTRS = ("positions", "orientations", "orientationsf", "scales", "velocities", "angularVelocities",
              "accelerations", "protoIndices")
@@ -164,6 +165,7 @@ class _Importer:
         self.meshes: list[sc.Mesh] = []
         self.instances: list[sc.Instance] = []
         self.lights: list[sc.Light] = []
+        self.volumes: list[sc.Volume] = []
         self._mesh_cache: dict[tuple, int | None] = {}
         self._mesh_bounds: list[np.ndarray] = []
         self._lo = np.full(3, np.inf)  # world bounds of the geometry, for the automatic camera only
@@ -199,6 +201,7 @@ class _Importer:
         self.shutter = self._shutter(cam_prim, settings)
         self.xf = TransformSampler(self.shutter)
         self.materials = MaterialTable(self.frame, warn, self.shutter)
+        self.volume_reader = usd_volumes.VolumeReader(self.frame, warn)
         self.detail = self._subdivision_detail(cam_prim, settings)
         self.skinning = Skinning(self.shutter, warn)
         if cam_prim is not None:
@@ -210,7 +213,7 @@ class _Importer:
             for prim, interval in self._proxies:
                 self._guarded(self._gprim, prim, interval)
         self._place_instances()
-        if not self.instances:
+        if not self.instances and not self.volumes:
             warn("no renderable geometry in stage")
 
         if cam_prim is not None:
@@ -248,6 +251,7 @@ class _Importer:
             up_axis=self._up_axis(),
             render_settings=settings,
             csg_operations=self.csg.finish(self.instances, self.meshes),
+            volumes=self.volumes,
             warnings=warn.lines(),
             source=self.source,
         ))
@@ -323,6 +327,10 @@ class _Importer:
                 self._guarded(self._light, prim)
             elif prim.IsA(UsdLux.LightFilter):
                 self.warn("light filters ignored (not modelled)", f"{prim.GetPath()} ({prim.GetTypeName()})")
+            elif usd_volumes.is_volume(prim):
+                it.PruneChildren()
+                if purpose != "guide":
+                    self._guarded(self._volume, prim)
             elif prim.IsA(UsdGeom.Gprim):
                 it.PruneChildren()
                 if purpose != "guide":
@@ -721,6 +729,9 @@ class _Importer:
                     meshes.append(mesh)
                     names.append(str(prim.GetPath()))
                     rows.append(self.xf.world(prim, times)[None])
+            elif usd_volumes.is_volume(prim):
+                it.PruneChildren()
+                self.warn("volumes inside PointInstancer prototypes skipped", str(prim.GetPath()))
             elif usd_lights.is_light(prim):  # placed like geometry, told apart by a negative index
                 key = str(prim.GetPath())
                 if key not in self._proto_lights:
@@ -731,6 +742,15 @@ class _Importer:
         if not meshes:
             return [], [], np.zeros((0, len(times), 4, 4))
         return meshes, names, np.concatenate(rows)
+
+    # -- volumes --------------------------------------------------------------------------------------------------
+    def _volume(self, prim) -> None:
+        if self._visible_interval(prim) is None:
+            return
+        times, rows = self.xf.motion(prim)
+        vol = self.volume_reader.volume(prim, motion_transform(self.shutter.normalise(times), rows))
+        if vol is not None:
+            self.volumes.append(vol)
 
     # -- lights ---------------------------------------------------------------------------------------------------
     def _light(self, prim) -> None:

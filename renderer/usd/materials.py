@@ -45,6 +45,16 @@ Light travelling a distance d inside a closed mesh keeps absorptionColor^(d / ab
 (per channel), i.e. exp(-sigma_a d) with sigma_a = -ln(absorptionColor) / absorptionDistance. Default: white (no
 absorption). They become ``Material.absorption_color`` and ``Material.absorption_distance``.
 
+**Interior medium extension.** Three more inputs fill a closed mesh with a homogeneous scattering medium (smoke in a
+bottle, milky glass, a fog bank given as a mesh)::
+
+    color3f inputs:drt:scatterColor = (0.5, 0.5, 0.5)   # scattering coefficient x scatterDistance (default black)
+    float inputs:drt:scatterDistance = 1.0              # scene units
+    float inputs:drt:scatterAnisotropy = 0.0            # Henyey-Greenstein g in (-1, 1)
+
+sigma_s = scatterColor / scatterDistance per scene unit, with the absorption above as sigma_a. Paths that enter the
+solid through its surface (opacity < 1; ior 1 for an invisible boundary) scatter inside it (``renderer.media``).
+
 Materials are deduplicated: one ``Material`` per (material prim, displayColor when it matters).
 """
 from __future__ import annotations
@@ -63,6 +73,9 @@ from renderer.usd.texture_files import (TextureFiles, authoring_layer, read_asse
 GREY = (0.18, 0.18, 0.18)
 ABSORPTION_COLOR = "drt:absorptionColor"
 ABSORPTION_DISTANCE = "drt:absorptionDistance"
+SCATTER_COLOR = "drt:scatterColor"
+SCATTER_DISTANCE = "drt:scatterDistance"
+SCATTER_ANISOTROPY = "drt:scatterAnisotropy"
 # Render contexts of a Material's surface output, in preference order: the universal output first, the one an
 # author gives every renderer (a material carrying both a UsdPreviewSurface and a MaterialX look renders as its
 # UsdPreviewSurface, as the shared assets' notes ask), then MaterialX, then Arnold's own.
@@ -320,6 +333,7 @@ class MaterialTable:
         if ti is not None and fields["opacity_threshold"] > 0 and "opacityThreshold" not in textures:
             fields["opacity"] = _texture_coverage(ti, fields["opacity_threshold"])
         fields["absorption_color"], fields["absorption_distance"] = self._absorption(mat, shader, path)
+        fields.update(self._scattering(mat, shader))
         fields["textures"] = textures
         nm = textures.get("normal")
         if nm is not None and nm.texture is not None:
@@ -375,6 +389,17 @@ class MaterialTable:
             self.warn(f"{ABSORPTION_DISTANCE} must be positive: 1 used", path)
             distance = 1.0
         return color, distance
+
+    def _scattering(self, mat: UsdShade.Material, shader: UsdShade.Shader) -> dict:
+        """The interior medium's extension inputs (``SCATTER_*``), the shader's opinion over the Material's."""
+        out = {}
+        for node in (mat, shader):
+            for name, key, n in ((SCATTER_COLOR, "scatter_color", 3), (SCATTER_DISTANCE, "scatter_distance", 1),
+                                 (SCATTER_ANISOTROPY, "scatter_anisotropy", 1)):
+                v = self._resolved(node, name)[1]
+                if v is not None:
+                    out[key] = _vec(v, 3, (0.0, 0.0, 0.0)) if n == 3 else float(v)
+        return out
 
     def _displacement(self, shader, path: str) -> None:
         inp = UsdShade.ConnectableAPI(shader).GetInput("displacement")
