@@ -59,29 +59,55 @@ def load_config(name: str):
         raise SettingsError(f"cannot read the OpenColorIO config {name!r}: {' '.join(str(e).split())}") from None
 
 
+# Names of linear Rec.709 (lower case): a render in it whose colours name nothing else never loads a config
+_REC709_NAMES = frozenset(("lin_rec709_scene", "lin_rec709", "lin_srgb", "lin_rec709_srgb", "linear rec.709 (srgb)",
+                           "utility - linear - srgb", "utility - linear - rec.709"))
+
+
+def _rec709(name: str | None) -> bool:
+    return (name or LINEAR_REC709).lower() in _REC709_NAMES
+
+
 class ColorSpaces:
     """Conversions of one import into its rendering colour space, through one OpenColorIO config.
 
     ``color(rgb, source)`` converts one colour, ``colors(array, source)`` many, ``texels(image, source)`` the
     colour channels of an image. ``source`` is a colour space name as authored ("" or None: linear Rec.709,
-    USD's default). Processors are built once per source space.
+    USD's default). Processors are built once per source space. The built-in config is loaded only when a
+    colour needs it: a linear Rec.709 render of colours that name no other space costs nothing (one named by
+    ``--ocio-config`` or ``$OCIO`` is read at once, so a bad one is reported).
     """
 
     def __init__(self, rendering: str | None = None, config: str | None = None):
         self.config_name = config_name(config)
-        self.config = load_config(self.config_name)
-        asked = rendering or LINEAR_REC709
-        cs = self.config.getColorSpace(asked)
-        if cs is None:
-            raise SettingsError(f"unknown rendering colour space {asked!r} (not in the OpenColorIO config "
-                                f"{self.config_name})")
-        if cs.isData():
-            raise SettingsError(f"rendering colour space {asked!r} is data, not a colour space")
-        if cs.getEncoding() not in ("", "scene-linear"):  # light adds linearly: rendering needs a linear space
-            raise SettingsError(f"rendering colour space {asked!r} is not linear ({cs.getEncoding()})")
-        self.rendering = cs.getName()  # the config's own name of it
-        self.asked = asked
+        self.asked = rendering or LINEAR_REC709
+        self._config = None
+        self._rendering: str | None = None
         self._processors: dict[str, object] = {}
+        self._same: dict[str, bool] = {}
+        if not _rec709(self.asked) or self.config_name != DEFAULT_CONFIG:
+            _ = self.rendering  # read and check the config and the space now
+
+    @property
+    def config(self):
+        if self._config is None:
+            self._config = load_config(self.config_name)
+        return self._config
+
+    @property
+    def rendering(self) -> str:
+        """The config's own name of the rendering space."""
+        if self._rendering is None:
+            cs = self.config.getColorSpace(self.asked)
+            if cs is None:
+                raise SettingsError(f"unknown rendering colour space {self.asked!r} (not in the OpenColorIO config "
+                                    f"{self.config_name})")
+            if cs.isData():
+                raise SettingsError(f"rendering colour space {self.asked!r} is data, not a colour space")
+            if cs.getEncoding() not in ("", "scene-linear"):  # light adds linearly: rendering needs a linear space
+                raise SettingsError(f"rendering colour space {self.asked!r} is not linear ({cs.getEncoding()})")
+            self._rendering = cs.getName()
+        return self._rendering
 
     # -- names ----------------------------------------------------------------------------------------------
     def canonical(self, name: str | None) -> str | None:
@@ -90,14 +116,25 @@ class ColorSpaces:
         return cs.getName() if cs is not None else None
 
     def is_data(self, name: str | None) -> bool:
-        if name and name.lower() in DATA_NAMES:
+        if not name or _rec709(name):
+            return False
+        if name.lower() in DATA_NAMES:
             return True
-        cs = self.config.getColorSpace(name) if name else None
+        cs = self.config.getColorSpace(name)
         return bool(cs is not None and cs.isData())
 
     def is_rendering(self, name: str | None) -> bool:
         """Whether colours in ``name`` need no conversion (the rendering space itself, or data)."""
-        return self.is_data(name) or self.canonical(name) == self.rendering
+        key = name or LINEAR_REC709
+        if key not in self._same:
+            if _rec709(key) and _rec709(self.asked):
+                self._same[key] = True
+            else:
+                self._same[key] = self.is_data(key) or self.canonical(key) == self.rendering
+        return self._same[key]
+
+    def known(self, name: str | None) -> bool:
+        return _rec709(name) or self.is_data(name) or self.canonical(name) is not None
 
     @property
     def default_is_rendering(self) -> bool:
@@ -116,9 +153,6 @@ class ColorSpaces:
                 proc = self.config.getProcessor(self.canonical(source), self.rendering)
                 self._processors[source] = None if proc.isNoOp() else proc.getDefaultCPUProcessor()
         return self._processors[source]
-
-    def known(self, name: str | None) -> bool:
-        return self.is_data(name) or self.canonical(name) is not None
 
     # -- conversions ----------------------------------------------------------------------------------------
     def colors(self, rgb: np.ndarray, source: str | None) -> np.ndarray:
@@ -159,6 +193,8 @@ class ColorSpaces:
     # -- what the EXR says --------------------------------------------------------------------------------------
     def interop_id(self) -> str | None:
         """The Color Interop Forum id of the rendering space, if it is one of the standard linear spaces."""
+        if _rec709(self.asked):
+            return LINEAR_REC709
         for cid in INTEROP_IDS:
             if self.canonical(cid) == self.rendering:
                 return cid
@@ -181,7 +217,7 @@ class ColorSpaces:
 
     def describe(self) -> dict[str, object]:
         """EXR header attributes naming the rendering space."""
-        out: dict[str, object] = {"chromaticities": self.chromaticities(), "drt/renderingColorSpace": self.rendering,
+        out: dict[str, object] = {"chromaticities": self.chromaticities(), "drt/renderingColorSpace": self.asked,
                                   "drt/ocioConfig": self.config_name}
         cid = self.interop_id()
         if cid is not None:

@@ -221,3 +221,17 @@ def test_the_service_preview_of_an_acescg_frame_looks_like_its_rec709_twin(tmp_p
         pngs.append(np.asarray(Image.open(io.BytesIO(preview.from_exr(tmp_path / f"{name}.exr"))), np.int32))
     assert np.abs(pngs[0] - pngs[1]).max() <= 1
     assert pngs[0].reshape(-1, 3)[0].tolist() == [149, 124, 89]  # sRGB of (0.3, 0.2, 0.1)
+
+
+def test_a_linear_rec709_render_never_reads_a_config(tmp_path):
+    """Colour management costs a scene without colour spaces nothing: OpenColorIO is not even imported."""
+    import subprocess
+    import sys
+
+    path = save(dome_stage(tmp_path, None))
+    code = ("import sys; from renderer.usd.importer import load_scene; from renderer.render import frame_attributes, "
+            "prepare, RenderOptions; s = load_scene(%r); frame_attributes(prepare(s, RenderOptions(spp=1))); "
+            "print('PyOpenColorIO' in sys.modules)" % path)
+    env = {k: v for k, v in __import__("os").environ.items() if k != "OCIO"}
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)
+    assert r.stdout.strip().splitlines()[-1] == "False", r.stderr[-2000:]
