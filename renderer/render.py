@@ -25,6 +25,7 @@ from renderer.accel import build_kernels, quantize, triangle_kernels, wide
 from renderer.accel.quads import order_for_quads
 from renderer.accel.upload import GeometryStats, upload_geometry
 from renderer.camera import CameraSetup, ndc_matrix, setup_camera
+from renderer.color import ColorSpaces
 from renderer.device import init_warp
 from renderer.errors import Cancelled, SettingsError
 from renderer.film import borders, denoise, film
@@ -378,6 +379,7 @@ def frame_attributes(prep: PreparedScene) -> dict:
         "drt/shutter": scene.shutter.offsets,
         "drt/depthOfField": int(prep.camera.lens_radius > 0),
         "drt/metersPerUnit": float(scene.meters_per_unit),
+        **(scene.colors or ColorSpaces()).describe(),
     }
 
 

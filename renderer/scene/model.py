@@ -399,6 +399,8 @@ class RenderSettingsInfo:
     aspect_ratio_conform_policy: str = "expandAperture"
     # UsdRender's dataWindowNDC (xmin, ymin, xmax, ymax), (0, 0) bottom left; None = the whole image
     data_window_ndc: tuple[float, float, float, float] | None = None
+    # UsdRender's renderingColorSpace: the linear space the render works in (None: linear Rec.709)
+    rendering_color_space: str | None = None
 
 
 @dataclass
@@ -415,6 +417,8 @@ class Scene:
     up_axis: str = "Y"
     render_settings: RenderSettingsInfo = field(default_factory=RenderSettingsInfo)
     volumes: list[Volume] = field(default_factory=list)  # participating media (UsdVol), see ``renderer.media``
+    # the colour spaces every colour was converted with (renderer.color.ColorSpaces); None: linear Rec.709
+    colors: object | None = None
     # CSG groups: the operation of each ("union", "intersection", "difference"); members name it on Instance
     csg_operations: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)

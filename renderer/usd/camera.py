@@ -50,6 +50,8 @@ def render_settings(stage: Usd.Stage, frame: float, warn) -> tuple[RenderSetting
     info.disable_motion_blur = bool(_get(prim, "disableMotionBlur", frame, False)) or bool(
         _get(prim, "instantaneousShutter", frame, False))
     info.disable_depth_of_field = bool(_get(prim, "disableDepthOfField", frame, False))
+    space = _get(prim, "renderingColorSpace", frame, None)
+    info.rendering_color_space = str(space) if space else None
     # the first RenderProduct's authored values override the settings' (UsdRenderSettingsBase is shared)
     products = [stage.GetPrimAtPath(t) for t in rs.GetProductsRel().GetForwardedTargets()]
     products = [p for p in products if p and p.IsA(UsdRender.Product)]

@@ -26,6 +26,7 @@ import re
 import numpy as np
 from pxr import Gf, Tf, Usd, UsdGeom, UsdLux, UsdRender, UsdShade
 
+from renderer.color import ColorSpaces
 from renderer.errors import SceneError, SettingsError
 from renderer.scene import model as sc
 from renderer.scene.analytic import object_box, realize_tessellations
@@ -34,6 +35,7 @@ from renderer.usd import camera as usd_camera
 from renderer.usd import csg as usd_csg
 from renderer.usd import curves as usd_curves
 from renderer.usd import lights as usd_lights
+from renderer.usd.color import AttributeColors
 from renderer.usd.linking import apply_linking
 from renderer.usd.materials import MaterialTable
 from renderer.usd.mesh import read_mesh
@@ -79,14 +81,17 @@ class WarningLog:
 
 def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_path: str | None = None,
                shutter: tuple[float, float] | None = None, motion_blur: bool = True,
-               subdivision_level: int | None = None, image_width: int | None = None) -> sc.Scene:
+               subdivision_level: int | None = None, image_width: int | None = None,
+               ocio_config: str | None = None) -> sc.Scene:
     """Load one frame of a USD stage as a ``Scene``.
 
     ``frame`` defaults to the stage's startTimeCode (0 if no range is authored). The shutter is ``frame +``
     the camera's (shutter:open, shutter:close), or ``frame + shutter`` when given. Subdivision surfaces are
     refined to ``subdivision_level`` (0..6), or by default to a level chosen from the camera for an image
-    ``image_width`` pixels wide (default: the render settings' width, else 640). Raises SceneError (one-line
-    message) for a missing or malformed file or a bad camera path.
+    ``image_width`` pixels wide (default: the render settings' width, else 640). Colours are converted into the
+    render settings' ``renderingColorSpace`` (default linear Rec.709) through the OpenColorIO config
+    ``ocio_config`` (default ``$OCIO``, else OpenColorIO's built-in one; ``renderer.color``). Raises SceneError
+    (one-line message) for a missing or malformed file or a bad camera path.
     """
     path = os.fspath(path)
     if not os.path.isfile(path):
@@ -101,7 +106,7 @@ def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_pa
     stage = _open_stage(path)
     try:
         return _Importer(stage, path, frame, camera_path, shutter, motion_blur, subdivision_level,
-                         image_width).run()
+                         image_width, ocio_config).run()
     except Tf.ErrorException as e:
         raise SceneError(f"cannot read {os.path.basename(path)}: {_pxr_message(e)}") from None
 
@@ -150,8 +155,9 @@ def _open_stage(path: str) -> Usd.Stage:
 
 class _Importer:
     def __init__(self, stage, source, frame, camera_path, shutter_override, motion_blur, subdivision_level=None,
-                 image_width=None):
+                 image_width=None, ocio_config=None):
         self.stage = stage
+        self.ocio_config = ocio_config
         self.source = source
         self.warn = WarningLog()
         if frame is None:
@@ -196,11 +202,13 @@ class _Importer:
             warn(f"{len(errors)} composition error(s) (missing references/payloads?); the rest was loaded",
                  str(errors[0]).splitlines()[0] if str(errors[0]) else None)
         settings, _ = usd_camera.render_settings(stage, self.frame, warn)
+        self.color_spaces = ColorSpaces(settings.rendering_color_space, self.ocio_config)
+        self.colors = AttributeColors(self.color_spaces, warn)
         cam_prim = usd_camera.find_camera(stage, self.camera_path, settings, warn)
         self._frame_bounds = cam_prim is None
         self.shutter = self._shutter(cam_prim, settings)
         self.xf = TransformSampler(self.shutter)
-        self.materials = MaterialTable(self.frame, warn, self.shutter)
+        self.materials = MaterialTable(self.frame, warn, self.shutter, self.colors)
         self.volume_reader = usd_volumes.VolumeReader(self.frame, warn)
         self.detail = self._subdivision_detail(cam_prim, settings)
         self.skinning = Skinning(self.shutter, warn)
@@ -229,7 +237,8 @@ class _Importer:
 
         for prim, insts in self._mesh_lights:
             for light in apply_mesh_light(prim, insts, self.meshes, self.instances, self.materials.materials,
-                                          float(self.shutter.normalise([self.frame])[0]), self.frame, self.warn):
+                                          float(self.shutter.normalise([self.frame])[0]), self.frame, self.warn,
+                                          self.colors):
                 self.lights.append(light)
                 self._light_prims.append((light, prim))
             self._mesh_light_instances.update({i: prim for i in insts})
@@ -250,6 +259,7 @@ class _Importer:
             meters_per_unit=float(UsdGeom.GetStageMetersPerUnit(stage)),
             up_axis=self._up_axis(),
             render_settings=settings,
+            colors=self.color_spaces,
             csg_operations=self.csg.finish(self.instances, self.meshes),
             volumes=self.volumes,
             warnings=warn.lines(),
@@ -482,6 +492,9 @@ class _Importer:
                     colors = getattr(geom, "colors", None)
                 if colors is not None and len(colors) != len(geom.triangles):
                     colors = None
+                if colors is not None:  # into the rendering colour space, from the primvar's
+                    pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar("displayColor")
+                    colors = np.asarray(self.colors.value(pv.GetAttr(), colors), np.float32) if pv else colors
             index = len(self.meshes)
             self.meshes.append(sc.Mesh(
                 name=str(prim.GetPath()),
@@ -580,7 +593,7 @@ class _Importer:
         self._proto_light_prims = [p for _, p in sorted(self._proto_lights.values(), key=lambda ip: ip[0])]
         for j in np.nonzero(is_light)[0]:  # one light per instance of a light in a prototype
             light = usd_lights.read_light(self._proto_light_prims[-meshes[j] - 1], self.xf, self.warn,
-                                          placement=(times, rows[j]), name=names[j])
+                                          placement=(times, rows[j]), name=names[j], colors=self.colors)
             if light is not None:
                 self.lights.append(light)
                 self._light_prims.append((light, self._proto_light_prims[-meshes[j] - 1]))
@@ -756,7 +769,7 @@ class _Importer:
     def _light(self, prim) -> None:
         if self._visible_interval(prim) is None:
             return
-        light = usd_lights.read_light(prim, self.xf, self.warn)
+        light = usd_lights.read_light(prim, self.xf, self.warn, colors=self.colors)
         if light is not None:
             self.lights.append(light)
             self._light_prims.append((light, prim))

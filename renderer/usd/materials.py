@@ -67,6 +67,7 @@ from renderer.usd.shading_network import (Const, Display, Network, Tex, UV, expa
                                           tex_mean)
 from renderer.usd import arnold_nodes
 from renderer.usd.surfaces import PREVIEW, PREVIEW_DEFAULTS, surface_inputs, surface_model
+from renderer.usd.color import AttributeColors, attribute_colors
 from renderer.usd.texture_files import (TextureFiles, authoring_layer, read_asset_image,  # noqa: F401 - re-exported
                                         resolve_asset)
 
@@ -90,15 +91,16 @@ _INPUTS = {name: (field, PREVIEW_DEFAULTS[name]) for name, field in (
     ("opacityThreshold", "opacity_threshold"), ("ior", "ior"), ("normal", "normal"), ("occlusion", "occlusion"))}
 
 
-def display_color(prim, frame: float) -> tuple[float, float, float] | None:
-    """The prim's displayColor: the constant value, or the average of a varying one; None if not authored."""
+def display_color(prim, frame: float, colors: AttributeColors | None = None) -> tuple[float, float, float] | None:
+    """The prim's displayColor: the constant value, or the average of a varying one; None if not authored.
+    ``colors``: converted into the rendering space."""
     pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar("displayColor")
     if not pv or not pv.HasAuthoredValue():
         return None
     v = pv.ComputeFlattened(frame)
     if v is None or len(v) == 0:
         return None
-    a = np.asarray(v, np.float64).reshape(-1, 3)
+    a = np.asarray(attribute_colors(colors, pv.GetAttr(), np.asarray(v, np.float64).reshape(-1, 3)), np.float64)
     if not np.all(np.isfinite(a)):
         return None
     m = a.mean(axis=0)
@@ -158,16 +160,17 @@ def _vec(value, n: int, default) -> tuple:
 class MaterialTable:
     """Deduplicated materials of one scene; ``assign`` returns material ids for a prim."""
 
-    def __init__(self, frame: float, warn, shutter=None):
+    def __init__(self, frame: float, warn, shutter=None, colors: AttributeColors | None = None):
         self.frame = frame
+        self.colors = colors  # colours into the rendering space (None: as authored)
         self.shutter = shutter  # usd_motion.Shutter: constant inputs varying inside it get keys (opacity)
         self.warn = warn
         self.materials: list[Material] = []
-        self.files = TextureFiles(warn)
+        self.files = TextureFiles(warn, colors=None if colors is None else colors.spaces)
         self._ids: dict[tuple, int] = {}
         self._surfaces: dict[str, tuple] = {}
         self._uv_sets: dict[str, tuple[str, ...]] = {}
-        self.net = Network(frame, warn, self.files, nodes=arnold_nodes.PATTERNS)
+        self.net = Network(frame, warn, self.files, nodes=arnold_nodes.PATTERNS, colors=colors)
 
     # -- public ---------------------------------------------------------------------------------------------------
     @property
@@ -240,7 +243,7 @@ class MaterialTable:
 
     def _material_id(self, mat: UsdShade.Material | None, prim) -> int:
         if mat is None:
-            color = display_color(prim, self.frame)
+            color = display_color(prim, self.frame, self.colors)
             if color is None:
                 return self._add(("grey",), Material(name="default grey", diffuse_color=GREY))
             return self._add(("display", color), Material(name=f"displayColor {color}", diffuse_color=color,
@@ -252,7 +255,7 @@ class MaterialTable:
         if kind == "preview":
             if not uses_display:
                 return self._add(("usd", path), Material(name=path, **fields))
-            color = display_color(prim, self.frame)
+            color = display_color(prim, self.frame, self.colors)
             f = dict(fields)
             for name, fallback, scale in uses_display:  # displayColor (or the reader's fallback) x network scale
                 c = color if color is not None else fallback
@@ -261,7 +264,7 @@ class MaterialTable:
                 if name == "diffuse_color" and color is not None:
                     f["display_scale"] = tuple(float(k) for k in np.resize(scale, 3))
             return self._add(("usd", path, color), Material(name=path, **f))
-        color = display_color(prim, self.frame)
+        color = display_color(prim, self.frame, self.colors)
         return self._add(("fallback", path, color), Material(name=path, diffuse_color=color or GREY,
                                                              display_scale=None if color is None else (1.0, 1.0, 1.0)))
 

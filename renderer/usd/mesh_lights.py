@@ -51,11 +51,13 @@ def light_material(base: sc.Material) -> sc.Material:
 
 
 def apply_mesh_light(prim, instances: list[int], scene_meshes: list[sc.Mesh], scene_instances: list[sc.Instance],
-                     materials: list[sc.Material], frame_s: float, frame: float, warn) -> list[sc.Light]:
+                     materials: list[sc.Material], frame_s: float, frame: float, warn,
+                     colors=None) -> list[sc.Light]:
     """The lights of a MeshLightAPI prim's instances (one LIGHT_MESH each, emitting L uniformly over its area).
-    With noMaterialResponse, each instance gets a copy of its mesh whose triangles reflect nothing."""
+    With noMaterialResponse, each instance gets a copy of its mesh whose triangles reflect nothing. ``colors``
+    (``usd.color.AttributeColors``): its colour into the rendering colour space."""
     mode = sync_mode(prim, warn)
-    emission = base_emission(prim, frame)
+    emission = base_emission(prim, frame, colors)
     norm = normalized(prim, frame)
     lights = []
     for i in instances:
