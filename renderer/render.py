@@ -11,6 +11,8 @@ on however many threads. The service splits frames into tiles and calls it from 
 """
 from __future__ import annotations
 
+import hashlib
+import pickle
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -91,6 +93,9 @@ class PreparedScene:
     device: str = "cpu"
     warnings: list[str] = field(default_factory=list)
     media: MediaUpload | None = None  # participating media (volumes, and materials' interior media)
+    # fingerprints of what the hierarchy and the materials were built from (``prepare``'s ``reuse``)
+    geometry_key: bytes = b""
+    materials_key: bytes = b""
 
 
 def resolve_resolution(scene: Scene, options: RenderOptions) -> tuple[int, int]:
@@ -111,8 +116,25 @@ def load_kernels(device: str = "cpu") -> dict[str, str]:
     return kernel_cache.load_modules(RENDER_MODULES, device)
 
 
-def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> PreparedScene:
-    """Build the hierarchy and upload lights, materials and camera: once per (scene, frame)."""
+def _fingerprint(*parts) -> bytes:
+    return hashlib.blake2b(pickle.dumps(parts, protocol=pickle.HIGHEST_PROTOCOL), digest_size=20).digest()
+
+
+def _geometry_key(flat: Scene) -> bytes:
+    """What ``upload_geometry`` reads of a flattened scene: meshes, instances (their motion keys are in shutter
+    time), CSG, and which lights are linked."""
+    links = [(lt.illuminates, lt.casts_shadow) for lt in flat.lights]
+    return _fingerprint(flat.meshes, flat.instances, flat.csg_operations, links)
+
+
+def prepare(scene: Scene, options: RenderOptions, device: str = "cpu",
+            reuse: PreparedScene | None = None) -> PreparedScene:
+    """Build the hierarchy and upload lights, materials and camera: once per (scene, frame).
+
+    ``reuse``: an earlier frame's prepared scene, on the same device. Its hierarchy is kept when this frame's
+    geometry is the same (bit for bit: a fingerprint of the flattened meshes and instances), and its materials and
+    textures when the materials are; lights, media and camera are built anew. A range of frames of a still set
+    builds its hierarchy and reads its textures once."""
     options.validate()
     if options.denoise:
         denoise.require()
@@ -123,10 +145,19 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> Prepar
         raise SettingsError(f"image of {width}x{height} pixels is too large")
     dof = options.dof and not scene.render_settings.disable_depth_of_field
     flat = order_for_quads(flatten_still_instances(scene))  # before anything reads triangle indices
-    geometry, stats = upload_geometry(flat, device)
     warnings = list(scene.warnings)
-    textures = upload_material_textures(flat.materials, device, warn=warnings.append)
-    materials = upload_materials(flat.materials, device)
+    reuse = reuse if reuse is not None and reuse.device == device else None
+    geometry_key = _geometry_key(flat)
+    if reuse is not None and reuse.geometry_key == geometry_key:
+        geometry, stats = reuse.geometry, reuse.stats
+    else:
+        geometry, stats = upload_geometry(flat, device)
+    materials_key = _fingerprint(flat.materials)
+    if reuse is not None and reuse.materials_key == materials_key:
+        textures, materials = reuse.textures, reuse.materials
+    else:
+        textures = upload_material_textures(flat.materials, device, warn=warnings.append)
+        materials = upload_materials(flat.materials, device)
     lights, light_count = upload_lights(flat, device, warn=lambda what, name="": warnings.append(f"{what}: {name}"))
     media = upload_media(scene, flat.materials, device,
                          warn=lambda what, name="": warnings.append(f"{what}: {name}"))
@@ -137,7 +168,7 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> Prepar
     return PreparedScene(scene=scene, options=options, width=width, height=height, framing=framing,
                          geometry=geometry, materials=materials, textures=textures, lights=lights,
                          light_count=light_count, camera=cam, stats=stats, device=device, warnings=warnings,
-                         media=media)
+                         media=media, geometry_key=geometry_key, materials_key=materials_key)
 
 
 def with_options(prep: PreparedScene, options: RenderOptions) -> PreparedScene:

@@ -401,6 +401,8 @@ class RenderSettingsInfo:
     data_window_ndc: tuple[float, float, float, float] | None = None
     # UsdRender's renderingColorSpace: the linear space the render works in (None: linear Rec.709)
     rendering_color_space: str | None = None
+    # UsdRender's includedPurposes (None: not authored; the importer's default policy)
+    included_purposes: tuple[str, ...] | None = None
 
 
 @dataclass

@@ -8,8 +8,10 @@ the package's other modules: ``mesh``, ``primitives``, ``curves``, ``materials``
 
 Policies worth knowing:
 
-* **Purpose**: ``default`` and ``render`` prims are drawn, ``guide`` never; ``proxy`` prims are drawn only when the
-  stage has no prim of purpose ``render`` at all (a stage-wide rule, simpler than per-model proxy pairing).
+* **Purpose**: the purposes asked for (``purposes``, else the render settings' ``includedPurposes``) are drawn,
+  ``default`` always. Without either, ``default`` and ``render`` prims are drawn, ``guide`` never; ``proxy`` prims
+  are drawn only when the stage has no prim of purpose ``render`` at all (a stage-wide rule, simpler than
+  per-model proxy pairing).
 * **Visibility**: inherited ``invisible`` hides the subtree. Time-sampled visibility becomes the instance's
   ``visible_from``/``visible_to`` (the hull of the visible part of the shutter, with a warning if it toggles more
   than once). Prims inside PointInstancer prototypes use their visibility at the frame.
@@ -82,7 +84,8 @@ class WarningLog:
 def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_path: str | None = None,
                shutter: tuple[float, float] | None = None, motion_blur: bool = True,
                subdivision_level: int | None = None, image_width: int | None = None,
-               ocio_config: str | None = None) -> sc.Scene:
+               ocio_config: str | None = None, settings_path: str | None = None, product_path: str | None = None,
+               purposes: tuple[str, ...] = (), stage=None) -> sc.Scene:
     """Load one frame of a USD stage as a ``Scene``.
 
     ``frame`` defaults to the stage's startTimeCode (0 if no range is authored). The shutter is ``frame +``
@@ -92,6 +95,10 @@ def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_pa
     render settings' ``renderingColorSpace`` (default linear Rec.709) through the OpenColorIO config
     ``ocio_config`` (default ``$OCIO``, else OpenColorIO's built-in one; ``renderer.color``). Raises SceneError
     (one-line message) for a missing or malformed file or a bad camera path.
+
+    The render settings are those of ``settings_path`` (see ``camera.settings_prim``) with the overrides of its
+    product ``product_path`` (default: the first). ``stage``: the stage already opened from ``path``
+    (``open_stage``), for a range of frames to read one stage.
     """
     path = os.fspath(path)
     if not os.path.isfile(path):
@@ -103,10 +110,14 @@ def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_pa
         raise SettingsError(f"frame must be finite, got {frame}")
     if subdivision_level is not None and not 0 <= subdivision_level <= MAX_LEVEL:
         raise SettingsError(f"subdivision level must be between 0 and {MAX_LEVEL}, got {subdivision_level}")
-    stage = _open_stage(path)
+    if stage is None:
+        stage = _open_stage(path)
     try:
-        return _Importer(stage, path, frame, camera_path, shutter, motion_blur, subdivision_level,
-                         image_width, ocio_config).run()
+        importer = _Importer(stage, path, frame, camera_path, shutter, motion_blur, subdivision_level,
+                             image_width, ocio_config)
+        importer.settings_path, importer.product_path = settings_path, product_path
+        importer.purposes = tuple(purposes)
+        return importer.run()
     except Tf.ErrorException as e:
         raise SceneError(f"cannot read {os.path.basename(path)}: {_pxr_message(e)}") from None
 
@@ -134,6 +145,15 @@ def malformed_usd_message(name: str, err: Exception) -> str:
     m = re.search(r"line (\d+)", msg)
     where = f" at line {m.group(1)}" if m else ""
     return f"malformed USD in {name}{where}: {msg}"
+
+
+def open_stage(path: str | os.PathLike) -> Usd.Stage:
+    """The stage of a scene file, payloads loaded (SceneError for a missing or malformed file): to hand to
+    ``load_scene`` for each frame of a range."""
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise SceneError(f"scene file not found: {path}")
+    return _open_stage(path)
 
 
 def _open_stage(path: str) -> Usd.Stage:
@@ -192,6 +212,10 @@ class _Importer:
         self._density_camera = None  # (camera row matrix, aperture, focal length, width px, ortho) for curves
         self._in_prototype = 0  # > 0 while reading PointInstancer prototypes (no single view)
         self.csg = usd_csg.CsgGroups(self.warn)
+        self.settings_path: str | None = None
+        self.product_path: str | None = None
+        self.purposes: tuple[str, ...] = ()
+        self._included: set[str] | None = None  # the purposes drawn, when asked for; None: the default policy
 
     # -- top level ------------------------------------------------------------------------------------------------
     def run(self) -> sc.Scene:
@@ -201,7 +225,9 @@ class _Importer:
         if errors:
             warn(f"{len(errors)} composition error(s) (missing references/payloads?); the rest was loaded",
                  str(errors[0]).splitlines()[0] if str(errors[0]) else None)
-        settings, _ = usd_camera.render_settings(stage, self.frame, warn)
+        settings, _ = usd_camera.render_settings(stage, self.frame, warn, self.settings_path, self.product_path)
+        included = self.purposes or settings.included_purposes
+        self._included = None if included is None else {"default", *included}
         self.color_spaces = ColorSpaces(settings.rendering_color_space, self.ocio_config)
         self.colors = AttributeColors(self.color_spaces, warn)
         cam_prim = usd_camera.find_camera(stage, self.camera_path, settings, warn)
@@ -322,6 +348,8 @@ class _Importer:
             info = img.ComputePurposeInfo(parent_info) if parent_info is not None else img.ComputePurposeInfo()
             purposes[str(prim.GetPath())] = info
             purpose = str(info.purpose)
+            if not self._draws(purpose):
+                purpose = "guide"  # not drawn, as a guide is not
             if prim.IsA(UsdGeom.PointInstancer):
                 it.PruneChildren()
                 if purpose != "guide":
@@ -362,11 +390,14 @@ class _Importer:
             return False
         return attr.Get(self.frame) == UsdGeom.Tokens.invisible
 
+    def _draws(self, purpose: str) -> bool:
+        return purpose != "guide" if self._included is None else purpose in self._included
+
     def _visit_gprim(self, prim, purpose: str) -> None:
         interval = self._visible_interval(prim)
         if interval is None:
             return
-        if purpose == "proxy":
+        if purpose == "proxy" and self._included is None:
             self._proxies.append((prim, interval))
             return
         if purpose == "render":
@@ -721,10 +752,10 @@ class _Importer:
                 it.PruneChildren()
                 continue
             purpose = img.GetPurposeAttr().Get()
-            if purpose == UsdGeom.Tokens.guide:
+            if not self._draws(str(purpose)):
                 it.PruneChildren()
                 continue
-            if purpose == UsdGeom.Tokens.proxy and self._saw_render:
+            if purpose == UsdGeom.Tokens.proxy and self._saw_render and self._included is None:
                 it.PruneChildren()
                 continue
             if prim.IsA(UsdGeom.PointInstancer):
