@@ -399,6 +399,10 @@ class _Run:
         products = read_products(self.stage, self.settings_path, frame)
         targets = [(_output_path(name, args.make_output_path), name, product)
                    for name, product in _targets(args, products, frame, self.warn)]
+        skipped = unwritten([v for _, _, p in targets if p for v in p.vars])
+        if skipped:
+            self.warn("render vars not written (drt renders no LPEs but the beauty, no primvars, and the raw "
+                      "sources of docs/rendering.md's table)", ", ".join(dict.fromkeys(skipped)))
         groups: dict = {}  # products with the same overrides render once
         for path, name, product in targets:
             groups.setdefault(product.override_key if product else None, []).append((path, name, product))
@@ -406,10 +410,6 @@ class _Run:
         for g, (key, members) in enumerate(groups.items()):
             first = members[0][2]
             vars_ = [v for _, _, p in members if p for v in p.vars]
-            skipped = unwritten(vars_)
-            if skipped:
-                self.warn("render vars not written (drt renders no LPEs but the beauty, no primvars, and the raw "
-                          "sources of docs/rendering.md's table)", ", ".join(skipped))
             aovs = tuple(dict.fromkeys(base.options.aovs + needed_aovs(vars_)))
             request = replace(base, frame=frame, product=first.path if first else None,
                               options=replace(base.options, aovs=aovs))

@@ -350,6 +350,8 @@ class _Importer:
             purpose = str(info.purpose)
             if not self._draws(purpose):
                 purpose = "guide"  # not drawn, as a guide is not
+            elif purpose == "guide":
+                purpose = "default"  # guides asked for: drawn as any other geometry
             if prim.IsA(UsdGeom.PointInstancer):
                 it.PruneChildren()
                 if purpose != "guide":
