@@ -20,6 +20,7 @@ import argparse
 import math
 import os
 import re
+import signal
 import sys
 import time
 
@@ -167,6 +168,9 @@ def add_render_command(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
     r.add_argument("--frames", type=_frame_list, default=None, metavar="A-BxS",
                    help="frames as usdrecord writes them: 1-10, 1-10x2, 1:10x0.5, 1,5,9 (instead of -f/-n/-i)")
     r.add_argument("--make-output-path", action="store_true", help="create the output folders that do not exist")
+    r.add_argument("--checkpoint", action="store_true",
+                   help="keep finished tiles beside the output (OUT.exr.drt-tiles/) until the frame is written: the "
+                        "same command run again resumes the frame, with the same pixels")
     r.add_argument("--threads", type=_parse_as(Setting("threads", int, None, "", ge=1)), default=None,
                    help="render threads (default: all cores)")
     r.add_argument("-V", "--verbose", type=_verbosity, default=None, metavar="LEVEL",
@@ -357,6 +361,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     load_kernels()
     run = _Run(args, base, stage, settings_path, warn, threads=args.threads or default_threads())
     run.load_seconds = time.perf_counter() - t_load
+    if hasattr(signal, "SIGUSR1"):  # husk's: write what the frame in progress has so far
+        signal.signal(signal.SIGUSR1, lambda *_: run.snapshot())
     if len(frames) == 1:
         run.frame(frames[0])
         return 0
@@ -386,12 +392,51 @@ class _Run:
         self.prepared: dict = {}
         self.load_seconds = 0.0
         self.alf = _AlfProgress("a" in (args.verbose or ""))
+        self.in_progress = None  # (outputs, prepared scene, finished tiles) of the render under way
+
+    def snapshot(self) -> None:
+        """Write the frame in progress, its finished tiles (the rest black), to its outputs (SIGUSR1)."""
+        from renderer.products import write_product
+        from renderer.render import assemble
+
+        if self.in_progress is None:
+            return
+        members, prep, finished = self.in_progress
+        tiles = list(dict(finished).values())
+        if not tiles:
+            sys.stderr.write("drt: snapshot: no tile finished yet\n")
+            return
+        sums = assemble(tiles, prep.width, prep.height)
+        for path, name, product in members:
+            write_product(path, prep, sums, product.vars if product else (), user_aovs=self.base.options.aovs,
+                          half=self.base.half)
+            sys.stderr.write(f"drt: snapshot of {len(tiles)} tiles written to {name}\n")
+        sys.stderr.flush()
+
+    def _checkpoints(self, request, prep, members, tile_size: int):
+        """The frame's tile checkpoints (``--checkpoint``) and the tiles an earlier run left, by index."""
+        from renderer.checkpoint import FrameCheckpoints
+        from renderer.render import TileSums, split_tiles
+
+        if not self.args.checkpoint:
+            return None, {}
+        st = os.stat(request.scene_path)
+        store = FrameCheckpoints(members[0][0], {
+            "scene": [os.path.abspath(request.scene_path), st.st_size, st.st_mtime_ns],
+            "request": request.settings(), "frame": request.frame, "product": request.product,
+            "size": [prep.width, prep.height], "tile": tile_size})
+        tiles = split_tiles(prep.width, prep.height, tile_size)
+        finished = {i: TileSums(tile=tiles[i], arrays=a, rays=rays, nonfinite=nf)
+                    for i, (a, rays, nf) in store.load().items() if i < len(tiles)}
+        if finished:
+            sys.stderr.write(f"drt: resuming {members[0][1]} from {len(finished)} of {len(tiles)} tiles\n")
+        return store, finished
 
     def frame(self, frame: float) -> None:
         from dataclasses import replace
 
         from renderer.products import needed_aovs, unwritten, write_product
-        from renderer.render import render_frame
+        from renderer.render import auto_tile_size, render_frame
         from renderer.usd.products import read_products
 
         args, base = self.args, self.base
@@ -425,11 +470,16 @@ class _Run:
             def progress(n: int, total: int, done=done, bar=bar) -> None:
                 bar(n, total)
                 self.alf.report(done + n / max(total, 1) / len(groups))
+            tile_size = getattr(args, "tile", None) or auto_tile_size(prep.width, prep.height, self.threads)
+            store, finished = self._checkpoints(request, prep, members, tile_size)
+            self.in_progress = (members, prep, finished)
             try:
-                result = render_frame(prep, tile_size=getattr(args, "tile", None), threads=self.threads,
-                                      progress=progress)
+                result = render_frame(prep, tile_size=tile_size, threads=self.threads, progress=progress,
+                                      finished=finished,
+                                      on_tile=store and (lambda i, t: store.save(i, t.arrays, t.rays, t.nonfinite)))
             finally:
                 bar.close()
+                self.in_progress = None
             if result.nonfinite:
                 self.warn(f"{result.nonfinite} samples had NaN/Inf radiance and were zeroed")
             for path, name, product in members:
@@ -438,6 +488,8 @@ class _Run:
                 if zeroed:
                     self.warn(f"{zeroed} non-finite pixel values were zeroed in {name}")
                 self._report(name, prep, result, t0)
+            if store is not None:
+                store.remove()
         self.alf.report(1.0)
 
     def _report(self, name: str, prep, result, t0: float) -> None:

@@ -334,33 +334,50 @@ class FrameResult:
 
 
 def render_frame(prep: PreparedScene, *, tile_size: int | None = None, threads: int = 2,
-                 progress: Callable[[int, int], None] | None = None) -> FrameResult:
+                 progress: Callable[[int, int], None] | None = None,
+                 finished: dict[int, TileSums] | None = None,
+                 on_tile: Callable[[int, TileSums], None] | None = None) -> FrameResult:
     """Render every tile of the frame on ``threads`` threads (Warp launches release the GIL); the tile size
-    defaults to ``auto_tile_size``."""
+    defaults to ``auto_tile_size``.
+
+    ``finished``: tiles already rendered, by index in ``split_tiles`` order (a resumed render's checkpoints):
+    they are not rendered again, and each tile rendered is added to it as it finishes (so the frame so far can
+    be assembled at any moment), after ``on_tile(index, tile)``."""
     if threads < 1:
         raise SettingsError(f"threads must be >= 1, got {threads}")
     if tile_size is None:
         tile_size = auto_tile_size(prep.width, prep.height, threads)
     tiles = split_tiles(prep.width, prep.height, tile_size)
+    finished = {} if finished is None else finished
     total = prep.width * prep.height * prep.options.spp
-    done = {}
+    done = {tiles[i]: t.tile.width * t.tile.height * prep.options.spp for i, t in finished.items()}
     lock = threading.Lock()
 
-    def work(tile: Tile) -> TileSums:
+    def work(index: int) -> TileSums:
+        tile = tiles[index]
+
         def on_wave(n: int, _: int) -> None:
             with lock:
                 done[tile] = n
                 if progress is not None:
                     progress(sum(done.values()), total)
         budget = tile_time_budget(prep.options, tile, prep.width, prep.height, min(threads, len(tiles)))
-        return render_tile(prep, tile, on_wave, time_budget=budget, shared_borders=True)
+        result = render_tile(prep, tile, on_wave, time_budget=budget, shared_borders=True)
+        if on_tile is not None:
+            on_tile(index, result)
+        with lock:
+            finished[index] = result
+        return result
 
     t0 = time.perf_counter()
+    todo = [i for i in range(len(tiles)) if i not in finished]
     if threads == 1:
-        results = [work(t) for t in tiles]
+        for i in todo:
+            work(i)
     else:
         with ThreadPoolExecutor(max_workers=threads) as pool:
-            results = list(pool.map(work, tiles))
+            list(pool.map(work, todo))
+    results = [finished[i] for i in range(len(tiles))]
     seconds = time.perf_counter() - t0
     sums = assemble(results, prep.width, prep.height)
     return FrameResult(sums=sums, seconds=seconds, samples=int(sums["spp"].sum()),

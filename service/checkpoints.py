@@ -11,13 +11,10 @@ as rendering the frame in one go (``render_tile`` is a pure function of scene, o
 """
 from __future__ import annotations
 
-import contextlib
-import os
 import shutil
-import tempfile
 from pathlib import Path
 
-import numpy as np
+from renderer.checkpoint import load_tile, save_tile  # noqa: F401 - the tile files' format is the renderer's
 
 TileBox = tuple[int, int, int, int]  # x0, y0, x1, y1: pixels [x0, x1) x [y0, y1), y down
 
@@ -52,23 +49,3 @@ class JobFiles:
 
     def remove(self) -> None:
         shutil.rmtree(self.root, ignore_errors=True)
-
-
-def save_tile(path: Path, arrays: dict[str, np.ndarray]) -> None:
-    """Write a tile checkpoint atomically. FileNotFoundError if the job's directory is gone (job deleted)."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".npz.tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, **arrays)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
-
-
-def load_tile(path: Path) -> dict[str, np.ndarray]:
-    with np.load(path) as z:
-        return {k: z[k] for k in z.files}

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import os
 import re
+import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -225,3 +227,61 @@ def test_a_frame_reuses_the_hierarchy_of_the_one_before_while_the_geometry_is_st
     a = render_frame(two, threads=1).sums
     b = render_frame(fresh, threads=1).sums
     assert all(np.array_equal(a[k], b[k]) for k in b)
+
+
+def test_a_killed_checkpointed_render_resumes_to_the_same_pixels(shot, tmp_path):
+    args = ["render", shot, "-s", "/Render/Preview", "-o", "img.exr", "--res", 96, 72, "--spp", 48, "--tile", 8,
+            "--threads", 1, "--checkpoint", "-f", 2]
+    (tmp_path / "whole").mkdir()
+    (tmp_path / "killed").mkdir()
+    r = drt(*args, cwd=tmp_path / "whole")
+    assert r.returncode == 0, r.stderr
+    assert not (tmp_path / "whole" / "img.exr.drt-tiles").exists()  # removed once the frame is written
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    proc = subprocess.Popen([sys.executable, "-m", "renderer.cli", *map(str, args)], cwd=tmp_path / "killed",
+                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    tiles = tmp_path / "killed" / "img.exr.drt-tiles"
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and len(list(tiles.glob("*.npz"))) < 3:
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    saved = len(list(tiles.glob("*.npz")))
+    assert 3 <= saved < 108 and not (tmp_path / "killed" / "img.exr").exists()
+    r = drt(*args, cwd=tmp_path / "killed")
+    assert r.returncode == 0, r.stderr
+    m = re.search(r"resuming img.exr from (\d+) of 108 tiles", r.stderr)
+    assert m and int(m.group(1)) >= saved, r.stderr
+    a, _ = read_exr(tmp_path / "whole" / "img.exr")
+    b, _ = read_exr(tmp_path / "killed" / "img.exr")
+    assert all(np.array_equal(a[k], b[k]) for k in a)
+
+
+def test_sigusr1_writes_a_snapshot_of_the_frame_in_progress(shot, tmp_path):
+    args = ["render", shot, "-s", "/Render/Preview", "-o", "img.exr", "--res", 96, 72, "--spp", 64, "--tile", 8,
+            "--threads", 1, "-f", 2, "-V", "a", "--aov", "spp"]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    proc = subprocess.Popen([sys.executable, "-m", "renderer.cli", *map(str, args)], cwd=tmp_path, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    lines = []
+    for line in proc.stderr:  # once a fifth of the frame is done, ask for a snapshot
+        lines.append(line)
+        m = re.match(r"ALF_PROGRESS (\d+)%", line)
+        if m and int(m.group(1)) >= 20:
+            proc.send_signal(signal.SIGUSR1)
+            break
+    for line in proc.stderr:
+        lines.append(line)
+        if "snapshot of" in line:
+            break
+    snap, _ = read_exr(tmp_path / "img.exr")
+    lines += proc.stderr.readlines()
+    assert proc.wait(timeout=300) == 0, "".join(lines)
+    final, _ = read_exr(tmp_path / "img.exr")
+    done = snap["spp.Y"] > 0  # the snapshot holds the tiles finished at the time; the rest is black
+    assert done.any() and not done.all() and (snap["R"][~done] == 0).all()
+    # pixels of finished tiles beyond the filter's reach (2 px) of unfinished ones are final
+    padded = np.pad(done, 2, constant_values=True)
+    inner = np.logical_and.reduce([padded[2 + dy:74 + dy, 2 + dx:98 + dx] for dy in range(-2, 3)
+                                   for dx in range(-2, 3)])
+    assert inner.any() and np.array_equal(snap["R"][inner], final["R"][inner])
