@@ -42,7 +42,7 @@ from renderer.motion.transform import matrix_at
 # MAX_SPP and RenderOptions are re-exported: ``renderer.render`` is the library API the README shows.
 from renderer.options import AOV_NAMES, MAX_DEPTH, MAX_PIXELS, MAX_SPP, TIME_FILTERS, RenderOptions  # noqa: F401
 from renderer.scene.flatten import flatten_still_instances
-from renderer.scene.model import Scene
+from renderer.scene.model import LIGHT_MESH, Scene
 from renderer.shading.materials import upload_material_textures, upload_materials
 
 
@@ -93,8 +93,10 @@ class PreparedScene:
     device: str = "cpu"
     warnings: list[str] = field(default_factory=list)
     media: MediaUpload | None = None  # participating media (volumes, and materials' interior media)
-    # fingerprints of what the hierarchy and the materials were built from (``prepare``'s ``reuse``)
+    # what the hierarchy was built from: the scene's geometry's fingerprint and its flattened form, and the
+    # materials' fingerprint (``prepare``'s ``reuse``)
     geometry_key: bytes = b""
+    flat: Scene | None = None
     materials_key: bytes = b""
 
 
@@ -120,11 +122,24 @@ def _fingerprint(*parts) -> bytes:
     return hashlib.blake2b(pickle.dumps(parts, protocol=pickle.HIGHEST_PROTOCOL), digest_size=20).digest()
 
 
-def _geometry_key(flat: Scene) -> bytes:
-    """What ``upload_geometry`` reads of a flattened scene: meshes, instances (their motion keys are in shutter
-    time), CSG, and which lights are linked."""
-    links = [(lt.illuminates, lt.casts_shadow) for lt in flat.lights]
-    return _fingerprint(flat.meshes, flat.instances, flat.csg_operations, links)
+def _geometry_key(scene: Scene) -> bytes:
+    """What flattening, laying out and uploading the geometry read of a scene: meshes, instances (their motion
+    keys are in shutter time), CSG, which lights are linked and which instances and triangles emit."""
+    lights = [(lt.kind == LIGHT_MESH, lt.instance if lt.kind == LIGHT_MESH else -1, lt.triangles, lt.uniform,
+               lt.illuminates, lt.casts_shadow) for lt in scene.lights]
+    return _fingerprint(scene.meshes, scene.instances, scene.csg_operations, lights)
+
+
+def _flatten(scene: Scene, key: bytes, reuse: PreparedScene | None) -> Scene:
+    """The scene with its still instances merged and its meshes laid out for quads, or the earlier frame's when
+    its geometry is the same (``_geometry_key``): then only the lights are this frame's (a mesh light keeps the
+    instance and triangles flattening gave it)."""
+    if reuse is None or reuse.geometry_key != key or reuse.flat is None:
+        return order_for_quads(flatten_still_instances(scene))  # before anything reads triangle indices
+    old = reuse.flat
+    lights = [replace(lt, instance=was.instance, triangles=was.triangles) if lt.kind == LIGHT_MESH else lt
+              for lt, was in zip(scene.lights, old.lights)]
+    return replace(scene, meshes=old.meshes, instances=old.instances, lights=lights)
 
 
 def prepare(scene: Scene, options: RenderOptions, device: str = "cpu",
@@ -144,10 +159,10 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu",
     if width * height > MAX_PIXELS:
         raise SettingsError(f"image of {width}x{height} pixels is too large")
     dof = options.dof and not scene.render_settings.disable_depth_of_field
-    flat = order_for_quads(flatten_still_instances(scene))  # before anything reads triangle indices
     warnings = list(scene.warnings)
     reuse = reuse if reuse is not None and reuse.device == device else None
-    geometry_key = _geometry_key(flat)
+    geometry_key = _geometry_key(scene)
+    flat = _flatten(scene, geometry_key, reuse)
     if reuse is not None and reuse.geometry_key == geometry_key:
         geometry, stats = reuse.geometry, reuse.stats
     else:
@@ -168,7 +183,7 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu",
     return PreparedScene(scene=scene, options=options, width=width, height=height, framing=framing,
                          geometry=geometry, materials=materials, textures=textures, lights=lights,
                          light_count=light_count, camera=cam, stats=stats, device=device, warnings=warnings,
-                         media=media, geometry_key=geometry_key, materials_key=materials_key)
+                         media=media, geometry_key=geometry_key, flat=flat, materials_key=materials_key)
 
 
 def with_options(prep: PreparedScene, options: RenderOptions) -> PreparedScene:

@@ -209,6 +209,8 @@ def test_a_frame_reuses_the_hierarchy_of_the_one_before_while_the_geometry_is_st
     stage = stages.new_stage(tmp_path / "a.usda")
     stages.camera(stage)
     stages.rect_xy(stage, "/World/Still", -0.5, 0.0, -0.4, 0.4, -3.0)
+    stages.rect_xy(stage, "/World/Lamp", -0.5, 0.5, 0.5, 0.6, -2.0,  # an emitter: a light of the merged mesh
+                   stages.material(stage, "Glow", emissive=(4.0, 4.0, 4.0)))
     moving = stages.rect_xy(stage, "/World/Moving", 0.0, 0.5, -0.4, 0.4, -3.0)
     op = UsdGeom.Xformable(moving).AddTranslateOp()
     op.Set(Gf.Vec3d(0, 0, 0), 1)
@@ -221,6 +223,7 @@ def test_a_frame_reuses_the_hierarchy_of_the_one_before_while_the_geometry_is_st
     two = req.at_frame(2).prepare(stage=opened, reuse=one)
     three = req.at_frame(3).prepare(stage=opened, reuse=two)
     assert two.geometry is one.geometry and two.textures is one.textures
+    assert any(lt.triangles is not None for lt in two.flat.lights)  # the lamp, within the merged still mesh
     assert three.geometry is not two.geometry and three.materials is two.materials
     # and a reused frame has the pixels of one prepared from scratch
     fresh = req.at_frame(2).prepare()
