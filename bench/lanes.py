@@ -105,17 +105,15 @@ from renderer.sampling.sobol import (  # noqa: E402
     sample_camera_pair,
     sobol_dims12,
 )
-from renderer.sampling.warps import (  # noqa: E402
-    INV_PI,
-    TWO_PI,
+from renderer.lights.shapes import (  # noqa: E402
     XU_RADICAND_MIN,
     LightSampleGeom,
     _area_sample_geom,
     _rect_local,
-    _sph_rect_angles_reference,
+    _safe_acos,
     _use_sph_rect,
-    sin_cos,
 )
+from renderer.sampling.warps import INV_PI, TWO_PI, sin_cos  # noqa: E402
 from renderer.shading.bsdf import SurfaceParams, bsdf_setup, lobes_eval, lobes_pdf, lobes_sample  # noqa: E402
 from renderer.shading.materials import Materials, eval_material_cone  # noqa: E402
 from renderer.shading.raycone import bounce_spread, camera_cone, uv_footprint  # noqa: E402
@@ -422,8 +420,24 @@ def light_pair_1_lane(seed: wp.uint32, pixel: wp.uint32, index: wp.uint32) -> wp
 
 
 @wp.func
+def _sph_rect_angles_reference(x0: float, y0: float, z0: float, x1: float, y1: float):
+    """``shapes._sph_rect_angles`` in Warp's scalar code (its vector lanes equal it bit for bit, by the renderer's
+    tests)."""
+    r0 = wp.sqrt(z0 * z0 + y0 * y0)
+    r1 = wp.sqrt(z0 * z0 + x1 * x1)
+    r2 = wp.sqrt(z0 * z0 + y1 * y1)
+    r3 = wp.sqrt(z0 * z0 + x0 * x0)
+    g01 = _safe_acos(y0 * x1 / (r0 * r1)) + _safe_acos(-x1 * y1 / (r1 * r2))
+    g23 = _safe_acos(x0 * y1 / (r2 * r3)) + _safe_acos(-x0 * y0 / (r3 * r0))
+    solid_angle = g01 + g23 - TWO_PI
+    if z0 == 0.0:
+        solid_angle = 0.0
+    return g01, g23, -y0 / r0, y1 / r2, solid_angle
+
+
+@wp.func
 def sample_rect_lane(p_ref: wp.vec3, corner: wp.vec3, edge_u: wp.vec3, edge_v: wp.vec3, u: wp.vec2) -> LightSampleGeom:
-    """``warps.sample_rect`` with the scalar twin of its 4-lane angles."""
+    """``shapes.sample_rect`` with the scalar twin of its 4-lane angles."""
     n = wp.cross(edge_u, edge_v)
     area = wp.length(n)
     normal = n / area
