@@ -3,8 +3,8 @@
 Every error answers ``{"detail": "<one line>"}``: ``ApiError`` from the service, FastAPI's own validation errors
 flattened to ``"<field>: <message>"``, a malformed body (e.g. multipart without a boundary) 400, and an oversized
 body cut off early with 413 (the ``Content-Length`` is checked before anything is read, the bytes are counted as
-they arrive). The bearer token is checked before all of that (``auth.TokenFirst``), and every answer carries the
-service's own time for it (``timing.ServerTiming``, the outermost middleware).
+they arrive). The bearer token is checked before all of that (``api.auth.TokenFirst``), and every answer carries the
+service's own time for it (``api.timing.ServerTiming``, the outermost middleware).
 """
 from __future__ import annotations
 
@@ -21,15 +21,15 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from .api import events, health, jobs, limits, monitor, web
+from .api.auth import TokenFirst
 from .api.deps import require_token
-from .auth import TokenFirst
+from .api.timing import ServerTiming
 from .errors import ApiError
-from .events import ChangeFeed
+from .intake.scene_checks import UploadTooLarge
 from .latency import SubmissionGate, new_submission_gate, tune_api_process
+from .queue.changes import ChangeFeed
 from .runtime import Runtime
 from .settings import ServiceSettings
-from .timing import ServerTiming
-from .uploads import UploadTooLarge
 
 log = logging.getLogger("drt.service")
 

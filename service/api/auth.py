@@ -12,8 +12,8 @@ import hashlib
 import hmac
 import json
 
-from .api.web import is_public
-from .errors import UNAUTHORIZED
+from ..errors import UNAUTHORIZED
+from .web import is_public
 
 PUBLIC_PATHS = frozenset({"/healthz"})
 CHALLENGE = {"WWW-Authenticate": "Bearer"}

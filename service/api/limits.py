@@ -5,7 +5,7 @@ from fastapi import APIRouter
 
 from schemas import Limits
 
-from .. import limits
+from ..intake import limit_checks
 from .deps import Authorized, SettingsDep
 from .docs import UNAUTHORIZED_ANSWER
 
@@ -16,4 +16,4 @@ router = APIRouter(tags=["limits"], dependencies=[Authorized], responses=UNAUTHO
 def get_limits(settings: SettingsDep):
     """The farm's limits (``DRT_MAX_*``): upload bytes, samples per job, pixels per frame, frames and tiles per
     job, jobs queued in total and per client."""
-    return limits.public(settings)
+    return limit_checks.public(settings)

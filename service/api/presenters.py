@@ -11,7 +11,7 @@ from datetime import datetime, timezone
 
 from schemas import FramePublic, FrameState, JobCreate, JobPublic, JobState, SceneInfo
 
-from .db import FrameRow, JobRow
+from ..queue.store import FrameRow, JobRow
 
 
 def frame_name(t: float) -> str:

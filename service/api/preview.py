@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .checkpoints import TileBox, load_tile
+from ..farm.job_files import TileBox, load_tile
 
 MAX_SIDE = 1024
 

@@ -3,7 +3,7 @@
 Embedded (no ``DRT_SCHEDULER_ADDRESS``): ``DRT_WORKERS`` worker processes (nanny-supervised: a worker that dies
 is restarted and its tasks rescheduled), each with ``DRT_THREADS_PER_WORKER`` threads (default: all cores over the
 workers). External: workers started by ``dask worker tcp://HOST:8786`` anywhere; they need only the scheduler's
-address (scenes travel through Dask, tiles come back as results; see ``service.worker``).
+address (scenes travel through Dask, tiles come back as results; see ``service.farm.tasks``).
 
 **Outages.** A watcher thread keeps the client connected: the Dask client reconnects by itself for
 ``DRT_SCHEDULER_TIMEOUT`` seconds and then closes for good, so when it has closed (or never connected) the watcher
@@ -24,7 +24,7 @@ import time
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from .settings import ServiceSettings
+from ..settings import ServiceSettings
 
 log = logging.getLogger("drt.engine")
 

@@ -28,8 +28,8 @@ import threading
 import time
 from dataclasses import dataclass, field
 
-from .engine import UNREACHABLE, ClusterFacts, Engine
-from .settings import ServiceSettings
+from ..settings import ServiceSettings
+from .cluster import UNREACHABLE, ClusterFacts, Engine
 
 log = logging.getLogger("drt.coordinator")
 
@@ -71,7 +71,7 @@ class Coordinator:
         self.scheduler = None
 
     def start(self) -> "Coordinator":
-        from .scheduler import Scheduler  # the renderer's film code comes with it: only where tiles are handled
+        from .dispatcher import Scheduler  # the renderer's film code comes with it: only where tiles are handled
 
         self.engine.start()
         self.scheduler = Scheduler(self.settings, self.store, self.engine, self.scenes)
@@ -239,8 +239,8 @@ class CoordinatorProcess:
 
 def child_main(settings: ServiceSettings, conn, log_level: int) -> None:
     """The coordinator process: its own database connection and cluster, steered through ``conn``."""
-    from .db import Store
-    from .uploads import SceneStore
+    from ..intake.scene_checks import SceneStore
+    from ..queue.store import Store
 
     logging.basicConfig(level=log_level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     # Ctrl-C in a terminal reaches the whole process group: the API shuts down and tells this process to stop.

@@ -11,7 +11,7 @@ or a cancellation takes effect within about one tile's time, and waits for a tas
   them in the database. When all tiles of a frame are recorded, they are assembled here, a worker turns the sums
   into the EXR's channels and header (it holds the prepared frame), and this thread writes the EXR atomically; the
   frame is marked done and its tile checkpoints are removed. A frame that fits in one batch does all of that in
-  one task (``worker.whole_frame_task``: no checkpoint). The job succeeds when every frame is done.
+  one task (``tasks.whole_frame_task``: no checkpoint). The job succeeds when every frame is done.
 * A job that left the active states (canceled, failed, deleted) has its tasks cancelled (running tiles stop at
   their next sample wave) and late results dropped.
 * A task that raises (including a worker that died three times running it, Dask's ``KilledWorker``) is submitted
@@ -44,14 +44,14 @@ from renderer.film.exr import write_exr
 from renderer.render import Tile, TileSums, assemble
 from schemas import JobCreate, JobState
 
-from . import jobs as sm
-from .checkpoints import JobFiles, TileBox, load_tile, save_tile, tile_grid
-from .db import JobNotFound, Store
-from .engine import ClusterUnavailable, Engine
-from .settings import ServiceSettings
-from .spec import RenderSpec
-from .uploads import SceneStore
-from .worker import (FrameTask, TileTask, exr_attributes, frame_image_task, render_tile_task, scene_package,
+from ..intake.scene_checks import SceneStore
+from ..queue import states as sm
+from ..queue.store import JobNotFound, Store
+from ..settings import ServiceSettings
+from ..spec import RenderSpec
+from .cluster import ClusterUnavailable, Engine
+from .job_files import JobFiles, TileBox, load_tile, save_tile, tile_grid
+from .tasks import (FrameTask, TileTask, exr_attributes, frame_image_task, render_tile_task, scene_package,
                      whole_frame_task)
 
 log = logging.getLogger("drt.scheduler")

@@ -37,7 +37,7 @@ from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 
-from .spec import RenderSpec
+from ..spec import RenderSpec
 
 TileBox = tuple[int, int, int, int]  # x0, y0, x1, y1: pixels [x0, x1) x [y0, y1), y down
 

@@ -12,9 +12,9 @@ from collections import defaultdict
 
 from schemas import Farm, FarmTask, FarmWorker, FrameTiles, TileMap
 
+from ..queue.store import JobNotFound, JobRow, Store
+from ..settings import ServiceSettings
 from .coordinator import FarmView, SchedulerStats
-from .db import JobNotFound, JobRow, Store
-from .settings import ServiceSettings
 
 _KEY = re.compile(r"^drt-(tile|frame)-([0-9A-Za-z]+)-(\d+)-(-?\d+(?:\.\d+)*)-[0-9A-Za-z]+$")
 

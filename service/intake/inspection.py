@@ -1,15 +1,15 @@
 """Scene inspection before a job is queued, in a small pool of local processes (never on the render workers).
 
-``inspect_task`` checks an upload: every asset path inside it (``uploads.check_asset_paths``), composition errors,
-the first frame loaded with the renderer (camera path, settings bounds), the resolution. It answers
+``inspect_task`` checks an upload: every asset path inside it (``scene_checks.check_asset_paths``), composition
+errors, the first frame loaded with the renderer (camera path, settings bounds), the resolution. It answers
 ``{"error": message}`` for anything wrong with the scene (the API's 422) or the facts the job needs.
 
-``InspectionPool`` runs it in ``size`` processes of its own (``python -m service.inspection``, talking over two pipes
-of their own, warmed up with pxr and the renderer imported; not ``multiprocessing``'s spawn, which would run the
-embedding program's main script again in each child),
-so pxr never parses untrusted bytes in the API process, the answer does not wait behind tiles on the cluster, and
-it works while the cluster is away. A scene that loads for longer than ``timeout`` seconds is refused (422) and the
-process stuck on it is killed and replaced; a process that dies loading a scene (a crash in pxr) is 422 too.
+``InspectionPool`` runs it in ``size`` processes of its own (``python -m service.intake.inspection``, talking over
+two pipes of their own, warmed up with pxr and the renderer imported; not ``multiprocessing``'s spawn, which would
+run the embedding program's main script again in each child), so pxr never parses untrusted bytes in the API
+process, the answer does not wait behind tiles on the cluster, and it works while the cluster is away. A scene that
+loads for longer than ``timeout`` seconds is refused (422) and the process stuck on it is killed and replaced; a
+process that dies loading a scene (a crash in pxr) is 422 too.
 
 Answers are remembered (the last ``CACHE_SIZE``), keyed by the upload's content hash, its name, the frames and the
 settings that reach the loader (not the seed): the same bytes give the same answer, so a pipeline that submits one
@@ -34,10 +34,10 @@ from pathlib import Path
 
 from schemas import JobCreate
 
-from .errors import ApiError
-from .latency import freeze_heap
-from .spec import RenderSpec
-from .uploads import StoredScene, UploadError, check_asset_paths, hide_dir
+from ..errors import ApiError
+from ..latency import freeze_heap
+from ..spec import RenderSpec
+from .scene_checks import StoredScene, UploadError, check_asset_paths, hide_dir
 
 log = logging.getLogger("drt.inspection")
 
@@ -123,7 +123,7 @@ class _Proc:
         to_child_r, to_child_w = os.pipe()
         from_child_r, from_child_w = os.pipe()
         env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
-        self.process = subprocess.Popen([sys.executable, "-m", "service.inspection", str(to_child_r),
+        self.process = subprocess.Popen([sys.executable, "-m", "service.intake.inspection", str(to_child_r),
                                          str(from_child_w)], pass_fds=(to_child_r, from_child_w), env=env,
                                         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
         os.close(to_child_r)
@@ -260,5 +260,5 @@ class InspectionPool:
             p.kill()
 
 
-if __name__ == "__main__":  # a pool process: python -m service.inspection REQUESTS_FD ANSWERS_FD
+if __name__ == "__main__":  # a pool process: python -m service.intake.inspection REQUESTS_FD ANSWERS_FD
     _serve(Connection(int(sys.argv[1]), writable=False), Connection(int(sys.argv[2]), readable=False))

@@ -1,15 +1,15 @@
 """A job's cost against the farm's limits (``DRT_MAX_*`` settings), checked before the job is queued.
 
 Every refusal is a 422 whose detail names the limit and what the job would cost, so that a client can shrink the
-job; the upload size (413) is enforced while the body streams in (``service.app.BodyLimit``, ``uploads``).
+job; the upload size (413) is enforced while the body streams in (``service.app.BodyLimit``, ``SceneStore.receive``).
 """
 from __future__ import annotations
 
 from schemas import Limits
 
-from .db import Store
-from .errors import ApiError
-from .settings import ServiceSettings
+from ..errors import ApiError
+from ..queue.store import Store
+from ..settings import ServiceSettings
 
 
 def public(s: ServiceSettings) -> Limits:

@@ -5,7 +5,7 @@ render cluster is unreachable, 503 (with ``Retry-After``); the upload is streame
 and hashed; the Idempotency-Key is claimed (a replay returns the first job; the same key with a different request
 is 422; while the first request is still running, 409); a ``.usdz``'s entries are checked; a local inspection
 process checks every asset path, composes the stage and loads the first frame (422 with the renderer's message;
-``service.inspection``); the job's cost against the farm's limits (``service.limits``: 422) is checked once from
+``intake.inspection``); the job's cost against the farm's limits (``intake.limit_checks``: 422) is checked once from
 the settings alone (before the upload is looked at, when they give the resolution) and again with the scene's real
 resolution and frames, the queue's length too; only then is the job queued.
 
@@ -24,12 +24,13 @@ from pydantic import ValidationError
 from schemas import JobCreate
 from schemas.settings import FRAMES_TAGS
 
-from . import errors, limits
-from .checkpoints import tile_count
-from .db import JobRow, Store
-from .errors import ApiError
-from .settings import ServiceSettings
-from .uploads import SceneStore, StoredScene, UploadError, check_usdz, new_job_id, safe_name, scene_extension
+from .. import errors
+from ..errors import ApiError
+from ..farm.job_files import tile_count
+from ..queue.store import JobRow, Store
+from ..settings import ServiceSettings
+from . import limit_checks as limits
+from .scene_checks import SceneStore, StoredScene, UploadError, check_usdz, new_job_id, safe_name, scene_extension
 
 log = logging.getLogger("drt.submission")
 

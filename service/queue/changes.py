@@ -22,8 +22,8 @@ from dataclasses import dataclass, field
 
 import anyio
 
-from .db import JobNotFound, Store
-from .views import job_public
+from ..api.presenters import job_public
+from .store import JobNotFound, Store
 
 log = logging.getLogger("drt.events")
 

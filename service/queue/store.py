@@ -36,7 +36,7 @@ from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column, rela
 
 from schemas import JobState
 
-from . import jobs as sm
+from . import states as sm
 
 
 class Base(DeclarativeBase):

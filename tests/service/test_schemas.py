@@ -6,7 +6,7 @@ import pytest
 from schemas import AOVS, FILTERS, TIME_FILTERS, FrameRange, JobCreate
 from service.errors import ApiError
 from service.spec import RenderSpec
-from service.submission import parse_settings
+from service.intake.submission import parse_settings
 
 
 def test_names_match_the_renderer():

@@ -179,7 +179,7 @@ def test_a_killed_service_resumes_its_running_job(servers, card, tmp_path):
 
 
 def _coordinator(server: Server) -> psutil.Process:
-    """The child process that runs the job scheduler and the Dask client (``service.coordinator``)."""
+    """The child process that runs the job scheduler and the Dask client (``service.farm.coordinator``)."""
     (proc,) = [p for p in psutil.Process(server.proc.pid).children()
                if any("spawn_main" in a for a in p.cmdline())]
     return proc

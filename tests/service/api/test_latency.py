@@ -1,6 +1,6 @@
 """What keeps the API's answers fast (``service.latency``): once started, the API process freezes its startup heap
 and shortens the GIL switch interval; submissions pass the ``SubmissionGate`` a few at a time. And every answer
-carries the service's own time for it (``service.timing``)."""
+carries the service's own time for it (``service.api.timing``)."""
 from __future__ import annotations
 
 import gc
@@ -26,7 +26,7 @@ def test_every_answer_carries_the_services_own_time_within_what_the_client_waite
     health check): positive, and never more than the client itself waited (a wrong unit would exceed it)."""
     import time
 
-    from service.timing import app_duration
+    from service.api.timing import app_duration
     from service_helpers import submit
 
     client = make_client(api_token="s3cret")
@@ -44,7 +44,7 @@ def test_every_answer_carries_the_services_own_time_within_what_the_client_waite
 
 
 def test_the_server_timing_parser_reads_the_app_entry_only():
-    from service.timing import app_duration
+    from service.api.timing import app_duration
 
     assert app_duration("app;dur=1.5") == 0.0015
     assert app_duration("db;dur=3, app;desc=\"api\";dur=2") == 0.002

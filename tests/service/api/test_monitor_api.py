@@ -15,8 +15,8 @@ import httpx
 import pytest
 
 from schemas import JobState
-from service import jobs as sm
-from service.db import Store
+from service.queue import states as sm
+from service.queue.store import Store
 
 from live_server import LiveServer
 from service_helpers import assert_same_exr, cli_env, cli_render, metric, submit, wait_job
@@ -176,18 +176,18 @@ _failures = {"left": 0}
 
 
 def failing_tile(task, scene):
-    from service import worker
+    from service.farm import tasks
 
     if any(box[:2] == (0, 0) for box in task.tiles) and _failures["left"] > 0:
         _failures["left"] -= 1
         raise RuntimeError("worker fell over")
-    return worker.render_tile_task(task, scene)
+    return tasks.render_tile_task(task, scene)
 
 
 def test_a_failed_job_retried_gets_fresh_attempts(server, card, monkeypatch):
-    import service.scheduler
+    import service.farm.dispatcher
 
-    monkeypatch.setattr(service.scheduler, "render_tile_task", failing_tile)
+    monkeypatch.setattr(service.farm.dispatcher, "render_tile_task", failing_tile)
     _failures["left"] = 3  # the default 2 retries: 3 failures fail the job
     job = wait_job(server.http, submit(server.http, card, SMALL).json()["id"])
     assert (job["state"], job["error"]) == ("failed", "tile 0 of frame 0 failed after 3 attempts: RuntimeError: "

@@ -5,7 +5,7 @@ import pytest
 
 from schemas import JobCreate
 from service.cli import build_parser
-from service.client import ClientError, settings_from_args
+from service.client.remote import ClientError, settings_from_args
 
 
 def settings(*argv) -> dict:

@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from service import worker
-from service.checkpoints import tile_grid
-from service.farm import parse_key
-from service.scheduler import FINISH, MAX_BATCH, FramePlan, JobPlan
+from service.farm import tasks
+from service.farm.dispatcher import FINISH, MAX_BATCH, FramePlan, JobPlan
+from service.farm.job_files import tile_grid
+from service.farm.view import parse_key
 
 from service_helpers import assert_same_exr, cli_render, submit, wait_job
 
@@ -78,20 +78,20 @@ _assemblies: list = []
 
 def counting_tile(task, scene):
     _tasks.append(task.tiles)
-    return worker.render_tile_task(task, scene)
+    return tasks.render_tile_task(task, scene)
 
 
 def counting_assembly(task, scene):
     _assemblies.append(task.frame)
-    return worker.frame_image_task(task, scene)
+    return tasks.frame_image_task(task, scene)
 
 
 @pytest.fixture
 def counted(monkeypatch):
-    import service.scheduler
+    import service.farm.dispatcher
 
-    monkeypatch.setattr(service.scheduler, "render_tile_task", counting_tile)
-    monkeypatch.setattr(service.scheduler, "frame_image_task", counting_assembly)
+    monkeypatch.setattr(service.farm.dispatcher, "render_tile_task", counting_tile)
+    monkeypatch.setattr(service.farm.dispatcher, "frame_image_task", counting_assembly)
     _tasks.clear()
     _assemblies.clear()
 
@@ -145,13 +145,13 @@ def fails_once_with_tile_zero(task, scene):
     if len(_tasks) == 1:
         assert (0, 0, 8, 8) in task.tiles
         raise RuntimeError("worker fell over")
-    return worker.render_tile_task(task, scene)
+    return tasks.render_tile_task(task, scene)
 
 
 def test_a_failed_batch_is_retried_tile_by_tile(make_client, card, monkeypatch, tmp_path):
-    import service.scheduler
+    import service.farm.dispatcher
 
-    monkeypatch.setattr(service.scheduler, "render_tile_task", fails_once_with_tile_zero)
+    monkeypatch.setattr(service.farm.dispatcher, "render_tile_task", fails_once_with_tile_zero)
     _tasks.clear()
     client = make_client()
     job = wait_job(client, submit(client, card, SMALL).json()["id"])
@@ -173,10 +173,10 @@ _race: dict = {}
 def cancel_and_retry_meanwhile(task, scene):
     """The first task's job is canceled and retried while it renders (both before the scheduler's next look at the
     database): its result arrives for a job that is queued again, not running."""
-    from service import jobs as sm
+    from service.queue import states as sm
 
     _tasks.append(task.tiles)
-    result = worker.render_tile_task(task, scene)
+    result = tasks.render_tile_task(task, scene)
     if len(_tasks) == 1:
         store = _race["store"]
         (job_id,) = [row.id for row in store.active_jobs()]
@@ -191,9 +191,9 @@ def test_a_result_for_a_job_canceled_and_retried_meanwhile_is_rendered_again(mak
     """Its tiles cannot be recorded (the job is not running), so they go back to the queue: lost, the job would wait
     for them for ever (a CI run hung at 15 of 16 tiles after a quick cancel and retry; without the fix the
     whole-frame case here hangs every time, the tile-by-tile one when the result beats the job's new claim)."""
-    import service.scheduler
+    import service.farm.dispatcher
 
-    monkeypatch.setattr(service.scheduler, "render_tile_task", cancel_and_retry_meanwhile)
+    monkeypatch.setattr(service.farm.dispatcher, "render_tile_task", cancel_and_retry_meanwhile)
     _tasks.clear()
     client = make_client(task_samples=task_samples)
     _race["store"] = client.app.state.runtime.store

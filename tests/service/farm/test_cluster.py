@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 from distributed import Client
 
-from service import worker as worker_module
+from service.farm import tasks
 
 from cluster_helpers import CAN_HIDE, Scheduler, Server, SupervisedWorker, free_port, service_files
 from service_helpers import assert_same_exr, cli_render, metric, submit, wait_job
@@ -39,7 +39,7 @@ class Cluster:
 
     def worker_stats(self) -> list[dict]:
         with Client(self.scheduler.address, timeout=30, set_as_default=False) as c:
-            return list(c.run(worker_module.stats).values())
+            return list(c.run(tasks.stats).values())
 
     def close(self) -> None:
         if self.server is not None:

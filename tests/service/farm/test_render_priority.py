@@ -6,7 +6,7 @@ import multiprocessing
 import os
 import threading
 
-from service import worker
+from service.farm import tasks
 
 
 def _child(q):
@@ -14,8 +14,8 @@ def _child(q):
     rendering = []
 
     def task():
-        worker.background_priority()
-        worker.background_priority()  # a second tile on the same thread: nothing more to do
+        tasks.background_priority()
+        tasks.background_priority()  # a second tile on the same thread: nothing more to do
         rendering.append(os.getpriority(os.PRIO_PROCESS, 0))  # 0: the calling thread on Linux
 
     for _ in range(2):
@@ -27,8 +27,8 @@ def _child(q):
 
 def test_every_rendering_thread_of_a_worker_process_yields_and_the_service_keeps_its_priority(monkeypatch):
     before = os.getpriority(os.PRIO_PROCESS, 0)
-    monkeypatch.setattr(worker, "_niced", threading.local())
-    worker.background_priority()  # this process has no parent process: a threads-mode "worker"
+    monkeypatch.setattr(tasks, "_niced", threading.local())
+    tasks.background_priority()  # this process has no parent process: a threads-mode "worker"
     assert os.getpriority(os.PRIO_PROCESS, 0) == before
     ctx = multiprocessing.get_context("spawn")
     q = ctx.Queue()
@@ -36,7 +36,7 @@ def test_every_rendering_thread_of_a_worker_process_yields_and_the_service_keeps
     p.start()
     rendering, main_thread = q.get(timeout=60)
     p.join(timeout=60)
-    want = max(before, worker.RENDER_NICENESS)
+    want = max(before, tasks.RENDER_NICENESS)
     assert rendering == [want, want]
     assert main_thread == before  # the worker's event loop keeps answering the scheduler at its own
 

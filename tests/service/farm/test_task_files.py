@@ -6,22 +6,25 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
-from service import worker
+from service.farm import tasks
+
+ROOT = Path(__file__).resolve().parents[3]
 
 # A worker process: makes its scene directory (locked for as long as it lives), prints it, and waits.
 WORKER = """
 import sys, time, tempfile
 tempfile.tempdir = sys.argv[1]
-from service import worker
-print(worker._root(), flush=True)
+from service.farm import tasks
+print(tasks._root(), flush=True)
 time.sleep(60)
 """
 
 
 def _start_worker(tmp_path) -> tuple[subprocess.Popen, str]:
     p = subprocess.Popen([sys.executable, "-c", WORKER, str(tmp_path)], stdout=subprocess.PIPE, text=True,
-                         cwd=os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+                         cwd=ROOT)
     return p, p.stdout.readline().strip()
 
 
@@ -37,12 +40,12 @@ def test_a_killed_workers_directory_is_removed_by_the_next_worker_and_a_live_one
         killed.wait()
         assert os.path.isdir(killed_dir)
 
-        assert worker.remove_orphaned_roots(tmp_path) == 1
+        assert tasks.remove_orphaned_roots(tmp_path) == 1
         assert not os.path.exists(killed_dir)
         assert os.path.isdir(live_dir) and old_style.exists() and (tmp_path / "something-else").exists()
-        assert worker.remove_orphaned_roots(tmp_path) == 0
+        assert tasks.remove_orphaned_roots(tmp_path) == 0
     finally:
         live.kill()
         live.wait()
     time.sleep(0.1)
-    assert worker.remove_orphaned_roots(tmp_path) == 1  # the second, now ended too
+    assert tasks.remove_orphaned_roots(tmp_path) == 1  # the second, now ended too

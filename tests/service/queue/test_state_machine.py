@@ -8,8 +8,8 @@ import time
 import pytest
 
 from schemas import JobState
-from service import jobs as sm
-from service.db import JobActive, JobNotFound, Store, StoreBusy, decode_cursor, encode_cursor
+from service.queue import states as sm
+from service.queue.store import JobActive, JobNotFound, Store, StoreBusy, decode_cursor, encode_cursor
 
 
 def test_transition_table():
