@@ -23,11 +23,12 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from .api import events, health, jobs, limits, monitor, web
 from .api.auth import TokenFirst
 from .api.deps import require_token
+from .api.presenters import job_public
 from .api.timing import ServerTiming
 from .errors import ApiError
-from .intake.scene_checks import UploadTooLarge
 from .latency import SubmissionGate, new_submission_gate, tune_api_process
 from .queue.changes import ChangeFeed
+from .queue.scenes import UploadTooLarge
 from .runtime import Runtime
 from .settings import ServiceSettings
 
@@ -99,7 +100,8 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         submission_threads = settings.inspect_processes + 1
         app.state.submit_limiter = anyio.CapacityLimiter(submission_threads)
         app.state.submission_gate = new_submission_gate(submission_threads)
-        app.state.feed = ChangeFeed(app.state.runtime.store)  # the monitor's server-sent events
+        # the monitor's server-sent events
+        app.state.feed = ChangeFeed(app.state.runtime.store, present=lambda row: job_public(row).model_dump_json())
         tune_api_process()  # startup is done: freeze its heap, shorten the GIL switch interval
         try:
             yield

@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 from .farm.coordinator import Coordinator, CoordinatorProcess
 from .intake.inspection import InspectionPool
-from .intake.scene_checks import SceneStore
 from .intake.submission import Inspector, Submitter
+from .queue.scenes import SceneStore
 from .queue.store import Store
 from .settings import ServiceSettings
 

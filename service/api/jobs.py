@@ -15,11 +15,12 @@ import anyio
 from fastapi import APIRouter, File, Form, Header, Query, Request, Response, UploadFile
 from fastapi.responses import FileResponse, JSONResponse
 
+from renderer.film.tiles import split_tiles
 from schemas import JobList, JobPublic, JobState
 
 from .. import errors
 from ..errors import ApiError
-from ..farm.job_files import JobFiles, tile_grid
+from ..farm.job_files import JobFiles
 from ..queue import states as sm
 from ..queue.store import JobActive, JobNotFound, JobRow, StoreBusy, decode_cursor, encode_cursor
 from . import preview
@@ -175,7 +176,7 @@ def get_preview(store: StoreDep, settings: SettingsDep, job_id: str, frame: str)
     if f.done and exr.is_file():
         data = preview.from_exr(exr)
     else:
-        boxes = tile_grid(row.width, row.height, row.tile_size)
+        boxes = split_tiles(row.width, row.height, row.tile_size)
         data = preview.from_tiles([(files.tile(f.idx, i), b) for i, b in enumerate(boxes)], row.width, row.height,
                                   row.exposure_scale)
     return Response(data, media_type="image/png", headers={"Cache-Control": "no-store"})

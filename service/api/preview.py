@@ -10,7 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..farm.job_files import TileBox, load_tile
+from renderer.film.tiles import Tile
+
+from ..farm.job_files import load_tile
 
 MAX_SIDE = 1024
 
@@ -39,7 +41,7 @@ def from_exr(path: Path) -> bytes:
     return png(np.stack([channels["R"], channels["G"], channels["B"]], axis=-1))
 
 
-def from_tiles(tiles: list[tuple[Path, TileBox]], width: int, height: int, exposure_scale: float) -> bytes:
+def from_tiles(tiles: list[tuple[Path, Tile]], width: int, height: int, exposure_scale: float) -> bytes:
     """Assemble the checkpoints that exist (a tile may vanish while we read: the frame was just finished)."""
     rgb = np.zeros((height, width, 3), np.float32)
     for path, (x0, y0, x1, y1) in tiles:

@@ -10,10 +10,11 @@ import argparse
 import json
 import os
 import sys
-import tempfile
 import time
 import uuid
 from pathlib import Path
+
+from renderer.files import atomic_write
 
 DEFAULT_SERVER = "http://127.0.0.1:8000"
 TERMINAL = ("succeeded", "failed", "canceled")
@@ -127,26 +128,18 @@ class Client:
                 bar.close()
 
     def download(self, url: str, out: Path) -> None:
-        """Stream a result to ``out`` atomically (a temporary file renamed over it)."""
+        """Stream a result to ``out`` atomically (a temporary file renamed over it; nothing left on a failure)."""
         import httpx
 
-        out = Path(out)
-        fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".part")
         try:
-            with os.fdopen(fd, "wb") as f, self.http.stream("GET", url) as r:
+            with atomic_write(out) as f, self.http.stream("GET", url) as r:
                 if r.status_code >= 400:
                     r.read()
                     self._check(r)
                 for chunk in r.iter_bytes():
                     f.write(chunk)
-            os.replace(tmp, out)
         except httpx.HTTPError as e:
-            os.unlink(tmp)
             raise ClientError(f"cannot reach {self.http.base_url}: {e}") from None
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
 
 
 # -------------------------------------------------------------------------------------------------------------

@@ -239,7 +239,7 @@ class CoordinatorProcess:
 
 def child_main(settings: ServiceSettings, conn, log_level: int) -> None:
     """The coordinator process: its own database connection and cluster, steered through ``conn``."""
-    from ..intake.scene_checks import SceneStore
+    from ..queue.scenes import SceneStore
     from ..queue.store import Store
 
     logging.basicConfig(level=log_level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")

@@ -9,9 +9,10 @@ or a cancellation takes effect within about one tile's time, and waits for a tas
 * Small tiles share a task: a frame's next tiles up to ``task_samples`` samples together (``JobPlan.next_work``).
 * Finished tiles come back as the task's result; this thread checkpoints each (atomically) on disk, then records
   them in the database. When all tiles of a frame are recorded, they are assembled here, a worker turns the sums
-  into the EXR's channels and header (it holds the prepared frame), and this thread writes the EXR atomically; the
-  frame is marked done and its tile checkpoints are removed. A frame that fits in one batch does all of that in
-  one task (``tasks.whole_frame_task``: no checkpoint). The job succeeds when every frame is done.
+  into the frame's image (channels and header as plain values, ``FrameImage``: it holds the prepared frame), and
+  this thread writes it atomically with the renderer's writer (``FrameImage.write``, as ``drt render`` does); the
+  frame is marked done and its tile checkpoints are removed. A frame that fits in one batch is rendered and made
+  an image in one task (``tasks.whole_frame_task``: no checkpoint). The job succeeds when every frame is done.
 * A job that left the active states (canceled, failed, deleted) has its tasks cancelled (running tiles stop at
   their next sample wave) and late results dropped.
 * A task that raises (including a worker that died three times running it, Dask's ``KilledWorker``) is submitted
@@ -40,19 +41,18 @@ from sqlalchemy.exc import IntegrityError
 
 from renderer.film import film
 from renderer.film.borders import check_tile
-from renderer.film.exr import write_exr
-from renderer.render import Tile, TileSums, assemble
+from renderer.film.tiles import Tile, split_tiles
+from renderer.render import TileSums, assemble
 from schemas import JobCreate, JobState
 
-from ..intake.scene_checks import SceneStore
 from ..queue import states as sm
+from ..queue.scenes import SceneStore
 from ..queue.store import JobNotFound, Store
 from ..settings import ServiceSettings
 from ..spec import RenderSpec
 from .cluster import ClusterUnavailable, Engine
-from .job_files import JobFiles, TileBox, load_tile, save_tile, tile_grid
-from .tasks import (FrameTask, TileTask, exr_attributes, frame_image_task, render_tile_task, scene_package,
-                     whole_frame_task)
+from .job_files import JobFiles, load_tile, save_tile
+from .tasks import FrameTask, TileTask, frame_image_task, render_tile_task, scene_package, whole_frame_task
 
 log = logging.getLogger("drt.scheduler")
 
@@ -90,7 +90,7 @@ class JobPlan:
     width: int
     height: int
     spp: int
-    boxes: list[TileBox]
+    boxes: list[Tile]  # the frame's grid (split_tiles): a tile's index in it names its checkpoint
     frames: list[FramePlan]
     files: JobFiles
 
@@ -301,7 +301,7 @@ class Scheduler:
             try:
                 arrays = load_tile(plan.files.tile(frame.idx, t))
                 check_tile(arrays, box, margin, plan.width, plan.height)  # e.g. an older layout: rendered again
-                parts.append(TileSums(tile=Tile(*box), arrays=arrays))
+                parts.append(TileSums(tile=box, arrays=arrays))
             except Exception:  # noqa: BLE001 - missing, truncated or garbage: np.load raises several kinds
                 bad.add(t)
         if bad:
@@ -414,8 +414,7 @@ class Scheduler:
 
     def _frame_image(self, plan: JobPlan, frame: FramePlan, result: dict) -> None:
         try:
-            write_exr(plan.files.frame(frame.idx), result["channels"], half=plan.spec.half,
-                      attributes=exr_attributes(result["attributes"]), **result.get("windows", {}))
+            result["image"].write(plan.files.frame(frame.idx), half=plan.spec.half)
         except FileNotFoundError:  # the job's files are gone: it was deleted
             self._drop(plan.job_id)
             return
@@ -522,7 +521,7 @@ class Scheduler:
             return None
         files = JobFiles(self.settings.data_dir, row.id)
         files.create(len(row.frames))
-        boxes = tile_grid(row.width, row.height, row.tile_size)
+        boxes = split_tiles(row.width, row.height, row.tile_size)
         recorded = self.store.done_tiles(row.id)
         frames = []
         for fr in row.frames:

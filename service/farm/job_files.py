@@ -1,35 +1,23 @@
-"""A job's files under the data directory: tile checkpoints, frame EXRs; the tile grid of a frame.
+"""A job's files under the data directory: tile checkpoints and frame EXRs.
 
     <data>/jobs/<job id>/tiles/<frame index>/<tile index>.npz   filtered sums of one finished tile
     <data>/jobs/<job id>/frames/<frame index>.exr               the frame, written atomically
 
-Only the service reads and writes them (workers return tiles as task results and never see this directory).
+Only the service reads and writes them (workers return tiles as task results and never see this directory). A
+tile's index is its place in the frame's grid (``renderer.film.tiles.split_tiles``).
 
-A checkpoint is written to a temporary file in its directory and renamed over its name, so a file that exists is
-complete: a service killed at any moment resumes from the tiles on disk, and assembling them gives the same bits
+A checkpoint is written to a temporary file in its directory and renamed over its name (``renderer.files``), so a
+file that exists is complete: a service killed at any moment resumes from the tiles on disk, and assembling them gives the same bits
 as rendering the frame in one go (``render_tile`` is a pure function of scene, options and tile).
 """
 from __future__ import annotations
 
-import contextlib
-import os
 import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-TileBox = tuple[int, int, int, int]  # x0, y0, x1, y1: pixels [x0, x1) x [y0, y1), y down
-
-
-def tile_grid(width: int, height: int, size: int) -> list[TileBox]:
-    """Tiles in row-major order (the order of ``renderer.render.split_tiles``)."""
-    return [(x, y, min(x + size, width), min(y + size, height))
-            for y in range(0, height, size) for x in range(0, width, size)]
-
-
-def tile_count(width: int, height: int, size: int) -> int:
-    return -(-width // size) * -(-height // size)
+from renderer.files import atomic_write
 
 
 class JobFiles:
@@ -56,17 +44,8 @@ class JobFiles:
 
 def save_tile(path: Path, arrays: dict[str, np.ndarray]) -> None:
     """Write a tile checkpoint atomically. FileNotFoundError if the job's directory is gone (job deleted)."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".npz.tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, **arrays)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
+    with atomic_write(path) as f:
+        np.savez(f, **arrays)
 
 
 def load_tile(path: Path) -> dict[str, np.ndarray]:

@@ -1,9 +1,10 @@
-"""What runs on the Dask workers: tile rendering and a frame's EXR channels; the per-process scene caches.
+"""What runs on the Dask workers: tile rendering and a frame's image; the per-process scene caches.
 
 A worker needs nothing but the scheduler's address. It never sees the service's data directory: the uploaded
 scene reaches it through Dask (a ``ScenePackage``, the upload's bytes, is the result of a ``scene_package`` task on
 which every tile task depends, so Dask copies it to a worker once and recomputes it if the worker holding it dies),
-tiles go back as task results, and the service alone writes checkpoints, frames and the database.
+tiles and frame images go back as task results (numpy arrays and plain values), and the service alone writes
+checkpoints, frames and the database.
 
 Tasks are pure functions of their arguments (a ``RenderSpec``, the scene's bytes, a frame, a batch of tiles), so
 Dask may run them anywhere and run them again after a worker dies: the result is the same bits.
@@ -37,9 +38,10 @@ from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..spec import RenderSpec
+from renderer.files import atomic_write
+from renderer.film.tiles import Tile
 
-TileBox = tuple[int, int, int, int]  # x0, y0, x1, y1: pixels [x0, x1) x [y0, y1), y down
+from ..spec import RenderSpec
 
 _cache: OrderedDict = OrderedDict()  # (sha, cache key) -> PreparedScene
 _cache_lock = threading.Lock()
@@ -78,9 +80,8 @@ class _LocalScene:
         self.dir = root / pkg.sha256
         self.dir.mkdir(parents=True, exist_ok=True)
         self.path = self.dir / pkg.name
-        tmp = self.dir / f".{pkg.name}.part"
-        tmp.write_bytes(pkg.data)
-        os.replace(tmp, self.path)
+        with atomic_write(self.path, durable=False) as f:  # a private copy: it need not outlive a crash
+            f.write(pkg.data)
         self.stages = Usd.StageCache()
         self.lock = threading.Lock()  # one frame loads at a time from the shared stage
 
@@ -238,7 +239,7 @@ class TileTask:
 
     spec: RenderSpec
     frame: float
-    tiles: tuple[TileBox, ...]
+    tiles: tuple[Tile, ...]
     width: int  # the resolution the job was planned at
     height: int
     cache_size: int = 2
@@ -311,7 +312,7 @@ def render_tile_task(task: TileTask, scene: ScenePackage) -> dict:
     """The task's tiles' sums, in its order: ``{"arrays": [per tile], "seconds": [per tile], "rays",
     "nonfinite", "pid"}``, or ``{"stopped": True}``, or ``{"error"}``."""
     from renderer.errors import Cancelled, RenderError
-    from renderer.render import Tile, render_tile, tile_time_budget
+    from renderer.render import render_tile, tile_time_budget
 
     background_priority()
     arrays, seconds, rays, nonfinite = [], [], 0, 0
@@ -324,9 +325,8 @@ def render_tile_task(task: TileTask, scene: ScenePackage) -> dict:
         with _cache_lock:
             _stats["running"] += 1  # tasks rendering now (tests watch a deleted job's tiles stop)
         try:
-            for box in task.tiles:
+            for tile in task.tiles:
                 t0 = time.perf_counter()
-                tile = Tile(*box)
                 budget = tile_time_budget(prep.options, tile, prep.width, prep.height, _worker_threads())
                 sums = render_tile(prep, tile, on_wave=stop_check, time_budget=budget, shared_borders=True)
                 arrays.append(sums.arrays)
@@ -358,61 +358,32 @@ class FrameTask:
 
 
 def frame_image_task(task: FrameTask, scene: ScenePackage) -> dict:
-    """The frame's EXR channels, header attributes and windows (``write_frame``'s, so the service's EXR has the same
-    bits as ``drt render``'s): ``{"channels", "attributes", "windows"}`` or ``{"error"}``. The service writes the
-    file."""
+    """The frame's image from its sums (``renderer.render.frame_image``: its EXR channels, header attributes and
+    windows as plain values): ``{"image"}`` or ``{"error"}``. The service writes it, with ``write_frame``'s writer,
+    so its EXR has the same bits as ``drt render``'s."""
     from renderer.errors import RenderError
-    from renderer.render import frame_attributes, frame_channels, frame_windows
+    from renderer.render import frame_image
 
     try:
         prep = prepared(task.spec, task.frame, scene, task.cache_size)
-        attributes = {k: PortableTimeCode.of(v) if type(v).__name__ == "TimeCode" else v
-                      for k, v in frame_attributes(prep).items()}
-        return {"channels": frame_channels(prep, task.sums), "attributes": attributes,
-                "windows": frame_windows(prep)}
+        return {"image": frame_image(prep, task.sums)}
     except RenderError as e:
         return {"error": _one_line(e)}
 
 
 def whole_frame_task(render_tiles, task: TileTask, scene: ScenePackage) -> dict:
-    """Every tile of a frame and then its EXR channels, in one task (a frame small enough for one batch): the tiles
+    """Every tile of a frame and then its image, in one task (a frame small enough for one batch): the tiles
     as ``render_tiles`` (the tile task) renders them, assembled, and ``frame_image_task``'s result from the sums,
     plus the tiles' ``seconds``. The same bits as tile tasks, checkpoints and an assembly task give."""
-    from renderer.render import Tile, TileSums, assemble
+    from renderer.render import TileSums, assemble
 
     tiles = render_tiles(task, scene)
     if "arrays" not in tiles:
         return tiles  # stopped, or the renderer's error
-    parts = [TileSums(tile=Tile(*box), arrays=arrays) for box, arrays in zip(task.tiles, tiles["arrays"], strict=True)]
+    parts = [TileSums(tile=tile, arrays=arrays) for tile, arrays in zip(task.tiles, tiles["arrays"], strict=True)]
     image = frame_image_task(FrameTask(spec=task.spec, frame=task.frame, sums=assemble(parts, task.width, task.height),
                                        cache_size=task.cache_size), scene)
     if "error" in image:
         return image
     return {**image, "seconds": tiles["seconds"], "rays": tiles["rays"], "nonfinite": tiles["nonfinite"],
             "pid": tiles["pid"]}
-
-
-TIMECODE_FIELDS = ("hours", "minutes", "seconds", "frame", "dropFrame", "colorFrame", "fieldPhase", "bgf0", "bgf1",
-                   "bgf2")
-
-
-@dataclass(frozen=True)
-class PortableTimeCode:
-    """An ``OpenEXR.TimeCode`` in a form that pickles (the binding's own does not). Binary groups are not carried:
-    ``renderer.film.exr.timecode_from_frame`` leaves them 0."""
-
-    fields: tuple[int, ...]
-
-    @classmethod
-    def of(cls, tc) -> "PortableTimeCode":
-        return cls(tuple(int(getattr(tc, f)) for f in TIMECODE_FIELDS))
-
-    def timecode(self):
-        import OpenEXR
-
-        return OpenEXR.TimeCode(*self.fields, *(0,) * 8)
-
-
-def exr_attributes(attributes: dict) -> dict:
-    """``frame_image_task``'s attributes as ``write_exr`` takes them (time codes rebuilt)."""
-    return {k: v.timecode() if isinstance(v, PortableTimeCode) else v for k, v in attributes.items()}

@@ -36,8 +36,9 @@ from schemas import JobCreate
 
 from ..errors import ApiError
 from ..latency import freeze_heap
+from ..queue.scenes import StoredScene, UploadError
 from ..spec import RenderSpec
-from .scene_checks import StoredScene, UploadError, check_asset_paths, hide_dir
+from .scene_checks import check_asset_paths, hide_dir
 
 log = logging.getLogger("drt.inspection")
 

@@ -5,17 +5,9 @@ job; the upload size (413) is enforced while the body streams in (``service.app.
 """
 from __future__ import annotations
 
-from schemas import Limits
-
 from ..errors import ApiError
 from ..queue.store import Store
 from ..settings import ServiceSettings
-
-
-def public(s: ServiceSettings) -> Limits:
-    return Limits(max_upload_bytes=s.max_upload_bytes, max_samples_per_job=s.max_samples_per_job,
-                  max_pixels_per_frame=s.max_pixels_per_frame, max_frames=s.max_frames, max_tiles=s.max_tiles,
-                  max_queued_jobs=s.max_queued_jobs, max_queued_jobs_per_client=s.max_queued_jobs_per_client)
 
 
 def check_frames(s: ServiceSettings, frames: int) -> None:

@@ -16,21 +16,23 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import uuid
 from pathlib import Path
 from typing import BinaryIO, Protocol
 
 from pydantic import ValidationError
 
+from renderer.film.tiles import tile_count
 from schemas import JobCreate
 from schemas.settings import FRAMES_TAGS
 
 from .. import errors
 from ..errors import ApiError
-from ..farm.job_files import tile_count
+from ..queue.scenes import SceneStore, StoredScene, UploadError
 from ..queue.store import JobRow, Store
 from ..settings import ServiceSettings
-from . import limit_checks as limits
-from .scene_checks import SceneStore, StoredScene, UploadError, check_usdz, new_job_id, safe_name, scene_extension
+from . import limit_checks
+from .scene_checks import check_usdz, safe_name, scene_extension
 
 log = logging.getLogger("drt.submission")
 
@@ -60,6 +62,10 @@ class Inspector(Protocol):
 RETRY_AFTER = "5"  # seconds a client is asked to wait after a 503
 
 
+def new_job_id() -> str:
+    return uuid.uuid4().hex
+
+
 class Submitter:
     def __init__(self, settings: ServiceSettings, store: Store, scenes: SceneStore, on_created=lambda: None,
                  cluster_available=lambda: True):
@@ -80,10 +86,10 @@ class Submitter:
             raise ApiError(e.status, str(e)) from None
         frames = settings.frame_times()
         if frames is not None:
-            limits.check_frames(self.settings, len(frames))
+            limit_checks.check_frames(self.settings, len(frames))
         if settings.width is not None and settings.height is not None:
-            limits.check_cost(self.settings, width=settings.width, height=settings.height, spp=settings.spp,
-                              frames=len(frames) if frames is not None else 1)
+            limit_checks.check_cost(self.settings, width=settings.width, height=settings.height, spp=settings.spp,
+                                    frames=len(frames) if frames is not None else 1)
         if not self.cluster_available():
             raise ApiError(503, errors.CLUSTER_UNAVAILABLE, headers={"Retry-After": RETRY_AFTER})
         try:
@@ -125,15 +131,15 @@ class Submitter:
                         check_usdz(stored.path, s.max_usdz_unpacked_bytes, s.max_usdz_entries)
                 except UploadError as e:
                     raise ApiError(e.status, str(e)) from None
-                limits.check_queue(s, self.store, client)  # before the inspection: it costs a worker's time
+                limit_checks.check_queue(s, self.store, client)  # before the inspection: it costs a worker's time
                 info = inspector(stored, settings)
                 if "error" in info:
                     raise ApiError(422, info["error"])
                 width, height, frames = int(info["width"]), int(info["height"]), list(info["frames"])
-                limits.check_cost(s, width=width, height=height, spp=settings.spp, frames=len(frames))
+                limit_checks.check_cost(s, width=width, height=height, spp=settings.spp, frames=len(frames))
                 per_frame = tile_count(width, height, settings.tile)
-                limits.check_tiles(s, per_frame * len(frames))
-                limits.check_queue(s, self.store, client)  # again: other jobs may have been queued meanwhile
+                limit_checks.check_tiles(s, per_frame * len(frames))
+                limit_checks.check_queue(s, self.store, client)  # again: other jobs may have been queued meanwhile
                 job_id = new_job_id()  # (its files' directories are made when the scheduler first plans it)
                 job = self.store.create_job(
                     job_id=job_id, priority=settings.priority, settings_json=settings.model_dump_json(),

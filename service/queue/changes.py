@@ -1,5 +1,5 @@
 """The job change feed behind the server-sent events: one watcher per service notices changed and deleted jobs
-and hands every subscriber the job's public view.
+and hands every subscriber the job's public view (``present``, given by the API: the queue knows no wire format).
 
 Why a watcher over the database rather than callbacks from the writers: every state change and every finished tile
 already stamps the job's ``updated_at`` in one committed ``UPDATE``, whoever wrote it (an API thread, the scheduler
@@ -17,13 +17,13 @@ import asyncio
 import json
 import logging
 import time
+from collections.abc import Callable
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
 
 import anyio
 
-from ..api.presenters import job_public
-from .store import JobNotFound, Store
+from .store import JobNotFound, JobRow, Store
 
 log = logging.getLogger("drt.events")
 
@@ -46,10 +46,11 @@ class Subscription:
 
 class ChangeFeed:
     """``async with feed.subscribe(job_id) as sub``: ``await sub.queue.get()`` gives ``(event, data)`` pairs,
-    ``("job", <JobPublic JSON>)`` or ``("deleted", '{"id": ...}')``, and ``None`` when the feed closes."""
+    ``("job", present(job))`` or ``("deleted", '{"id": ...}')``, and ``None`` when the feed closes."""
 
-    def __init__(self, store: Store, interval: float = 0.25):
+    def __init__(self, store: Store, present: Callable[[JobRow], str], interval: float = 0.25):
         self.store = store
+        self.present = present  # a job's row -> its public view as JSON
         self.interval = interval
         self._subs: set[Subscription] = set()
         self._task: asyncio.Task | None = None
@@ -85,7 +86,7 @@ class ChangeFeed:
 
     def _view(self, job_id: str) -> str | None:
         try:
-            return job_public(self.store.get_job(job_id)).model_dump_json()
+            return self.present(self.store.get_job(job_id))
         except JobNotFound:
             return None
 

@@ -10,6 +10,7 @@ import pytest
 from PIL import Image
 
 from renderer.film.exr import read_exr
+from renderer.film.tiles import Tile
 from service.farm import tasks
 from service.intake import inspection
 from service.api.deps import get_settings, get_store
@@ -489,11 +490,11 @@ def test_a_running_tile_stops_when_its_future_is_cancelled(card):
     data = card.read_bytes()
     sha = hashlib.sha256(data).hexdigest()
     spec = RenderSpec.from_settings(JobCreate(width=64, height=64, spp=4096), card.name, sha)
-    task = tasks.TileTask(spec=spec, frame=0.0, tiles=((0, 0, 64, 64),), width=64, height=64)
+    task = tasks.TileTask(spec=spec, frame=0.0, tiles=(Tile(0, 0, 64, 64),), width=64, height=64)
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
             Client(cluster, set_as_default=False) as client:
         scene = client.submit(tasks.scene_package, sha, card.name, data, pure=False)
-        small = tasks.TileTask(spec=spec, frame=0.0, tiles=((0, 0, 1, 1),), width=64, height=64)
+        small = tasks.TileTask(spec=spec, frame=0.0, tiles=(Tile(0, 0, 1, 1),), width=64, height=64)
         assert "arrays" in client.submit(tasks.render_tile_task, small, scene, pure=False).result()  # prepared
         before = tasks.stats()["stopped"]
         fut = client.submit(tasks.render_tile_task, task, scene, pure=False)

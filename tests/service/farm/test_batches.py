@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
+from renderer.film.tiles import split_tiles
 from service.farm import tasks
 from service.farm.dispatcher import FINISH, MAX_BATCH, FramePlan, JobPlan
-from service.farm.job_files import tile_grid
 from service.farm.view import parse_key
 
 from service_helpers import assert_same_exr, cli_render, submit, wait_job
@@ -19,7 +19,7 @@ SMALL = {"width": 24, "height": 16, "spp": 2, "tile": 8}  # 6 tiles of 128 sampl
 
 
 def plan(width: int, height: int, tile: int, spp: int) -> JobPlan:
-    boxes = tile_grid(width, height, tile)
+    boxes = split_tiles(width, height, tile)
     frame = FramePlan(idx=0, time=0.0, queue=collections.deque(range(len(boxes))), done=set())
     return JobPlan(job_id="j", state=None, priority=0, spec=None, scene_file=Path("x"), width=width, height=height,
                    spp=spp, boxes=boxes, frames=[frame], files=None)
@@ -101,7 +101,7 @@ def test_a_tiny_job_is_one_task_and_equals_drt_render(make_client, card, counted
     job = wait_job(client, submit(client, card, SMALL).json()["id"])
     assert job["state"] == "succeeded" and job["tiles_done"] == job["tiles_total"] == 6, job
     assert job["samples_per_second"] > 0, job  # the tiles' samples and seconds were recorded
-    assert _tasks == [tuple(tile_grid(24, 16, 8))] and _assemblies == []  # the tiles and the EXR: one task
+    assert _tasks == [tuple(split_tiles(24, 16, 8))] and _assemblies == []  # the tiles and the EXR: one task
     (tmp_path / "got.exr").write_bytes(client.get(job["frames"][0]["exr_url"]).content)
     cli_render(card, tmp_path / "want.exr", "--width", 24, "--height", 16, "--spp", 2)
     assert_same_exr(tmp_path / "got.exr", tmp_path / "want.exr")
@@ -111,7 +111,7 @@ def test_task_samples_zero_sends_one_tile_per_task(make_client, card, counted, t
     client = make_client(task_samples=0)
     job = wait_job(client, submit(client, card, SMALL).json()["id"])
     assert job["state"] == "succeeded", job
-    assert sorted(_tasks) == sorted((box,) for box in tile_grid(24, 16, 8)) and _assemblies == [0.0]
+    assert sorted(_tasks) == sorted((box,) for box in split_tiles(24, 16, 8)) and _assemblies == [0.0]
     (tmp_path / "got.exr").write_bytes(client.get(job["frames"][0]["exr_url"]).content)
     cli_render(card, tmp_path / "want.exr", "--width", 24, "--height", 16, "--spp", 2)
     assert_same_exr(tmp_path / "got.exr", tmp_path / "want.exr")
@@ -121,7 +121,7 @@ def test_frames_larger_than_a_batch_are_checkpointed_and_assembled(make_client, 
     client = make_client(task_samples=3 * 128)  # 6 tiles of 128 samples: two batches of three
     job = wait_job(client, submit(client, card, SMALL).json()["id"])
     assert job["state"] == "succeeded", job
-    boxes = tile_grid(24, 16, 8)
+    boxes = split_tiles(24, 16, 8)
     assert sorted(_tasks) == [tuple(boxes[:3]), tuple(boxes[3:])] and _assemblies == [0.0]
 
 
@@ -156,7 +156,7 @@ def test_a_failed_batch_is_retried_tile_by_tile(make_client, card, monkeypatch, 
     client = make_client()
     job = wait_job(client, submit(client, card, SMALL).json()["id"])
     assert job["state"] == "succeeded", job
-    boxes = tile_grid(24, 16, 8)
+    boxes = split_tiles(24, 16, 8)
     assert _tasks[0] == tuple(boxes) and sorted(_tasks[1:]) == sorted((b,) for b in boxes)
     assert "drt_task_failures_total 1" in client.get("/metrics").text
     store = client.app.state.runtime.store

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from service.intake.scene_checks import (SceneStore, UploadError, UploadTooLarge, check_asset_paths, check_usdz,
-                                         safe_name, scene_extension)
+from service.intake.scene_checks import check_asset_paths, check_usdz, safe_name, scene_extension
+from service.queue.scenes import SceneStore, UploadError, UploadTooLarge
 
 from service_helpers import cli_env, write_card
 
@@ -70,7 +70,7 @@ def test_nothing_outside_the_upload_is_read(tmp_path):
     path = write(tmp_path / "up" / "scene.usda",
                  layer(meta="subLayers = [@../trap.usda@]", prim="references = @../trap.usda@"))
     code = ("import sys; from pathlib import Path\n"
-            "from service.intake.scene_checks import check_asset_paths, UploadError\n"
+            "from service.intake.scene_checks import check_asset_paths\nfrom service.queue.scenes import UploadError\n"
             "try:\n    check_asset_paths(Path(sys.argv[1]))\nexcept UploadError as e:\n    print(e)\n")
     r = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, timeout=60,
                        env=cli_env())
