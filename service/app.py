@@ -1,4 +1,4 @@
-"""``create_app(settings)``: the FastAPI application, its lifespan (database, Dask, scheduler) and error format.
+"""``create_app(settings)``: the FastAPI application, its lifespan (database, coordinator, inspection) and error format.
 
 Every error answers ``{"detail": "<one line>"}``: ``ApiError`` from the service, FastAPI's own validation errors
 flattened to ``"<field>: <message>"``, a malformed body (e.g. multipart without a boundary) 400, and an oversized

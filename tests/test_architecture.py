@@ -109,17 +109,24 @@ def test_pxr_only_in_the_usd_package():
         assert not pxr, f"{p.relative_to(ROOT)} imports {pxr}: USD belongs in renderer/usd"
 
 
-def test_renderer_imports_and_parses_without_the_service_libraries():
-    """A library user installs `drt` without the [service] extra: the renderer and `drt render` still work."""
-    code = textwrap.dedent("""
+def run_without(blocked: set[str], code: str) -> subprocess.CompletedProcess:
+    """Run ``code`` in a new interpreter in which importing any of the ``blocked`` packages fails."""
+    prelude = textwrap.dedent(f"""
         import importlib.abc, sys
-        BLOCKED = {"fastapi", "starlette", "sqlalchemy", "dask", "distributed", "uvicorn", "httpx", "pydantic",
-                   "pydantic_settings"}
         class Block(importlib.abc.MetaPathFinder):
             def find_spec(self, name, path=None, target=None):
-                if name.split(".")[0] in BLOCKED:
-                    raise ImportError(f"blocked: {name}")
+                if name.split(".")[0] in {sorted(blocked)!r}:
+                    raise ImportError(f"blocked: {{name}}")
         sys.meta_path.insert(0, Block())
+    """)
+    return subprocess.run([sys.executable, "-c", prelude + textwrap.dedent(code)], cwd=ROOT, capture_output=True,
+                          text=True, timeout=120)
+
+
+def test_renderer_imports_and_parses_without_the_service_libraries():
+    """A library user installs `drt` without the [service] extra: the renderer and `drt render` still work."""
+    r = run_without({"fastapi", "starlette", "sqlalchemy", "dask", "distributed", "uvicorn", "httpx", "pydantic",
+                     "pydantic_settings"}, """
         import renderer.render, renderer.request, renderer.usd.importer, renderer.cli
         from renderer.cli import build_parser
         args = build_parser().parse_args(["render", "x.usda", "-o", "x.exr", "--f-stop", "2.8"])
@@ -129,7 +136,6 @@ def test_renderer_imports_and_parses_without_the_service_libraries():
         drt_parser().parse_args(["render", "x.usda", "-o", "x.exr"])
         print("ok")
     """)
-    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0 and r.stdout.strip().endswith("ok"), r.stderr[-2000:]
 
 
@@ -198,20 +204,12 @@ def test_the_group_check_sees_an_undeclared_import():
 
 def test_the_client_imports_with_its_extra_alone():
     """`pip install drt[client]` (httpx, pydantic) gives `drt submit/status/fetch`: no FastAPI, SQLAlchemy or Dask."""
-    code = textwrap.dedent("""
-        import importlib.abc, sys
-        BLOCKED = {"fastapi", "starlette", "sqlalchemy", "dask", "distributed", "uvicorn", "pydantic_settings",
-                   "multipart", "PIL"}
-        class Block(importlib.abc.MetaPathFinder):
-            def find_spec(self, name, path=None, target=None):
-                if name.split(".")[0] in BLOCKED:
-                    raise ImportError(f"blocked: {name}")
-        sys.meta_path.insert(0, Block())
+    r = run_without({"fastapi", "starlette", "sqlalchemy", "dask", "distributed", "uvicorn", "pydantic_settings",
+                     "multipart", "PIL"}, """
         from service.cli import build_parser
         from service.client.remote import Client
         args = build_parser().parse_args(["submit", "x.usda", "--spp", "8", "--server", "http://127.0.0.1:1"])
         Client(args.server).close()
         print("ok")
     """)
-    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0 and r.stdout.strip().endswith("ok"), r.stderr[-2000:]

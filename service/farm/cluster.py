@@ -1,4 +1,5 @@
-"""The execution engine: a Dask client, on an embedded ``LocalCluster`` or an external ``dask scheduler``.
+"""The render cluster as the service holds it: a Dask client, on an embedded ``LocalCluster`` or an external
+``dask scheduler``.
 
 Embedded (no ``DRT_SCHEDULER_ADDRESS``): ``DRT_WORKERS`` worker processes (nanny-supervised: a worker that dies
 is restarted and its tasks rescheduled), each with ``DRT_THREADS_PER_WORKER`` threads (default: all cores over the
@@ -9,9 +10,9 @@ address (scenes travel through Dask, tiles come back as results; see ``service.f
 ``DRT_SCHEDULER_TIMEOUT`` seconds and then closes for good, so when it has closed (or never connected) the watcher
 makes a new one, backing off from 0.5 s to 5 s between attempts (each first knocks on the scheduler's TCP port for
 at most 2 s, so that an attempt never waits out a whole connection timeout). Every future of a lost connection is cancelled by
-Dask with the reason ``scheduler-connection-lost``; the scheduler resubmits those tiles without counting an
+Dask with the reason ``scheduler-connection-lost``; the dispatcher resubmits those tiles without counting an
 attempt. The watcher also caches the cluster's facts (reachable, workers, threads) once a second, so ``/healthz``
-and the scheduler never wait on a scheduler that does not answer. ``submit`` raises ``ClusterUnavailable`` while
+and the dispatcher never wait on a scheduler that does not answer. ``submit`` raises ``ClusterUnavailable`` while
 there is no connection (the API answers 503).
 """
 from __future__ import annotations
@@ -26,7 +27,7 @@ from typing import Any, Callable
 
 from ..settings import ServiceSettings
 
-log = logging.getLogger("drt.engine")
+log = logging.getLogger("drt.cluster")
 
 BACKOFF_FIRST, BACKOFF_MAX = 0.5, 5.0  # seconds between attempts to make a new client
 FACTS_EVERY = 1.0  # seconds between refreshes of the cached cluster facts
@@ -47,10 +48,10 @@ class ClusterFacts:
 UNREACHABLE = ClusterFacts(False, 0, 0, {})
 
 
-class Engine:
+class Cluster:
     def __init__(self, settings: ServiceSettings):
         self.settings = settings
-        self.cluster = None
+        self.local = None
         self.client = None
         self.generation = 0  # +1 for every new client: futures of an older one are gone
         self._facts = UNREACHABLE
@@ -58,7 +59,7 @@ class Engine:
         self._watcher: threading.Thread | None = None
         self._lock = threading.Lock()
 
-    def start(self, connect_wait: float = 10.0) -> "Engine":
+    def start(self, connect_wait: float = 10.0) -> "Cluster":
         """Start (or connect to) the cluster. An external scheduler that does not answer within ``connect_wait``
         seconds does not stop the service from starting: it reports the cluster unreachable meanwhile."""
         import dask
@@ -67,11 +68,11 @@ class Engine:
         s = self.settings
         if not s.scheduler_address:
             # A worker killed while running a tile counts against the task; three deaths in a row mean the task
-            # itself kills workers. Dask's default, kept explicit since the scheduler's retry logic relies on it.
+            # itself kills workers. Dask's default, kept explicit since the dispatcher's retry logic relies on it.
             with dask.config.set({"distributed.scheduler.allowed-failures": 3}):
                 # No dashboard, and the scheduler's own HTTP endpoint on an ephemeral loopback port rather than
                 # 8787, so that several services (and test runs) on one machine never collide.
-                self.cluster = LocalCluster(n_workers=s.workers, threads_per_worker=s.local_threads(),
+                self.local = LocalCluster(n_workers=s.workers, threads_per_worker=s.local_threads(),
                                             processes=s.processes, dashboard_address=None,
                                             scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
                                             silence_logs=logging.WARNING)
@@ -80,7 +81,7 @@ class Engine:
             self._connect(timeout=30)
         else:
             log.info("connecting to the Dask scheduler at %s", s.scheduler_address)
-        self._watcher = threading.Thread(target=self._watch, name="drt-engine", daemon=True)
+        self._watcher = threading.Thread(target=self._watch, name="drt-cluster", daemon=True)
         self._watcher.start()
         deadline = time.monotonic() + connect_wait
         while s.scheduler_address and not self.available() and time.monotonic() < deadline:
@@ -91,7 +92,7 @@ class Engine:
     def _knock(self) -> None:
         """OSError unless the external scheduler's TCP port accepts a connection (cheap, at most 2 s)."""
         address = self.settings.scheduler_address or ""
-        if self.cluster is not None or not address.startswith("tcp://"):
+        if self.local is not None or not address.startswith("tcp://"):
             return
         host, _, port = address[len("tcp://"):].rpartition(":")
         with socket.create_connection((host.strip("[]"), int(port)), timeout=2):
@@ -101,8 +102,8 @@ class Engine:
         from distributed import Client
 
         self._knock()
-        target = self.cluster if self.cluster is not None else self.settings.scheduler_address
-        client = Client(target, set_as_default=False, timeout=timeout if self.cluster is not None
+        target = self.local if self.local is not None else self.settings.scheduler_address
+        client = Client(target, set_as_default=False, timeout=timeout if self.local is not None
                         else self.settings.scheduler_timeout)
         with self._lock:
             old, self.client = self.client, client
@@ -191,7 +192,7 @@ class Engine:
 
     def restartable(self) -> bool:
         """Workers are processes under a nanny (not threads of this process), so they can be restarted."""
-        return self.cluster is None or self.settings.processes
+        return self.local is None or self.settings.processes
 
     def worker_pids(self) -> dict[str, int]:
         return self.client.run(os.getpid)
@@ -205,9 +206,9 @@ class Engine:
                 self.client.close(timeout=10)
             except Exception:  # noqa: BLE001 - shutting down anyway
                 log.debug("closing the Dask client failed", exc_info=True)
-        if self.cluster is not None:
+        if self.local is not None:
             try:
-                self.cluster.close(timeout=20)
+                self.local.close(timeout=20)
             except Exception:  # noqa: BLE001
                 log.debug("closing the LocalCluster failed", exc_info=True)
-        self.client = self.cluster = None
+        self.client = self.local = None

@@ -1,4 +1,4 @@
-"""The coordinator: the job scheduler and its Dask engine, which turn queued jobs into tile tasks and tile results
+"""The coordinator: the dispatcher and its Dask cluster, which turn queued jobs into tile tasks and tile results
 into frames. It runs in a child process of its own (``CoordinatorProcess``, the default) or as threads of the API's
 process (``Coordinator``, ``DRT_SCHEDULER_PROCESS=false``: the in-process tests patch worker functions).
 
@@ -14,7 +14,7 @@ The two processes share only the database (all job state; both open it, WAL mode
 - child -> API: ``("ready",)`` once the cluster is up, then ``("state", facts, stats, farm)`` every
   ``PUBLISH_EVERY`` seconds (``farm`` only for a while after it was asked for: it costs the Dask scheduler a look
   at every worker). The API answers ``/healthz``, ``/metrics`` and 503s from the last state: never waits on it.
-- The child exits when the pipe closes, so a dead API (even SIGKILLed) never leaves a second scheduler on its
+- The child exits when the pipe closes, so a dead API (even SIGKILLed) never leaves a second dispatcher on its
   database. A child that dies is started again (backing off 1 s to 30 s); meanwhile the cluster counts as
   unreachable (submissions get 503) and the new child resumes the running jobs from their checkpoints, as after a
   restart of the service.
@@ -29,7 +29,7 @@ import time
 from dataclasses import dataclass, field
 
 from ..settings import ServiceSettings
-from .cluster import UNREACHABLE, ClusterFacts, Engine
+from .cluster import UNREACHABLE, Cluster, ClusterFacts
 
 log = logging.getLogger("drt.coordinator")
 
@@ -41,8 +41,8 @@ RESTART_FIRST, RESTART_MAX = 1.0, 30.0  # seconds before starting a dead child a
 
 
 @dataclass(frozen=True)
-class SchedulerStats:
-    """The job scheduler's counters, as ``/metrics`` and the monitor show them."""
+class DispatcherStats:
+    """The dispatcher's counters, as ``/metrics`` and the monitor show them."""
     tiles_completed: int = 0
     tiles_failed: int = 0
     tiles_lost: int = 0
@@ -61,42 +61,42 @@ class FarmView:
 
 
 class Coordinator:
-    """The job scheduler and its engine as threads of this process."""
+    """The dispatcher and its cluster as threads of this process."""
 
     def __init__(self, settings: ServiceSettings, store, scenes):
         self.settings = settings
         self.store = store
         self.scenes = scenes
-        self.engine = Engine(settings)
-        self.scheduler = None
+        self.cluster = Cluster(settings)
+        self.dispatcher = None
 
     def start(self) -> "Coordinator":
-        from .dispatcher import Scheduler  # the renderer's film code comes with it: only where tiles are handled
+        from .dispatcher import Dispatcher  # the renderer's film code comes with it: only where tiles are handled
 
-        self.engine.start()
-        self.scheduler = Scheduler(self.settings, self.store, self.engine, self.scenes)
-        self.scheduler.start()
+        self.cluster.start()
+        self.dispatcher = Dispatcher(self.settings, self.store, self.cluster, self.scenes)
+        self.dispatcher.start()
         return self
 
     def wake(self) -> None:
-        self.scheduler.wake()
+        self.dispatcher.wake()
 
     def facts(self) -> ClusterFacts:
-        return self.engine.facts()
+        return self.cluster.facts()
 
     def available(self) -> bool:
-        return self.engine.available()
+        return self.cluster.available()
 
-    def stats(self) -> SchedulerStats:
-        s = self.scheduler
-        return SchedulerStats(tiles_completed=s.tiles_completed, tiles_failed=s.tiles_failed,
+    def stats(self) -> DispatcherStats:
+        s = self.dispatcher
+        return DispatcherStats(tiles_completed=s.tiles_completed, tiles_failed=s.tiles_failed,
                               tiles_lost=s.tiles_lost, in_flight=s.in_flight(), pending=s.pending_tiles(),
                               tiles_per_second=s.tiles_per_second())
 
     def farm(self) -> FarmView:
         """Asks the Dask scheduler (a round trip or two); an empty view while it cannot be reached."""
-        client = self.engine.client
-        if client is None or not self.engine.available():
+        client = self.cluster.client
+        if client is None or not self.cluster.available():
             return FarmView()
         try:
             info = client.scheduler_info(n_workers=-1)
@@ -110,9 +110,9 @@ class Coordinator:
         return FarmView(info=info, processing=processing, dashboard_link=link)
 
     def close(self) -> None:
-        if self.scheduler is not None:
-            self.scheduler.stop()
-        self.engine.close()
+        if self.dispatcher is not None:
+            self.dispatcher.stop()
+        self.cluster.close()
 
 
 class CoordinatorProcess:
@@ -126,7 +126,7 @@ class CoordinatorProcess:
         self._send_lock = threading.Lock()
         self._changed = threading.Condition()
         self._facts = UNREACHABLE
-        self._stats = SchedulerStats()
+        self._stats = DispatcherStats()
         self._farm = FarmView()
         self._farm_at = 0.0  # monotonic time of the last farm received
         self._state_at = 0.0  # ... of the last state received
@@ -226,7 +226,7 @@ class CoordinatorProcess:
     def available(self) -> bool:
         return self.facts().reachable
 
-    def stats(self) -> SchedulerStats:
+    def stats(self) -> DispatcherStats:
         return self._stats
 
     def farm(self) -> FarmView:

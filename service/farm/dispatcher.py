@@ -1,4 +1,4 @@
-"""The scheduler: one thread that turns queued jobs into tile tasks on Dask and finished tiles into frames.
+"""The dispatcher: one thread that turns queued jobs into tile tasks on Dask and finished tiles into frames.
 
 Each turn it reads the active jobs from the database (priority, then first-in first-out), keeps at most
 ``max_in_flight`` tasks submitted (default: twice the cluster's worker threads), so that a new high-priority job
@@ -20,7 +20,7 @@ or a cancellation takes effect within about one tile's time, and waits for a tas
   message; the tiles of a failed batch are tried again one per task, so the tile that keeps failing is named.
   A renderer error (bad scene or settings) fails the job at once: trying again would give the same answer.
   A task lost with the connection to the scheduler (Dask cancels every future then) is not a failure: it is
-  submitted again, without counting an attempt, once the engine has reconnected.
+  submitted again, without counting an attempt, once the cluster has reconnected.
 * On start, jobs found ``running`` resume: tiles whose checkpoints are on disk are not rendered again.
 
 All job state lives in the database; the plans held here are a cache of it, rebuilt after a restart.
@@ -50,11 +50,11 @@ from ..queue.scenes import SceneStore
 from ..queue.store import JobNotFound, Store
 from ..settings import ServiceSettings
 from ..spec import RenderSpec
-from .cluster import ClusterUnavailable, Engine
+from .cluster import Cluster, ClusterUnavailable
 from .job_files import JobFiles, load_tile, save_tile
 from .tasks import FrameTask, TileTask, frame_image_task, render_tile_task, scene_package, whole_frame_task
 
-log = logging.getLogger("drt.scheduler")
+log = logging.getLogger("drt.dispatcher")
 
 FINISH = -1  # the "tile index" of a frame's assembly task in attempt records
 MAX_BATCH = 64  # tiles in one task at most (their indices name the task's Dask key)
@@ -127,15 +127,15 @@ class InFlight:
     tiles: tuple[int, ...]  # the tiles the task renders, or (FINISH,)
     future: object
     submitted: float
-    generation: int  # the engine's client the future belongs to
+    generation: int  # the cluster's client the future belongs to
     whole: bool = False  # every tile of the frame and its EXR channels in one task (no checkpoints)
 
 
-class Scheduler:
-    def __init__(self, settings: ServiceSettings, store: Store, engine: Engine, scenes: SceneStore):
+class Dispatcher:
+    def __init__(self, settings: ServiceSettings, store: Store, cluster: Cluster, scenes: SceneStore):
         self.settings = settings
         self.store = store
-        self.engine = engine
+        self.cluster = cluster
         self.scenes = scenes
         self._events: queue.Queue = queue.Queue()
         self._stop = threading.Event()
@@ -143,7 +143,7 @@ class Scheduler:
         self._plans: dict[str, JobPlan] = {}
         self._order: list[JobPlan] = []
         self._inflight: dict[str, InFlight] = {}
-        self._scene_futures: dict[str, tuple[int, object]] = {}  # sha -> (engine generation, scene_package future)
+        self._scene_futures: dict[str, tuple[int, object]] = {}  # sha -> (client generation, scene_package future)
         self._generation = 0
         self._tile_times: collections.deque = collections.deque(maxlen=4096)
         self.tiles_completed = 0
@@ -152,7 +152,7 @@ class Scheduler:
 
     # -- lifecycle -------------------------------------------------------------------------------------------
     def start(self) -> None:
-        self._thread = threading.Thread(target=self._run, name="drt-scheduler", daemon=True)
+        self._thread = threading.Thread(target=self._run, name="drt-dispatcher", daemon=True)
         self._thread.start()
 
     def stop(self) -> None:
@@ -187,7 +187,7 @@ class Scheduler:
                 self._fill()
                 self._wait_and_handle()
             except Exception:  # noqa: BLE001 - the loop must outlive any one bad turn (database busy, etc.)
-                log.exception("scheduler turn failed; retrying")
+                log.exception("dispatcher turn failed; retrying")
                 self._stop.wait(1.0)
 
     def _wait_and_handle(self) -> None:
@@ -207,8 +207,8 @@ class Scheduler:
                 return
 
     def _sync(self) -> None:
-        if self._generation != self.engine.generation:
-            self._generation = self.engine.generation
+        if self._generation != self.cluster.generation:
+            self._generation = self.cluster.generation
             self._scene_futures.clear()
             # The futures of an older client are gone (Dask cancelled them with the connection); their done
             # callbacks normally brought them back already, this catches any that did not.
@@ -239,11 +239,11 @@ class Scheduler:
         self._order = order
 
     def _capacity(self) -> int:
-        return self.settings.max_in_flight or 2 * max(1, self.engine.threads())
+        return self.settings.max_in_flight or 2 * max(1, self.cluster.threads())
 
     def _fill(self) -> None:
-        if not self.engine.available():
-            return  # the engine is reconnecting; queued work waits (nothing is charged)
+        if not self.cluster.available():
+            return  # the cluster is reconnecting; queued work waits (nothing is charged)
         cap = self._capacity()
         for plan in list(self._order):
             if all(f.finished for f in plan.frames):  # e.g. stopped between its last frame and its success
@@ -282,13 +282,13 @@ class Scheduler:
 
     def _scene(self, plan: JobPlan):
         """The future of the job's scene package on the current client (submitted once per scene and client)."""
-        generation = self.engine.generation
+        generation = self.cluster.generation
         held = self._scene_futures.get(plan.spec.scene_sha256)
         if held is not None and held[0] == generation and held[1].status in ("pending", "finished"):
             return held[1]
         data = plan.scene_file.read_bytes()
         key = f"drt-scene-{plan.spec.scene_sha256[:16]}-{uuid.uuid4().hex[:8]}"
-        fut = self.engine.submit(scene_package, plan.spec.scene_sha256, plan.spec.scene_path, data, key=key,
+        fut = self.cluster.submit(scene_package, plan.spec.scene_sha256, plan.spec.scene_path, data, key=key,
                                  priority=plan.priority + 2)
         self._scene_futures[plan.spec.scene_sha256] = (generation, fut)
         return fut
@@ -323,8 +323,8 @@ class Scheduler:
                 args = (whole_frame_task, render_tile_task, task) if whole else (render_tile_task, task)
                 kind, priority = "tile", plan.priority
             key = f"drt-{kind}-{plan.job_id}-{frame.idx}-{'.'.join(map(str, tiles))}-{uuid.uuid4().hex[:8]}"
-            generation = self.engine.generation
-            future = self.engine.submit(*args, scene, key=key, priority=priority)
+            generation = self.cluster.generation
+            future = self.cluster.submit(*args, scene, key=key, priority=priority)
         except BaseException:
             if not finish:
                 frame.queue.extendleft(reversed(tiles))  # not submitted: they stay to do (the cluster may be back)
@@ -354,7 +354,7 @@ class Scheduler:
             try:
                 result = fut.result()
             except Exception as e:  # noqa: BLE001 - fetching the result can fail if its worker just died
-                if not self.engine.available() or rec.generation != self.engine.generation:
+                if not self.cluster.available() or rec.generation != self.cluster.generation:
                     self._lost(plan, frame, rec.tiles, f"{type(e).__name__}: {e}")
                 else:
                     self._failed_attempt(plan, frame, rec.tiles, f"{type(e).__name__}: {e}")
@@ -509,7 +509,7 @@ class Scheduler:
             if held is not None:
                 futures.append(held[1])  # no other job needs the scene: workers may forget its bytes
         if futures:
-            self.engine.cancel(futures)
+            self.cluster.cancel(futures)
 
     # -- plans ---------------------------------------------------------------------------------------------------
     def _load(self, row) -> JobPlan | None:

@@ -7,8 +7,9 @@ Only the service reads and writes them (workers return tiles as task results and
 tile's index is its place in the frame's grid (``renderer.film.tiles.split_tiles``).
 
 A checkpoint is written to a temporary file in its directory and renamed over its name (``renderer.files``), so a
-file that exists is complete: a service killed at any moment resumes from the tiles on disk, and assembling them gives the same bits
-as rendering the frame in one go (``render_tile`` is a pure function of scene, options and tile).
+file that exists is complete: a service killed at any moment resumes from the tiles on disk, and assembling them
+gives the same bits as rendering the frame in one go (``render_tile`` is a pure function of scene, options and
+tile).
 """
 from __future__ import annotations
 

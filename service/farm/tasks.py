@@ -21,7 +21,7 @@ or failed), the scheduler releases the task and the worker marks it ``cancelled`
 mark between sample waves and stops. No file, no round trip.
 
 **Errors.** A ``RenderError`` (bad scene, bad settings: the user's to fix) is returned as ``{"error": message}``,
-never retried. Anything else raises, so the scheduler's bounded resubmission applies.
+never retried. Anything else raises, so the dispatcher's bounded resubmission applies.
 """
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """The farm as the monitor shows it: Dask's workers with the drt tasks each holds, and a job's tile map.
 
-Which tile a worker renders is read from the Dask task keys the scheduler gives its tasks,
+Which tile a worker renders is read from the Dask task keys the dispatcher gives its tasks,
 ``drt-<kind>-<job id>-<frame index>-<tile indices>-<nonce>`` (``kind`` is ``tile`` or ``frame``; the indices of a
 batch of tiles joined by dots; a frame's assembly has tile index -1). Keys of other shapes are counted, not named.
 """
@@ -14,7 +14,7 @@ from schemas import Farm, FarmTask, FarmWorker, FrameTiles, TileMap
 
 from ..queue.store import JobNotFound, JobRow, Store
 from ..settings import ServiceSettings
-from .coordinator import FarmView, SchedulerStats
+from .coordinator import FarmView, DispatcherStats
 
 _KEY = re.compile(r"^drt-(tile|frame)-([0-9A-Za-z]+)-(\d+)-(-?\d+(?:\.\d+)*)-[0-9A-Za-z]+$")
 
@@ -53,7 +53,7 @@ def _frame_times(store: Store, tasks: list[FarmTask]) -> None:
         t.frame = frames[t.frame_index] if t.frame_index < len(frames) else None
 
 
-def farm(settings: ServiceSettings, view: FarmView, store: Store, stats: SchedulerStats) -> Farm:
+def farm(settings: ServiceSettings, view: FarmView, store: Store, stats: DispatcherStats) -> Farm:
     info, held = view.info, view.processing
     workers = []
     for address, w in sorted((info.get("workers") or {}).items()):

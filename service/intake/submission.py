@@ -140,7 +140,7 @@ class Submitter:
                 per_frame = tile_count(width, height, settings.tile)
                 limit_checks.check_tiles(s, per_frame * len(frames))
                 limit_checks.check_queue(s, self.store, client)  # again: other jobs may have been queued meanwhile
-                job_id = new_job_id()  # (its files' directories are made when the scheduler first plans it)
+                job_id = new_job_id()  # (its files' directories are made when the dispatcher first plans it)
                 job = self.store.create_job(
                     job_id=job_id, priority=settings.priority, settings_json=settings.model_dump_json(),
                     scene_sha256=sha, scene_name=name, scene_bytes=size, width=width, height=height,

@@ -2,7 +2,7 @@
 and hands every subscriber the job's public view (``present``, given by the API: the queue knows no wire format).
 
 Why a watcher over the database rather than callbacks from the writers: every state change and every finished tile
-already stamps the job's ``updated_at`` in one committed ``UPDATE``, whoever wrote it (an API thread, the scheduler
+already stamps the job's ``updated_at`` in one committed ``UPDATE``, whoever wrote it (an API thread, the dispatcher
 thread or, with a shared database, another process). One query per ``interval`` finds them, and a
 burst of tiles of one job becomes one event per interval. A write that commits later than the time it stamped is
 still seen: the watcher looks back ``LOOKBACK`` seconds and remembers which version of each job it already sent.

@@ -5,7 +5,7 @@
     failed | canceled -> queued          (retry: the job resumes from its checkpointed tiles)
 
 The database applies a transition atomically (``UPDATE ... WHERE state IN sources(to)``), so two actors racing
-(the scheduler finishing a job while a user cancels it) cannot both win.
+(the dispatcher finishing a job while a user cancels it) cannot both win.
 """
 from __future__ import annotations
 

@@ -428,7 +428,7 @@ def test_a_stopped_service_resumes_from_its_checkpoints(make_client, card, tmp_p
     client2 = make_client(threads_per_worker=2)  # it resumes the job at once, maybe before its first request
     job = wait_job(client2, job_id)
     assert job["state"] == "succeeded"
-    rendered_after = client2.app.state.runtime.coordinator.scheduler.tiles_completed
+    rendered_after = client2.app.state.runtime.coordinator.dispatcher.tiles_completed
     assert rendered_after == job["tiles_total"] - done_before  # checkpointed tiles were not rendered again
     (tmp_path / "got.exr").write_bytes(client2.get(job["frames"][0]["exr_url"]).content)
     cli_render(card, tmp_path / "want.exr", "--width", 64, "--height", 64, "--spp", 128)
@@ -453,7 +453,7 @@ def test_an_unreadable_checkpoint_is_rendered_again(make_client, card, tmp_path)
     client2 = make_client(threads_per_worker=2)
     job = wait_job(client2, job_id)
     assert job["state"] == "succeeded" and job["error"] is None, job
-    assert client2.app.state.runtime.coordinator.scheduler.tiles_completed == job["tiles_total"] - done_before + 2
+    assert client2.app.state.runtime.coordinator.dispatcher.tiles_completed == job["tiles_total"] - done_before + 2
     assert "drt_task_failures_total 0" in client2.get("/metrics").text
     (tmp_path / "got.exr").write_bytes(client2.get(job["frames"][0]["exr_url"]).content)
     cli_render(card, tmp_path / "want.exr", "--width", 64, "--height", 64, "--spp", 64)

@@ -106,7 +106,7 @@ def test_cursors_out_of_range_are_422(client):
 
 
 def _running_tiles(client) -> int:
-    return sum(s["running"] for s in client.app.state.runtime.coordinator.engine.client.run(tasks.stats).values())
+    return sum(s["running"] for s in client.app.state.runtime.coordinator.cluster.client.run(tasks.stats).values())
 
 
 def _nothing_left(data, job_id: str) -> None:
