@@ -78,7 +78,7 @@ def main() -> int:
     ap.add_argument("-o", "--output", default=str(ROOT / "docs" / "contact_sheet.png"))
     args = ap.parse_args()
     from renderer.device import init_warp
-    from service.preview import srgb8
+    from service.api.preview import srgb8
 
     init_warp()
     assets = assets_dir()

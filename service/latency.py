@@ -6,7 +6,7 @@
   process, of a submission). Freezing the startup heap moves it out of the collector's sight (``gc.freeze``);
   collections then walk only what was allocated since: none over 3 ms in the API process during the load test
   afterwards.
-* **GIL switch interval.** The event loop shares the interpreter with the job scheduler's thread (checkpoints,
+* **GIL switch interval.** The event loop shares the interpreter with the dispatcher's thread (checkpoints,
   frame assembly, EXR writing), Dask's client thread and the submission threads. A thread that wants the GIL
   waits up to the switch interval for the holder to let go, at every step of a request. 1 ms instead of 5:
   status p99 16-20 ms (4 runs) against 22-28 ms (3 runs) in the 50-client load test, submission p50 140-167

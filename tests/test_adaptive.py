@@ -86,7 +86,8 @@ def test_time_limit_is_respected_within_ten_percent(scene, limit):
 
 
 def test_tile_budgets_share_the_frame_limit_by_area():
-    from renderer.render import split_tiles, tile_time_budget
+    from renderer.film.tiles import split_tiles
+    from renderer.render import tile_time_budget
 
     o = RenderOptions(time_limit=10.0)
     tiles = split_tiles(100, 70, 32)
