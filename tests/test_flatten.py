@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 
 from renderer.scene.flatten import flatten_still_instances
-from renderer.motion.transform import make_transform
-from renderer.scene.model import LIGHT_MESH, Camera, Instance, Light, Material, Mesh, MotionTransform, Scene
+from renderer.motion.transform import MotionTransform, make_transform
+from renderer.scene.model import LIGHT_MESH, Camera, Instance, Light, Material, Mesh, Scene
 
 
 def translate(x):

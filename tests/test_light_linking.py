@@ -132,7 +132,8 @@ def test_membership_follows_collection_rules_and_instance_proxies(tmp_path):
 @pytest.mark.parametrize("n", [40])
 def test_many_distinct_link_collections_warn(tmp_path, n):
     from renderer.lights.linking import MAX_GROUPS, upload_links
-    from renderer.scene.model import Light, MotionTransform
+    from renderer.motion.transform import MotionTransform
+    from renderer.scene.model import Light
     lights = []
     for i in range(n):
         m = np.zeros(n, bool)

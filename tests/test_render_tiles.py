@@ -6,11 +6,11 @@ import pytest
 import warp as wp
 
 from renderer.film import film
-from renderer.motion.transform import make_transform
-from renderer.render import (RenderOptions, Tile, assemble, auto_tile_size, prepare, render_frame, render_tile,
-                             split_tiles, with_options)
-from renderer.scene.model import (LIGHT_RECT, LIGHT_SPHERE, Camera, Instance, Light, Material, Mesh, MotionTransform,
-                            Scene)
+from renderer.motion.transform import MotionTransform, make_transform
+from renderer.options import RenderOptions
+from renderer.render import (Tile, assemble, auto_tile_size, prepare, render_frame, render_tile, split_tiles,
+                             with_options)
+from renderer.scene.model import LIGHT_RECT, LIGHT_SPHERE, Camera, Instance, Light, Material, Mesh, Scene
 
 
 def translate(x, y, z):

@@ -57,8 +57,7 @@ from renderer.usd.shading_network import (Const, Display, Network, Tex, UV, expa
                                           tex_mean)
 from renderer.usd import arnold_nodes
 from renderer.usd.surfaces import PREVIEW, PREVIEW_DEFAULTS, surface_inputs, surface_model
-from renderer.usd.texture_files import (TextureFiles, authoring_layer, read_asset_image,  # noqa: F401 - re-exported
-                                        resolve_asset)
+from renderer.usd.texture_files import TextureFiles
 
 GREY = (0.18, 0.18, 0.18)
 ABSORPTION_COLOR = "drt:absorptionColor"

@@ -12,7 +12,7 @@ from service.submission import parse_settings
 def test_names_match_the_renderer():
     from renderer.film.film import FILTERS as R_FILTERS
     from renderer.integrator import TIME_FILTERS as R_TIME
-    from renderer.render import AOV_NAMES
+    from renderer.options import AOV_NAMES
 
     assert set(FILTERS) == set(R_FILTERS)
     assert set(TIME_FILTERS) == set(R_TIME)
@@ -23,7 +23,7 @@ def test_defaults_are_drt_render_defaults():
     s = JobCreate()
     assert (s.spp, s.seed, s.tile, s.filter, s.time_filter, s.motion_blur, s.dof, s.half, s.priority) == \
         (16, 0, 64, "gaussian", "box", True, True, False, 0)
-    from renderer.render import MAX_DEPTH, RenderOptions
+    from renderer.options import MAX_DEPTH, RenderOptions
 
     o = RenderOptions()
     assert (s.max_depth, s.clamp) == (o.max_depth, o.clamp)
