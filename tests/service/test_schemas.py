@@ -10,9 +10,9 @@ from service.submission import parse_settings
 
 
 def test_names_match_the_renderer():
-    from renderer.film.film import FILTERS as R_FILTERS
-    from renderer.integrator import TIME_FILTERS as R_TIME
     from renderer.options import AOV_NAMES
+    from renderer.options import FILTERS as R_FILTERS
+    from renderer.options import TIME_FILTERS as R_TIME
 
     assert set(FILTERS) == set(R_FILTERS)
     assert set(TIME_FILTERS) == set(R_TIME)
