@@ -39,8 +39,7 @@ from renderer.lights.table import upload_lights
 from renderer.media import upload as media_upload
 from renderer.media.upload import MediaUpload, upload_media
 from renderer.motion.transform import matrix_at
-# MAX_SPP and RenderOptions are re-exported: ``renderer.render`` is the library API the README shows.
-from renderer.options import AOV_NAMES, MAX_DEPTH, MAX_PIXELS, MAX_SPP, TIME_FILTERS, RenderOptions  # noqa: F401
+from renderer.options import MAX_PIXELS, MAX_SPP, TIME_FILTERS, RenderOptions
 from renderer.scene.flatten import flatten_still_instances
 from renderer.scene.model import Scene
 from renderer.shading.materials import upload_material_textures, upload_materials
@@ -384,6 +383,6 @@ def default_threads() -> int:
     return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
 
 
-__all__ = ["RenderOptions", "Tile", "TileSums", "PreparedScene", "FrameResult", "prepare", "render_tile",
+__all__ = ["Tile", "TileSums", "PreparedScene", "FrameResult", "prepare", "render_tile",
            "render_frame", "tile_time_budget", "assemble", "frame_channels", "frame_attributes",
            "frame_windows", "FrameImage", "frame_image", "write_frame", "default_threads", "load_kernels"]

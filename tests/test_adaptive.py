@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from renderer.film.adaptive import Convergence, pixel_error
-from renderer.render import RenderOptions, Tile, frame_channels, prepare, render_frame, render_tile
+from renderer.options import RenderOptions
+from renderer.render import Tile, frame_channels, prepare, render_frame, render_tile
 from test_render_tiles import make_scene
 
 

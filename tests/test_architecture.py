@@ -264,7 +264,7 @@ def test_the_cli_derives_each_setting_from_the_table(s):
     leaves the table's default."""
     from renderer.cli import request_from_args
     from service.cli import build_parser
-    from service.client import settings_from_args
+    from service.client.remote import settings_from_args
 
     parser = build_parser()
     base = ["render", "scene.usda", "-o", "out.exr"]

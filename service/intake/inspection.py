@@ -70,7 +70,8 @@ def inspect_task(task: InspectTask) -> dict:
         problem = _composition_problem(path)
         if problem:
             return {"error": problem}
-        from renderer.render import MAX_PIXELS, resolve_resolution
+        from renderer.options import MAX_PIXELS
+        from renderer.render import resolve_resolution
 
         frames = task.frames
         scene = task.spec.load(frames[0] if frames else None)
