@@ -110,7 +110,8 @@ def production_figures(scenes: pathlib.Path, spp: int, bpy: str | None):
 
 
 def render(path, *, spp, threads, motion_blur=True, dof=True, tile=64, repeats=1):
-    from renderer.render import RenderOptions, prepare, render_frame
+    from renderer.options import RenderOptions
+    from renderer.render import prepare, render_frame
     from renderer.usd.importer import load_scene
 
     t0 = time.perf_counter()
@@ -146,7 +147,8 @@ def faster_motion(scene, factor: float):
 def paired_seconds(variants: dict, *, spp: int, threads: int = 2, rounds: int = 3) -> dict:
     """Best render seconds of each variant (name -> (Scene, depth of field on)), rendered in turn ``rounds``
     times, so that drift in the machine's speed over the run falls on all of them alike."""
-    from renderer.render import RenderOptions, prepare, render_frame
+    from renderer.options import RenderOptions
+    from renderer.render import prepare, render_frame
 
     preps = {k: prepare(sc, RenderOptions(width=640, height=360, spp=spp, dof=dof))
              for k, (sc, dof) in variants.items()}
@@ -160,7 +162,8 @@ def paired_seconds(variants: dict, *, spp: int, threads: int = 2, rounds: int = 
 def thread_scaling(scene, *, spp: int, rounds: int = 3) -> float:
     """One thread's best render seconds over two threads', the two rendered in turn ``rounds`` times (one prepared
     scene, 64-pixel tiles: 60 tiles at 640x360, so the last tile's tail is small)."""
-    from renderer.render import RenderOptions, prepare, render_frame
+    from renderer.options import RenderOptions
+    from renderer.render import prepare, render_frame
 
     prep = prepare(scene, RenderOptions(width=640, height=360, spp=spp))
     best = {1: float("inf"), 2: float("inf")}
@@ -178,7 +181,8 @@ def gloss_noise_at_equal_time(scenes, cycles_sps: float, reference_spp: int = 10
     """
     import numpy as np
 
-    from renderer.render import RenderOptions, frame_channels, prepare, render_frame
+    from renderer.options import RenderOptions
+    from renderer.render import frame_channels, prepare, render_frame
     from renderer.usd.importer import load_scene
 
     w, h = 320, 180

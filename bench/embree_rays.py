@@ -40,7 +40,8 @@ def main() -> None:
     from renderer.accel.upload import upload_geometry
     from renderer.render import load_kernels
     from renderer.scene.flatten import flatten_still_instances
-    from renderer.scene.model import Instance, MotionTransform
+    from renderer.motion.transform import MotionTransform
+    from renderer.scene.model import Instance
     from renderer.usd.importer import load_scene
 
     @wp.kernel

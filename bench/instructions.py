@@ -67,7 +67,8 @@ def child(lib: str, scene: str, blur: bool, dof: bool, speed: float, size: int, 
 
     init_warp()
     from renderer import render
-    from renderer.render import RenderOptions, prepare, render_frame
+    from renderer.options import RenderOptions
+    from renderer.render import prepare, render_frame
     from renderer.usd.importer import load_scene
 
     sc = load_scene(SCENES / f"{scene}.usda", motion_blur=blur)

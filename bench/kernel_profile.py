@@ -147,7 +147,8 @@ class Perf:
 def render(args, kernel, perf: Perf) -> tuple[float, int]:
     """Render frames on one thread until the kernel has run ``args.seconds``, sampled during its launches."""
     import warp as wp
-    from renderer.render import RenderOptions, prepare, render_frame
+    from renderer.options import RenderOptions
+    from renderer.render import prepare, render_frame
     from renderer.usd.importer import load_scene
     path = pathlib.Path(args.scene) if ".usd" in args.scene else SCENES / f"{args.scene}.usda"
     prep = prepare(load_scene(path, motion_blur=not args.no_motion_blur),

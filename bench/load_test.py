@@ -32,7 +32,7 @@ from urllib.parse import urlparse
 
 import httpx
 
-from service.timing import app_duration
+from service.api.timing import app_duration
 
 SCENE = """#usda 1.0
 (

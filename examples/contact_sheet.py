@@ -44,7 +44,8 @@ def render_tile(path: pathlib.Path, size: int, spp: int, frame: float | None = N
     """Linear RGB (size, size, 3) of one scene, letterboxed into a square."""
     from pxr import Usd
 
-    from renderer.render import RenderOptions, frame_channels, prepare, render_frame
+    from renderer.options import RenderOptions
+    from renderer.render import frame_channels, prepare, render_frame
     from renderer.usd.importer import load_scene
 
     stage = Usd.Stage.Open(str(path))
@@ -78,7 +79,7 @@ def main() -> int:
     ap.add_argument("-o", "--output", default=str(ROOT / "docs" / "contact_sheet.png"))
     args = ap.parse_args()
     from renderer.device import init_warp
-    from service.preview import srgb8
+    from service.api.preview import srgb8
 
     init_warp()
     assets = assets_dir()

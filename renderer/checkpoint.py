@@ -7,32 +7,22 @@ of scene, options and tile, and ``assemble`` adds the same partials in the same 
 """
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import json
 import os
 import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from renderer.files import atomic_write
+
 
 def save_tile(path: Path, arrays: dict[str, np.ndarray]) -> None:
-    """Write a tile checkpoint atomically (a temporary file renamed over ``path``: a file that exists is
-    complete). FileNotFoundError if its directory is gone."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".npz.tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, **arrays)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
+    """Write a tile checkpoint atomically (``renderer.files``: a file that exists is complete).
+    FileNotFoundError if its directory is gone."""
+    with atomic_write(path) as f:
+        np.savez(f, **arrays)
 
 
 def load_tile(path: Path) -> dict[str, np.ndarray]:

@@ -3,7 +3,7 @@
 A sample is a point in every dimension at once (the paper's central idea): its film position (antialiasing),
 its time (motion blur: camera, geometry, lights and shadows are all evaluated at that one instant), its lens
 position (depth of field), and at every bounce a light position (penumbrae) and a BSDF direction (gloss,
-translucency). All come from ``sampler`` as pure functions of (seed, pixel, sample index, dimension), so the
+translucency). All come from ``sampling.sobol`` as pure functions of (seed, pixel, sample index, dimension), so the
 sample can be replayed exactly.
 
 At every surface, light is gathered twice and the two estimates combined by the power heuristic (Veach's

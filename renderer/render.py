@@ -2,12 +2,13 @@
 
     scene = load_scene("shot.usda", frame=12)                 # renderer.usd.importer
     prep = prepare(scene, RenderOptions(width=640, height=360, spp=64))
-    sums = render_frame(prep, tile_size=64, threads=2)        # or render_tile(prep, Tile(...)) per worker
-    write_frame("out.exr", prep, sums)
+    result = render_frame(prep, tile_size=64, threads=2)      # or render_tile(prep, Tile(...)) per worker
+    write_frame("out.exr", prep, result.sums)
 
 ``render_tile`` is a pure function of (scene, options, tile): it returns the tile's filtered sums and weights,
 the same bits whoever renders it; ``assemble`` makes them a frame that has the same bits in whatever tiling,
-on however many threads. The service splits frames into tiles and calls it from its workers.
+on however many threads. The service splits frames into tiles (``film.tiles``) and calls it from its workers, which
+return the frame as a ``FrameImage`` of plain values that its coordinator writes.
 """
 from __future__ import annotations
 
@@ -32,36 +33,18 @@ from renderer.device import init_warp
 from renderer.errors import Cancelled, SettingsError
 from renderer.film import borders, denoise, film
 from renderer.film.adaptive import Convergence
-from renderer.film.exr import timecode_from_frame, write_exr
+from renderer.film.exr import timecode_fields, write_exr
+from renderer.film.tiles import Tile, auto_tile_size, split_tiles
 from renderer.framing import Framing, resolve_framing
 from renderer.integrator import PathSettings, Wave, trace_wave_kernel
 from renderer.lights.table import upload_lights
 from renderer.media import upload as media_upload
 from renderer.media.upload import MediaUpload, upload_media
 from renderer.motion.transform import matrix_at
-# MAX_SPP and RenderOptions are re-exported: ``renderer.render`` is the library API the README shows.
-from renderer.options import AOV_NAMES, MAX_DEPTH, MAX_PIXELS, MAX_SPP, TIME_FILTERS, RenderOptions  # noqa: F401
+from renderer.options import MAX_PIXELS, MAX_SPP, TIME_FILTERS, RenderOptions
 from renderer.scene.flatten import flatten_still_instances
 from renderer.scene.model import LIGHT_MESH, Scene
 from renderer.shading.materials import upload_material_textures, upload_materials
-
-
-@dataclass(frozen=True)
-class Tile:
-    """Pixels [x0, x1) x [y0, y1) of the full image (y down)."""
-
-    x0: int
-    y0: int
-    x1: int
-    y1: int
-
-    @property
-    def width(self) -> int:
-        return self.x1 - self.x0
-
-    @property
-    def height(self) -> int:
-        return self.y1 - self.y0
 
 
 @dataclass
@@ -147,7 +130,7 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu",
     """Build the hierarchy and upload lights, materials and camera: once per (scene, frame).
 
     ``reuse``: an earlier frame's prepared scene, on the same device. Its hierarchy is kept when this frame's
-    geometry is the same (bit for bit: a fingerprint of the flattened meshes and instances), and its materials and
+    geometry is the same (bit for bit: a fingerprint of its meshes, instances and mesh lights), and its materials and
     textures when the materials are; lights, media and camera are built anew. A range of frames of a still set
     builds its hierarchy and reads its textures once."""
     options.validate()
@@ -312,27 +295,6 @@ def tile_time_budget(options: RenderOptions, tile: Tile, width: int, height: int
     return float(options.time_limit) * threads * (tile.width * tile.height) / (width * height)
 
 
-DEFAULT_TILE = 64  # pixels: large enough that per-tile overhead vanishes on production frames
-MIN_AUTO_TILE = 16
-
-
-def auto_tile_size(width: int, height: int, threads: int) -> int:
-    """The tile size for a frame rendered on ``threads`` threads: DEFAULT_TILE, halved (down to MIN_AUTO_TILE)
-    while the frame would have fewer than 4 tiles per thread, so that the last tiles do not leave threads idle
-    (a 160x90 preview is 6 tiles of 64 px, of unequal sizes, on 2 threads). The image does not depend on it."""
-    size = DEFAULT_TILE
-    while size > MIN_AUTO_TILE and len(split_tiles(width, height, size)) < 4 * max(1, threads):
-        size //= 2
-    return size
-
-
-def split_tiles(width: int, height: int, tile_size: int) -> list[Tile]:
-    if tile_size < 1:
-        raise SettingsError(f"tile size must be >= 1, got {tile_size}")
-    return [Tile(x, y, min(x + tile_size, width), min(y + tile_size, height))
-            for y in range(0, height, tile_size) for x in range(0, width, tile_size)]
-
-
 def assemble(tiles: list[TileSums], width: int, height: int) -> dict[str, np.ndarray]:
     """The frame's sums from tiles that cover it without overlapping (``borders.assemble``)."""
     return borders.assemble([((t.tile.x0, t.tile.y0, t.tile.x1, t.tile.y1), t.arrays) for t in tiles], width,
@@ -419,14 +381,15 @@ def frame_channels(prep: PreparedScene, sums: dict[str, np.ndarray]) -> dict[str
 
 
 def frame_attributes(prep: PreparedScene) -> dict:
-    """EXR header attributes: camera matrices at the frame time, frame rate, time code, render settings."""
+    """EXR header attributes, as plain values: camera matrices at the frame time, frame rate, time code, render
+    settings."""
     scene, o = prep.scene, prep.options
     w2c = np.linalg.inv(matrix_at(scene.camera.transform, scene.shutter.frame_s))
     return {
         "worldToCamera": w2c,
         "worldToNDC": ndc_matrix(scene.camera, prep.camera) @ w2c,
         "framesPerSecond": float(scene.time_codes_per_second),
-        "timeCode": timecode_from_frame(max(0, round(scene.frame)), scene.time_codes_per_second),
+        "timeCode": timecode_fields(max(0, round(scene.frame)), scene.time_codes_per_second),
         "drt/frame": float(scene.frame),
         "drt/camera": scene.camera.name,
         "drt/spp": int(o.spp),
@@ -451,10 +414,30 @@ def frame_windows(prep: PreparedScene) -> dict[str, tuple[int, int, int, int]]:
     return dict(display_window=prep.framing.display_window(), data_window=prep.framing.data_window())
 
 
+@dataclass
+class FrameImage:
+    """What a frame's EXR holds, as plain values (numpy arrays, numbers, strings, tuples) that pickle: the service's
+    workers make it where the prepared scene is, and its coordinator writes it."""
+
+    channels: dict[str, np.ndarray]  # (H, W) arrays by EXR channel name (``frame_channels``)
+    attributes: dict  # header attributes (``frame_attributes``)
+    display_window: tuple[int, int, int, int]
+    data_window: tuple[int, int, int, int]
+
+    def write(self, path, *, half: bool = False) -> int:
+        """Write the EXR atomically. Returns the number of non-finite values that had to be zeroed."""
+        return write_exr(path, self.channels, half=half, attributes=self.attributes,
+                         display_window=self.display_window, data_window=self.data_window)
+
+
+def frame_image(prep: PreparedScene, sums: dict[str, np.ndarray]) -> FrameImage:
+    """The frame's channels, header attributes and windows from its assembled sums."""
+    return FrameImage(channels=frame_channels(prep, sums), attributes=frame_attributes(prep), **frame_windows(prep))
+
+
 def write_frame(path, prep: PreparedScene, sums: dict[str, np.ndarray], *, half: bool = False) -> int:
     """Write the frame's EXR atomically. Returns the number of non-finite values that had to be zeroed."""
-    return write_exr(path, frame_channels(prep, sums), half=half, attributes=frame_attributes(prep),
-                     **frame_windows(prep))
+    return frame_image(prep, sums).write(path, half=half)
 
 
 def default_threads() -> int:
@@ -463,6 +446,6 @@ def default_threads() -> int:
     return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
 
 
-__all__ = ["RenderOptions", "Tile", "TileSums", "PreparedScene", "FrameResult", "prepare", "render_tile",
-           "render_frame", "tile_time_budget", "split_tiles", "assemble", "frame_channels", "frame_attributes",
-           "frame_windows", "write_frame", "default_threads", "load_kernels"]
+__all__ = ["Tile", "TileSums", "PreparedScene", "FrameResult", "prepare", "render_tile",
+           "render_frame", "tile_time_budget", "assemble", "frame_channels", "frame_attributes",
+           "frame_windows", "FrameImage", "frame_image", "write_frame", "default_threads", "load_kernels"]

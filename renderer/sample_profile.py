@@ -25,6 +25,8 @@ import pathlib
 import re
 import tempfile
 
+from renderer.files import atomic_write
+
 PROFILES = pathlib.Path(__file__).parent / "profiles"
 # -debug-info-kind=line-directives-only: the debug locations a sample profile is matched by, without DWARF in the
 # object (the code is the same as with line tables; the object a quarter of the size); -no-integrated-as: no
@@ -93,10 +95,8 @@ def write_profile(mod, directory: pathlib.Path) -> pathlib.Path | None:
         return None
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / _file_name(mod.name, stored)
-    fd, tmp = tempfile.mkstemp(dir=directory, suffix=".tmp")
-    with os.fdopen(fd, "w") as f:
+    with atomic_write(path, "w", durable=False) as f:  # read by a compile now, not needed after a crash
         f.write(renew_names(stored.read_text(), current_names(mod)))
-    os.replace(tmp, path)
     return path
 
 

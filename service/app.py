@@ -1,10 +1,10 @@
-"""``create_app(settings)``: the FastAPI application, its lifespan (database, Dask, scheduler) and error format.
+"""``create_app(settings)``: the FastAPI application, its lifespan (database, coordinator, inspection) and error format.
 
 Every error answers ``{"detail": "<one line>"}``: ``ApiError`` from the service, FastAPI's own validation errors
 flattened to ``"<field>: <message>"``, a malformed body (e.g. multipart without a boundary) 400, and an oversized
 body cut off early with 413 (the ``Content-Length`` is checked before anything is read, the bytes are counted as
-they arrive). The bearer token is checked before all of that (``auth.TokenFirst``), and every answer carries the
-service's own time for it (``timing.ServerTiming``, the outermost middleware).
+they arrive). The bearer token is checked before all of that (``api.auth.TokenFirst``), and every answer carries the
+service's own time for it (``api.timing.ServerTiming``, the outermost middleware).
 """
 from __future__ import annotations
 
@@ -21,15 +21,16 @@ from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from .api import events, health, jobs, limits, monitor, web
+from .api.auth import TokenFirst
 from .api.deps import require_token
-from .auth import TokenFirst
+from .api.presenters import job_public
+from .api.timing import ServerTiming
 from .errors import ApiError
-from .events import ChangeFeed
 from .latency import SubmissionGate, new_submission_gate, tune_api_process
+from .queue.changes import ChangeFeed
+from .queue.scenes import UploadTooLarge
 from .runtime import Runtime
 from .settings import ServiceSettings
-from .timing import ServerTiming
-from .uploads import UploadTooLarge
 
 log = logging.getLogger("drt.service")
 
@@ -99,7 +100,8 @@ def create_app(settings: ServiceSettings | None = None) -> FastAPI:
         submission_threads = settings.inspect_processes + 1
         app.state.submit_limiter = anyio.CapacityLimiter(submission_threads)
         app.state.submission_gate = new_submission_gate(submission_threads)
-        app.state.feed = ChangeFeed(app.state.runtime.store)  # the monitor's server-sent events
+        # the monitor's server-sent events
+        app.state.feed = ChangeFeed(app.state.runtime.store, present=lambda row: job_public(row).model_dump_json())
         tune_api_process()  # startup is done: freeze its heap, shorten the GIL switch interval
         try:
             yield

@@ -15,7 +15,7 @@ import sys
 def build_parser() -> argparse.ArgumentParser:
     from renderer import cli as rcli
 
-    from .client import add_commands
+    from .client.remote import add_commands
 
     parser, sub = rcli.new_parser()
     rcli.add_render_command(sub)
@@ -88,7 +88,7 @@ def run_command(args: argparse.Namespace) -> int:
     try:
         if args.command == "serve":
             return cmd_serve(args)
-        from .client import run
+        from .client.remote import run
 
         return run(args)
     except KeyboardInterrupt:
@@ -97,7 +97,7 @@ def run_command(args: argparse.Namespace) -> int:
     except Exception as e:  # noqa: BLE001 - one line, never a traceback (DRT_DEBUG=1 shows it)
         from pydantic import ValidationError
 
-        from .client import ClientError
+        from .client.remote import ClientError
 
         if isinstance(e, ValidationError):  # bad DRT_* environment variables
             msg = "; ".join(f"DRT_{'.'.join(map(str, err['loc'])).upper()}: {err['msg']}" for err in e.errors())

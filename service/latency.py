@@ -5,8 +5,10 @@
   ``gc.callbacks`` during ``bench/load_test.py``, every one a stall of the event loop (and, in an inspection
   process, of a submission). Freezing the startup heap moves it out of the collector's sight (``gc.freeze``);
   collections then walk only what was allocated since: none over 3 ms in the API process during the load test
-  afterwards.
-* **GIL switch interval.** The event loop shares the interpreter with the job scheduler's thread (checkpoints,
+  afterwards. The frozen heap goes back to the collector at exit, so that the interpreter's last collections
+  free it: a frozen module held in cycles (OpenImageIO's, imported before the freeze) would outlive the
+  interpreter, and its bindings (nanobind) would print each of its objects as "leaked" on stderr.
+* **GIL switch interval.** The event loop shares the interpreter with the dispatcher's thread (checkpoints,
   frame assembly, EXR writing), Dask's client thread and the submission threads. A thread that wants the GIL
   waits up to the switch interval for the holder to let go, at every step of a request. 1 ms instead of 5:
   status p99 16-20 ms (4 runs) against 22-28 ms (3 runs) in the 50-client load test, submission p50 140-167
@@ -20,6 +22,7 @@
 """
 from __future__ import annotations
 
+import atexit
 import gc
 import sys
 
@@ -29,9 +32,12 @@ SWITCH_INTERVAL = 0.001  # seconds
 
 
 def freeze_heap() -> None:
-    """Collect once, then exempt every surviving object from later collections (call when startup is done)."""
+    """Collect once, then exempt every surviving object from later collections (call when startup is done); they
+    are handed back to the collector at exit."""
     gc.collect()
     gc.freeze()
+    atexit.unregister(gc.unfreeze)  # once, however often a process freezes
+    atexit.register(gc.unfreeze)
 
 
 def tune_api_process() -> None:

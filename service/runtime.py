@@ -4,12 +4,12 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 
-from .coordinator import Coordinator, CoordinatorProcess
-from .db import Store
-from .inspection import InspectionPool
+from .farm.coordinator import Coordinator, CoordinatorProcess
+from .intake.inspection import InspectionPool
+from .intake.submission import Inspector, Submitter
+from .queue.scenes import SceneStore
+from .queue.store import Store
 from .settings import ServiceSettings
-from .submission import Inspector, Submitter
-from .uploads import SceneStore
 
 log = logging.getLogger("drt.service")
 

@@ -15,8 +15,8 @@ from renderer.shading.textures import Textures
 from renderer.accel.build import build_bvh
 from renderer.accel.instance_bounds import instance_key_bounds
 from renderer.accel.upload import upload_geometry
-from renderer.motion.transform import make_transform, matrix_at
-from renderer.scene.model import Camera, Instance, Material, Mesh, MotionTransform, Scene
+from renderer.motion.transform import MotionTransform, make_transform, matrix_at
+from renderer.scene.model import Camera, Instance, Material, Mesh, Scene
 
 
 @wp.kernel

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from renderer.film.adaptive import Convergence, pixel_error
-from renderer.render import RenderOptions, Tile, frame_channels, prepare, render_frame, render_tile
+from renderer.options import RenderOptions
+from renderer.render import Tile, frame_channels, prepare, render_frame, render_tile
 from test_render_tiles import make_scene
 
 
@@ -86,7 +87,8 @@ def test_time_limit_is_respected_within_ten_percent(scene, limit):
 
 
 def test_tile_budgets_share_the_frame_limit_by_area():
-    from renderer.render import split_tiles, tile_time_budget
+    from renderer.film.tiles import split_tiles
+    from renderer.render import tile_time_budget
 
     o = RenderOptions(time_limit=10.0)
     tiles = split_tiles(100, 70, 32)

@@ -10,20 +10,10 @@ import stages
 from renderer.motion.shutter import Shutter
 from renderer.accel.analytic import BIG, shape_hits, shape_normal, sphere_roots
 from renderer.accel.upload import upload_geometry
-from renderer.motion.transform import make_transform
+from renderer.motion.transform import MotionTransform, make_transform
 from renderer.scene.analytic import SHAPE_CODES, analytic_shapes
 from renderer.scene.flatten import flatten_still_instances
-from renderer.scene.model import (
-    LIGHT_MESH,
-    AnalyticShape,
-    Camera,
-    Instance,
-    Light,
-    Material,
-    Mesh,
-    MotionTransform,
-    Scene,
-)
+from renderer.scene.model import LIGHT_MESH, AnalyticShape, Camera, Instance, Light, Material, Mesh, Scene
 from renderer.usd.primitives import _AXIS_PERM, _analytic_shape, _sphere, _tessellate, tessellate_primitive
 from renderer.usd.importer import load_scene
 from test_accel import _probe, random_mesh, ray_triangles
@@ -327,7 +317,8 @@ def test_stand_ins_get_their_triangles_where_the_shape_cannot_be_used(tmp_path):
     """A still implicit prim arrives as its shape and a one-triangle stand-in. An emissive one (a light samples its
     triangles) and the operands of a CSG group get exactly the tessellation the importer made before; a stand-in
     that stops being usable after import (a light made of it through the library) gets it when prepared."""
-    from renderer.render import RenderOptions, prepare
+    from renderer.options import RenderOptions
+    from renderer.render import prepare
 
     stage = stages.new_stage(tmp_path / "s.usda")
     stages.camera(stage, translate=(0, 0, 8))
@@ -422,7 +413,8 @@ def test_a_sphere_covers_exactly_its_disc_in_an_orthographic_view(tmp_path):
     """Coverage through the whole render path (camera, walk, film): the alpha of a unit sphere seen orthographically
     integrates to pi (seeds 0 and 1: +1.0e-4, +0.5e-4). Its 4032-triangle tessellation covered 0.165 % less (a
     64-gon silhouette), five times this tolerance."""
-    from renderer.render import RenderOptions, frame_channels, prepare, render_frame
+    from renderer.options import RenderOptions
+    from renderer.render import frame_channels, prepare, render_frame
 
     stage = stages.new_stage(tmp_path / "disc.usda")
     stages.camera(stage, translate=(0, 0, 5), ortho=True, h_ap_mm=24.0, v_ap_mm=24.0)  # 2.4 x 2.4 units

@@ -1,7 +1,10 @@
 """The package layout's rules, checked on the source: no import cycles inside ``renderer`` or ``service`` (imports
 inside functions count too, so a cycle cannot hide there), dependencies pointing one way, ``pxr`` only in the USD
-import package and the service's scene checks, and the renderer importable with the service's libraries absent."""
+import package and the service's scene checks, the renderer importable with the service's libraries absent, the
+client with its own extra alone, and the service's modules grouped by the process that runs them, importing each
+other across groups only through the interfaces declared here."""
 import ast
+import fnmatch
 import pathlib
 import subprocess
 import sys
@@ -106,17 +109,24 @@ def test_pxr_only_in_the_usd_package():
         assert not pxr, f"{p.relative_to(ROOT)} imports {pxr}: USD belongs in renderer/usd"
 
 
-def test_renderer_imports_and_parses_without_the_service_libraries():
-    """A library user installs `drt` without the [service] extra: the renderer and `drt render` still work."""
-    code = textwrap.dedent("""
+def run_without(blocked: set[str], code: str) -> subprocess.CompletedProcess:
+    """Run ``code`` in a new interpreter in which importing any of the ``blocked`` packages fails."""
+    prelude = textwrap.dedent(f"""
         import importlib.abc, sys
-        BLOCKED = {"fastapi", "starlette", "sqlalchemy", "dask", "distributed", "uvicorn", "httpx", "pydantic",
-                   "pydantic_settings"}
         class Block(importlib.abc.MetaPathFinder):
             def find_spec(self, name, path=None, target=None):
-                if name.split(".")[0] in BLOCKED:
-                    raise ImportError(f"blocked: {name}")
+                if name.split(".")[0] in {sorted(blocked)!r}:
+                    raise ImportError(f"blocked: {{name}}")
         sys.meta_path.insert(0, Block())
+    """)
+    return subprocess.run([sys.executable, "-c", prelude + textwrap.dedent(code)], cwd=ROOT, capture_output=True,
+                          text=True, timeout=120)
+
+
+def test_renderer_imports_and_parses_without_the_service_libraries():
+    """A library user installs `drt` without the [service] extra: the renderer and `drt render` still work."""
+    r = run_without({"fastapi", "starlette", "sqlalchemy", "dask", "distributed", "uvicorn", "httpx", "pydantic",
+                     "pydantic_settings"}, """
         import renderer.render, renderer.request, renderer.usd.importer, renderer.cli
         from renderer.cli import build_parser
         args = build_parser().parse_args(["render", "x.usda", "-o", "x.exr", "--f-stop", "2.8"])
@@ -126,7 +136,82 @@ def test_renderer_imports_and_parses_without_the_service_libraries():
         drt_parser().parse_args(["render", "x.usda", "-o", "x.exr"])
         print("ok")
     """)
-    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stdout.strip().endswith("ok"), r.stderr[-2000:]
+
+
+# The service's modules by the process that runs them. A group may import the modules of another group only where
+# it is declared below (its interfaces); any group but the client may import the shared top-level modules; the
+# composition roots build the service from the groups and are imported by none, but for the runtime the API's
+# dependencies hand out.
+SERVICE_GROUPS = {
+    "api": "the API process: routes, bearer token, Server-Timing, presenters, previews, metrics",
+    "intake": "the API process and its inspection processes: submission, cost limits, scene checks",
+    "queue": "the API process and the coordinator: the job store, the state machine, the change feed, stored scenes",
+    "farm": "the coordinator and the Dask workers: dispatcher, cluster, tasks, job files, the monitor's farm view",
+    "client": "a user's machine: drt submit/status/fetch over HTTP",
+}
+SHARED = {"errors", "settings", "spec", "latency"}
+ROOTS = {"app", "runtime", "cli"}
+INTERFACES = {  # group -> what it may import of the other groups and the roots (patterns, relative to service)
+    "api": {"queue.*", "intake.submission", "farm.job_files", "farm.view", "runtime"},
+    "intake": {"queue.*"},
+    "queue": set(),
+    "farm": {"queue.*"},
+    "client": set(),
+}
+
+
+def cross_group_imports(interfaces: dict[str, set[str]]) -> list[str]:
+    """Every import of a service module that its group's ``interfaces`` (and SHARED) do not allow."""
+    files = {module_name(p).removeprefix("service."): p for p in (ROOT / "service").rglob("*.py")
+             if p.name != "__init__.py"}
+    bad = []
+    for name, path in sorted(files.items()):
+        if name in ROOTS:
+            continue
+        group = name.split(".")[0] if "." in name else None
+        if group is None:
+            allowed = SHARED
+        else:
+            allowed = (set() if group == "client" else SHARED) | interfaces[group]
+        for imported in sorted(imported_modules(path)):
+            target = imported.removeprefix("service.")
+            if not imported.startswith("service.") or target not in files or target == name:
+                continue  # not the service's, a package (its __init__ is a docstring), or a name in a module
+            if group is not None and target.split(".")[0] == group and "." in target:
+                continue
+            if not any(fnmatch.fnmatchcase(target, pattern) for pattern in allowed):
+                bad.append(f"service.{name} imports service.{target}")
+    return bad
+
+
+def test_service_modules_import_across_process_groups_only_through_declared_interfaces():
+    top = {p.stem for p in (ROOT / "service").glob("*.py") if p.name != "__init__.py"}
+    assert top == SHARED | ROOTS, "a new top-level module: declare it shared or a root, or put it in a group"
+    assert len(top) <= 12
+    groups = {p.parent.name for p in (ROOT / "service").glob("*/__init__.py")}
+    assert groups == set(SERVICE_GROUPS)
+    for g in groups:  # no re-exports: a group's package is its docstring
+        body = ast.parse((ROOT / "service" / g / "__init__.py").read_text()).body
+        assert len(body) == 1 and isinstance(body[0], ast.Expr), f"service/{g}/__init__.py holds code"
+    assert cross_group_imports(INTERFACES) == []
+
+
+def test_the_group_check_sees_an_undeclared_import():
+    narrower = {**INTERFACES, "api": INTERFACES["api"] - {"farm.view"}}
+    assert cross_group_imports(narrower) == ["service.api.monitor imports service.farm.view"]
+
+
+def test_the_client_imports_with_its_extra_alone():
+    """`pip install drt[client]` (httpx, pydantic) gives `drt submit/status/fetch`: no FastAPI, SQLAlchemy or Dask."""
+    r = run_without({"fastapi", "starlette", "sqlalchemy", "dask", "distributed", "uvicorn", "pydantic_settings",
+                     "multipart", "PIL"}, """
+        from service.cli import build_parser
+        from service.client.remote import Client
+        args = build_parser().parse_args(["submit", "x.usda", "--spp", "8", "--server", "http://127.0.0.1:1"])
+        Client(args.server).close()
+        print("ok")
+    """)
     assert r.returncode == 0 and r.stdout.strip().endswith("ok"), r.stderr[-2000:]
 
 
@@ -179,7 +264,7 @@ def test_the_cli_derives_each_setting_from_the_table(s):
     leaves the table's default."""
     from renderer.cli import request_from_args
     from service.cli import build_parser
-    from service.client import settings_from_args
+    from service.client.remote import settings_from_args
 
     parser = build_parser()
     base = ["render", "scene.usda", "-o", "out.exr"]

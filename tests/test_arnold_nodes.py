@@ -7,7 +7,8 @@ from PIL import Image
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, Vt
 
 import stages
-from renderer.render import RenderOptions, frame_channels, prepare, render_frame
+from renderer.options import RenderOptions
+from renderer.render import frame_channels, prepare, render_frame
 from renderer.usd.importer import load_scene
 
 W, H = 40, 30  # the card fills the frame: 4 x 3 units seen by an orthographic camera

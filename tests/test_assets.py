@@ -7,7 +7,8 @@ import pathlib
 import numpy as np
 import pytest
 
-from renderer.render import RenderOptions, frame_channels, prepare, render_frame
+from renderer.options import RenderOptions
+from renderer.render import frame_channels, prepare, render_frame
 from renderer.usd.importer import load_scene
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]

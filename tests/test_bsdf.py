@@ -1,4 +1,4 @@
-"""Tests of renderer/bsdf_lobes.py and renderer/bsdf.py (the UsdPreviewSurface BSDF).
+"""Tests of renderer/shading/lobes.py and renderer/shading/bsdf.py (the UsdPreviewSurface BSDF).
 
 * chi-square of every lobe's sampler against its pdf and of the whole mixture (``bsdf_sample`` vs ``bsdf_pdf``) at
   roughness 0.05, 0.3, 1 and near-normal and grazing (80 deg) incidence; the dielectric entering and leaving, ior
@@ -142,9 +142,9 @@ def k_bsdf_pdf(p: B.SurfaceParams, n: wp.vec3, ng: wp.vec3, wo: wp.vec3, front: 
 @wp.kernel
 def k_lambert(n: wp.vec3, u: wp.array(dtype=wp.vec2), out: wp.array(dtype=wp.vec3), val: wp.array(dtype=wp.vec3)):
     i = wp.tid()
-    d = B.lambert_sample(n, u[i])
+    d = L.lambert_sample(n, u[i])
     out[i] = d
-    val[i] = B.lambert_eval(wp.vec3(0.5), n, d) * (wp.dot(n, d) / B.lambert_pdf(n, d))
+    val[i] = L.lambert_eval(wp.vec3(0.5), n, d) * (wp.dot(n, d) / L.lambert_pdf(n, d))
 
 
 # ----------------------------------------------------------------------------------------------------------------

@@ -211,7 +211,7 @@ def test_the_service_preview_of_an_acescg_frame_looks_like_its_rec709_twin(tmp_p
 
     from PIL import Image
 
-    from service import preview
+    from service.api import preview
 
     pngs = []
     for space, name in ((None, "a"), ("acescg", "b")):

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from renderer.render import RenderOptions, frame_channels, prepare, render_frame
+from renderer.options import RenderOptions
+from renderer.render import frame_channels, prepare, render_frame
 from renderer.scene import tessellate_curves as tc
 from renderer.scene import tessellate_points as tp
 from renderer.usd.curves import nurbs_basis as tc_nurbs_basis

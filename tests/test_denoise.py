@@ -6,7 +6,8 @@ import pytest
 
 from renderer.errors import SettingsError
 from renderer.film import denoise
-from renderer.render import RenderOptions, frame_channels, prepare, render_frame
+from renderer.options import RenderOptions
+from renderer.render import frame_channels, prepare, render_frame
 from test_render_tiles import make_scene
 
 

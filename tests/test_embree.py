@@ -10,7 +10,8 @@ import warp as wp
 from renderer.motion.shutter import Shutter
 from renderer.accel import embree
 from renderer.accel.upload import upload_geometry
-from renderer.scene.model import Camera, Instance, Material, Mesh, MotionTransform, Scene
+from renderer.motion.transform import MotionTransform
+from renderer.scene.model import Camera, Instance, Material, Mesh, Scene
 from tests.test_accel import _probe, brute_force, random_mesh, rot_y
 from tests.test_quads import hits
 

@@ -6,7 +6,7 @@ import warp as wp
 
 from chi2 import SphericalCap, assert_chi2
 from renderer.lights.envmap import (EnvMap, build_distribution, dir_to_latlong_np, env_pdf, env_pdf_np, env_radiance,
-                             env_sample, env_sample_np, latlong_to_dir_np, upload_envmap)
+                                    env_sample, env_sample_np, latlong_mean, latlong_to_dir_np, upload_envmap)
 
 
 def sky(h=32, w=64, seed=1):
@@ -29,6 +29,19 @@ def test_orientation_follows_the_openexr_latlong_convention():
     u, v = dir_to_latlong_np(latlong_to_dir_np(np.array([0.1, 0.7]), np.array([0.3, 0.9])))
     np.testing.assert_allclose(u, [0.1, 0.7], atol=1e-12)
     np.testing.assert_allclose(v, [0.3, 0.9], atol=1e-12)
+
+
+def test_latlong_round_trip_and_mean():
+    u = np.array([0.5, 0.25, 0.75, 0.0, 0.5, 0.5, 0.125])
+    v = np.array([0.5, 0.5, 0.5, 0.5, 0.0, 1.0, 0.25])
+    d = latlong_to_dir_np(u, v)
+    s = np.sqrt(0.5)
+    np.testing.assert_allclose(d, [[0, 0, 1], [1, 0, 0], [-1, 0, 0], [0, 0, -1], [0, 1, 0], [0, -1, 0],
+                                   [0.5, s, -0.5]], atol=1e-12)
+    uu, vv = dir_to_latlong_np(d[[0, 1, 2, 6]])
+    np.testing.assert_allclose(uu, u[[0, 1, 2, 6]], atol=1e-12)
+    np.testing.assert_allclose(vv, v[[0, 1, 2, 6]], atol=1e-12)
+    np.testing.assert_allclose(latlong_mean(np.ones((4, 8, 3))), [1, 1, 1])
 
 
 def test_env_sampling_matches_its_pdf():

@@ -1,4 +1,4 @@
-"""renderer/exr.py: round trips through write_exr/read_exr, checked again with the OpenEXR binding directly and
+"""renderer/film/exr.py: round trips through write_exr/read_exr, checked again with the OpenEXR binding directly and
 with a small parser of the raw header bytes (independent of the binding's type mapping)."""
 from __future__ import annotations
 

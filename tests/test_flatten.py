@@ -5,8 +5,8 @@ import numpy as np
 
 from renderer.motion.shutter import Shutter
 from renderer.scene.flatten import flatten_still_instances
-from renderer.motion.transform import make_transform
-from renderer.scene.model import LIGHT_MESH, Camera, Instance, Light, Material, Mesh, MotionTransform, Scene
+from renderer.motion.transform import MotionTransform, make_transform
+from renderer.scene.model import LIGHT_MESH, Camera, Instance, Light, Material, Mesh, Scene
 
 
 def translate(x):

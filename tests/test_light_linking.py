@@ -132,7 +132,8 @@ def test_membership_follows_collection_rules_and_instance_proxies(tmp_path):
 @pytest.mark.parametrize("n", [40])
 def test_many_distinct_link_collections_warn(tmp_path, n):
     from renderer.lights.linking import MAX_GROUPS, upload_links
-    from renderer.scene.model import Light, MotionTransform
+    from renderer.motion.transform import MotionTransform
+    from renderer.scene.model import Light
     lights = []
     for i in range(n):
         m = np.zeros(n, bool)
@@ -147,8 +148,8 @@ def test_many_distinct_link_collections_warn(tmp_path, n):
 
 def test_a_shadow_linked_light_keeps_every_other_casters_whole_shadow(tmp_path):
     """With a shadow-link collection the shadow rays walk the casters of the light's group only
-    (``linking.caster_transmittance``); the occluder left in it shadows across its whole width: both of its
-    triangles, whichever walk (ours or Embree's) holds its mesh."""
+    (``occlusion.linked_transmittance``); the occluder left in it shadows across its whole width:
+    both of its triangles, whichever walk (ours or Embree's) holds its mesh."""
     def configure(sun, stage):
         exclude(UsdLux.LightAPI(sun).GetShadowLinkCollectionAPI(), "/World/FloorA")
     row = build(tmp_path / "f.usda", configure)

@@ -10,8 +10,9 @@ from renderer.motion.shutter import Shutter
 from renderer.lights.select import Selection, select_light
 from renderer.lights.select import select_pdf as light_select_pdf
 from renderer.lights.table import delivered_irradiance, upload_lights
+from renderer.motion.transform import MotionTransform
 from renderer.scene.model import (LIGHT_DISTANT, LIGHT_DOME, LIGHT_RECT, LIGHT_SPHERE, Camera, Instance, Light,
-                                   Material, Mesh, MotionTransform, Scene)
+                                  Material, Mesh, Scene)
 
 
 def translate(x, y, z):
@@ -188,7 +189,8 @@ def row_of_lights_scene(tmp_path, n=1000):
 def test_a_row_of_a_thousand_lights_is_quieter_than_power_selection_and_unbiased(tmp_path):
     from dataclasses import replace
 
-    from renderer.render import RenderOptions, frame_channels, prepare, render_frame
+    from renderer.options import RenderOptions
+    from renderer.render import frame_channels, prepare, render_frame
     from renderer.usd.importer import load_scene
     path, xs = row_of_lights_scene(tmp_path)
     scene = load_scene(path, 0.0)

@@ -1,5 +1,5 @@
-"""Tests of renderer/microfacet.py: Warp == NumPy, GGX normalisation, visible-normal sampling (chi-square), Smith
-masking bounds, Fresnel and Snell.
+"""Tests of renderer/shading/microfacet.py: Warp == NumPy, GGX normalisation, visible-normal sampling (chi-square),
+Smith masking bounds, Fresnel and Snell.
 
 Also home of the direction domain ``HemisphereCharts`` and the sub-probability chi-square ``chi2_directions`` that
 ``test_bsdf.py`` shares: BSDF lobes at roughness 0.05 (GGX alpha 0.0025) are a few thousandths of a radian wide,

@@ -133,7 +133,8 @@ def test_uploaded_records_are_cache_lines():
     """The uploaded records start on a 64-byte boundary, so each is one cache line (a wrapped NumPy buffer is
     only 16-byte aligned: every record would straddle two)."""
     from renderer.accel.upload import upload_geometry
-    from renderer.scene.model import Camera, Instance, Material, Mesh, MotionTransform, Scene
+    from renderer.motion.transform import MotionTransform
+    from renderer.scene.model import Camera, Instance, Material, Mesh, Scene
 
     rng = np.random.default_rng(3)
     pts = rng.random((1, 3000, 3)).astype(np.float32)

@@ -1,17 +1,22 @@
-"""Output is bit-identical whatever the tiling and thread count; filters and waves behave."""
+"""Output is bit-identical whatever the tiling and thread count; the tile grid; filters and waves behave."""
 from __future__ import annotations
+
+import pickle
 
 import numpy as np
 import pytest
 import warp as wp
 
-from renderer.motion.shutter import Shutter
+from renderer.errors import SettingsError
 from renderer.film import film
-from renderer.motion.transform import make_transform
-from renderer.render import (RenderOptions, Tile, assemble, auto_tile_size, prepare, render_frame, render_tile,
-                             split_tiles, with_options)
-from renderer.scene.model import (LIGHT_RECT, LIGHT_SPHERE, Camera, Instance, Light, Material, Mesh, MotionTransform,
-                            Scene)
+from renderer.film.exr import read_exr
+from renderer.film.tiles import Tile, auto_tile_size, split_tiles, tile_count
+from renderer.motion.shutter import Shutter
+from renderer.motion.transform import MotionTransform, make_transform
+from renderer.options import RenderOptions
+from renderer.render import (assemble, frame_image, prepare, render_frame, render_tile, with_options,
+                             write_frame)
+from renderer.scene.model import (LIGHT_RECT, LIGHT_SPHERE, Camera, Instance, Light, Material, Mesh, Scene)
 
 
 def translate(x, y, z):
@@ -83,6 +88,34 @@ def test_the_default_tile_size_keeps_every_thread_busy(scene):
     prep = prepare(scene, RenderOptions(width=40, height=28, spp=3))
     auto = render_frame(prep, threads=2).sums  # the default is only a schedule: same pixels
     assert np.array_equal(auto["rgba"], render_frame(prep, tile_size=64, threads=1).sums["rgba"])
+
+
+@pytest.mark.parametrize("width, height, size", [(1, 1, 1), (24, 16, 8), (40, 28, 16), (37, 23, 8), (5, 70, 64),
+                                                  (160, 90, 32), (64, 64, 64)])
+def test_the_tile_grid_covers_the_frame_once_in_row_major_order(width, height, size):
+    tiles = split_tiles(width, height, size)
+    assert len(tiles) == tile_count(width, height, size)
+    covered = np.zeros((height, width), np.int32)
+    for x0, y0, x1, y1 in tiles:
+        covered[y0:y1, x0:x1] += 1
+    assert (covered == 1).all()
+    assert tiles == sorted(tiles, key=lambda t: (t.y0, t.x0))  # row-major: checkpoints are named by the index
+    assert all(t.width == min(size, width - t.x0) and t.height == min(size, height - t.y0) for t in tiles)
+    # a Tile is the plain box too (task keys, the border code) and pickles (Dask tasks carry tiles)
+    assert tiles[0] == (0, 0, min(size, width), min(size, height)) and pickle.loads(pickle.dumps(tiles)) == tiles
+    with pytest.raises(SettingsError):
+        split_tiles(width, height, 0)
+
+
+def test_a_frame_image_pickles_and_writes_what_write_frame_writes(scene, tmp_path):
+    """The service's workers return a frame's image (channels, header, windows) and its coordinator writes it: plain
+    values that pickle (an ``OpenEXR.TimeCode`` does not), written into the same file as ``write_frame``'s."""
+    prep = prepare(scene, RenderOptions(width=24, height=16, spp=2))
+    sums = render_frame(prep, tile_size=8, threads=1).sums
+    write_frame(tmp_path / "direct.exr", prep, sums, half=True)
+    pickle.loads(pickle.dumps(frame_image(prep, sums))).write(tmp_path / "shipped.exr", half=True)
+    assert (tmp_path / "shipped.exr").read_bytes() == (tmp_path / "direct.exr").read_bytes()
+    assert "timeCode" in read_exr(tmp_path / "shipped.exr")[1]
 
 
 def test_seed_changes_the_noise_not_the_mean(scene):

@@ -1,4 +1,5 @@
-"""Tests of renderer/sampler.py: Warp == NumPy bit for bit, range, purity, (0,m,2)-nets, decorrelation, convergence."""
+"""Tests of renderer/sampling/sobol.py: Warp == NumPy bit for bit, range, purity, (0,m,2)-nets, decorrelation,
+convergence."""
 from __future__ import annotations
 
 import itertools

@@ -264,23 +264,6 @@ def test_apply_normal_map():
                                atol=1e-6)
 
 
-# ---------------------------------------------------------------------------------------------------------------
-# Lat-long
-
-
-def test_latlong_convention():
-    u = np.array([0.5, 0.25, 0.75, 0.0, 0.5, 0.5, 0.125])
-    v = np.array([0.5, 0.5, 0.5, 0.5, 0.0, 1.0, 0.25])
-    d = T.latlong_to_direction(u, v)
-    s = np.sqrt(0.5)
-    np.testing.assert_allclose(d, [[0, 0, 1], [1, 0, 0], [-1, 0, 0], [0, 0, -1], [0, 1, 0], [0, -1, 0],
-                                   [0.5, s, -0.5]], atol=1e-12)
-    uu, vv = T.direction_to_latlong(d[[0, 1, 2, 6]])
-    np.testing.assert_allclose(uu, u[[0, 1, 2, 6]], atol=1e-12)
-    np.testing.assert_allclose(vv, v[[0, 1, 2, 6]], atol=1e-12)
-    np.testing.assert_allclose(T.latlong_mean(np.ones((4, 8, 3))), [1, 1, 1])
-
-
 def test_warp_triangle_tangent_matches_numpy_and_vec3_overload():
     rng = np.random.default_rng(3)
     p = rng.normal(size=(20, 3, 3))

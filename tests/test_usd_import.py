@@ -1,4 +1,5 @@
-"""USD import (renderer/usd_scene.py and its usd_* parts): small stages authored with pxr, plus every shipped asset."""
+"""USD import (renderer/usd/importer.py and the rest of renderer/usd): small stages authored with pxr, plus every
+shipped asset."""
 from __future__ import annotations
 
 import json

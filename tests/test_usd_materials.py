@@ -1,4 +1,4 @@
-"""UsdPreviewSurface import with textures (renderer/usd_materials.py), dome textures, and the shipped assets."""
+"""UsdPreviewSurface import with textures (renderer/usd/materials.py), dome textures, and the shipped assets."""
 from __future__ import annotations
 
 import json
@@ -9,9 +9,9 @@ import OpenImageIO as oiio
 import pytest
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade, Vt
 
+from renderer.lights import envmap
 from renderer.shading import materials as M
 from renderer.scene import model as sc
-from renderer.shading import textures as T
 from renderer.motion.transform import matrix_at
 from renderer.usd.primvars import read_named_uvs
 from renderer.usd.materials import MaterialTable
@@ -409,7 +409,7 @@ def dome_stage(tmp_path, kind="DomeLight", up="Y", pole=None, rotate_y=None):
 def bright_world_direction(light):
     row, col = np.unravel_index(np.argmax(light.texture[..., 0]), light.texture.shape[:2])
     h, w = light.texture.shape[:2]
-    d = T.latlong_to_direction((col + 0.5) / w, (row + 0.5) / h)
+    d = envmap.latlong_to_dir_np((col + 0.5) / w, (row + 0.5) / h)
     m = matrix_at(light.transform, 0.0)[:3, :3]
     d = m @ d
     return (row, col), d / np.linalg.norm(d)
@@ -419,7 +419,7 @@ def test_dome_texture_latlong_orientation(tmp_path):
     light, scene = dome_stage(tmp_path)
     assert light.texture.shape == (4, 8, 3) and light.texture.dtype == np.float32
     np.testing.assert_allclose(light.texture[1, 2], [20.0, 10.0, 5.0])  # times intensity 2 and color
-    np.testing.assert_allclose(light.radiance, T.latlong_mean(light.texture), rtol=1e-6)
+    np.testing.assert_allclose(light.radiance, envmap.latlong_mean(light.texture), rtol=1e-6)
     (row, col), d = bright_world_direction(light)
     assert (row, col) == (1, 2)
     # u = 0.3125: longitude pi (1 - 2u) = 0.375 pi; v = 0.375: latitude pi/8
@@ -442,7 +442,7 @@ def test_dome_texture_latlong_orientation(tmp_path):
 def test_dome_pole_axis(tmp_path, kind, up, pole, pole_world):
     light, _ = dome_stage(tmp_path, kind, up, pole)
     m = matrix_at(light.transform, 0.0)[:3, :3]
-    np.testing.assert_allclose(m @ T.latlong_to_direction(0.5, 0.0), pole_world, atol=1e-6)  # the top row
+    np.testing.assert_allclose(m @ envmap.latlong_to_dir_np(0.5, 0.0), pole_world, atol=1e-6)  # the top row
 
 
 def test_dome_missing_texture_warns_and_other_formats_convert(tmp_path):

@@ -1,5 +1,5 @@
-"""Mesh features read from USD (renderer/usd/mesh.py, renderer/usd/primvars.py): holes, GeomSubsets through holes and refinement,
-subdivision surfaces as imported and rendered."""
+"""Mesh features read from USD (renderer/usd/mesh.py, renderer/usd/primvars.py): holes, GeomSubsets through holes
+and refinement, subdivision surfaces as imported and rendered."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,7 +7,8 @@ import pytest
 from pxr import Gf, Sdf, UsdGeom, UsdShade, Vt
 
 import stages
-from renderer.render import RenderOptions, frame_channels, prepare, render_frame
+from renderer.options import RenderOptions
+from renderer.render import frame_channels, prepare, render_frame
 from renderer.usd.importer import load_scene
 
 

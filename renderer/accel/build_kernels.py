@@ -1,4 +1,4 @@
-"""Warp kernels of the BVH builder (``accel_build.py`` is the NumPy-facing side and documents the layout).
+"""Warp kernels of the BVH builder (``build.py`` is the NumPy-facing side and documents the layout).
 
 All four kernels are sequential and launched with ``dim=1``: a top-down build is a chain of dependent
 decisions, and one native thread running an explicit work stack beats any amount of NumPy bookkeeping per node.
@@ -284,7 +284,7 @@ def build_topology(
     prim: wp.array(dtype=wp.int32),  # (N,) primitive index per slot, 0..N-1 on entry; reordered in place
     bins: BinScratch,
     stack: WorkStack,
-    node_a: wp.array(dtype=wp.int32),  # (2N - 1,) outputs, see accel_build.Bvh
+    node_a: wp.array(dtype=wp.int32),  # (2N - 1,) outputs, see build.Bvh
     node_b: wp.array(dtype=wp.int32),
     node_count: wp.array(dtype=wp.int32),  # (1,) output: number of nodes written
 ):

@@ -20,8 +20,7 @@ import heapq
 import numpy as np
 
 from renderer.accel.build import Bvh
-from renderer.motion.transform import matrix_at, place_boxes
-from renderer.scene.model import MotionTransform
+from renderer.motion.transform import MotionTransform, matrix_at, place_boxes
 
 SUBSTEPS = 8  # samples per top-level segment when measuring how far curved motion leaves the linear blend
 CUT_BOXES = 64  # node boxes per instance at most

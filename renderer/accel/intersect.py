@@ -2,7 +2,7 @@
 
 Design (the paper asks that a moving object cost no more per ray than a still one):
 
-* **Bottom level, per mesh.** One BVH per mesh in object space (``accel_build.build_bvh``, binned SAH).
+* **Bottom level, per mesh.** One BVH per mesh in object space (``build.build_bvh``, binned SAH).
   A deforming mesh has P point keys; every node stores one box per key and a ray at time s tests the box
   interpolated between the two bracketing keys. Vertices are interpolated linearly between the same keys, so
   the interpolated box of a node always contains its triangles at time s: boxes stay tight at every instant

@@ -117,14 +117,26 @@ def mesh_transmittance(geo: Geometry, mats: Materials, tex: Textures, m: int, ro
     return blas_transmittance(geo, mats, tex, m, ro, rd, safe_inverse(rd), tmax, s, trans)
 
 
-@wp.func(inline=True)  # one call site: no copy of the Geometry struct
-def transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd: wp.vec3, tmax: float,
-                  s: float):
-    """Fraction of light passing along the segment ro + t rd, t in (0, tmax), at time s."""
+@wp.func
+def casts_shadow(casters: wp.array(dtype=wp.int32), bit: int, inst: int) -> bool:
+    """Does instance ``inst`` block light for shadow-link group ``bit`` (its bit set in ``casters[inst]``; -1: every
+    instance blocks)?"""
+    if bit < 0:
+        return True
+    return ((casters[inst] >> bit) & 1) != 0
+
+
+@wp.func(inline=True)  # no copy of the Geometry struct
+def linked_transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd: wp.vec3, tmax: float,
+                         s: float, casters: wp.array(dtype=wp.int32), bit: int):
+    """Fraction of light passing along the segment ro + t rd, t in (0, tmax), at time s, through the instances that
+    cast shadows for shadow-link group ``bit`` (``lights.linking``: their bit set in ``casters``, per instance);
+    with a group, the operands of CSG groups block as plain meshes (the CSG walk does not know the groups'
+    casters). ``bit`` -1: every instance blocks (``transmittance``)."""
     tr = float(1.0)
     direct = geo.direct_inst  # walked first, outside the top level (``Geometry.direct_inst``)
     if direct >= 0:
-        if instance_visible(geo, direct, s):
+        if instance_visible(geo, direct, s) and casts_shadow(casters, bit, direct):
             ro_o, rd_o = direct_ray(geo, ro, rd)
             tr = mesh_transmittance(geo, mats, tex, geo.inst_mesh[direct], ro_o, rd_o, tmax, s, tr)
         if geo.tlas_others == 0 or tr <= 0.0:  # blocked by the still prims: no top-level walk, no CSG
@@ -144,7 +156,8 @@ def transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd
             first, count = leaf_range(ref)
             for i in range(count):
                 inst = geo.tlas_prim[first + i]
-                if instance_visible(geo, inst, s) and tr > 0.0 and geo.inst_csg[inst] < 0:
+                csg_member = geo.inst_csg[inst] >= 0 and bit < 0  # walked by ``csg_transmittance`` below
+                if instance_visible(geo, inst, s) and tr > 0.0 and not csg_member and casts_shadow(casters, bit, inst):
                     w2o = instance_world_to_object(geo, inst, s)
                     rd_o = wp.transform_vector(w2o, rd)
                     tr = mesh_transmittance(geo, mats, tex, geo.inst_mesh[inst], wp.transform_point(w2o, ro), rd_o,
@@ -156,6 +169,14 @@ def transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd
                 if d[j] < BIG:
                     stack[sp] = c[j]
                     sp += 1
-    if tr > 0.0 and geo.csg_groups > 0:
+    if tr > 0.0 and geo.csg_groups > 0 and bit < 0:
         tr = csg_transmittance(geo, mats, tex, ro, rd, tmax, s, tr)
     return tr
+
+
+@wp.func(inline=True)  # no copy of the Geometry struct
+def transmittance(geo: Geometry, mats: Materials, tex: Textures, ro: wp.vec3, rd: wp.vec3, tmax: float,
+                  s: float):
+    """Fraction of light passing along the segment ro + t rd, t in (0, tmax), at time s: every instance blocks
+    (``linked_transmittance`` without a group, which then reads no caster mask: ``inst_mesh`` stands in)."""
+    return linked_transmittance(geo, mats, tex, ro, rd, tmax, s, geo.inst_mesh, -1)

@@ -21,11 +21,11 @@ from renderer.accel.quantize import QNODE_DTYPE, QNode, quantize
 from renderer.accel.wide import WideBvh, box_records, collapse, root_boxes
 from renderer.accel.triangle_kernels import leaf_triangles, triangle_boxes
 from renderer.motion.kernels import upload_keys
-from renderer.motion.transform import matrices_at
+from renderer.motion.transform import MotionTransform, matrices_at
 from renderer.scene.analytic import (CLOUD_KINDS, SHAPE_BOX_PAD, analytic_shapes, realize_tessellations,
                                      shape_bounds, shape_table, shape_world_boxes)
 from renderer.scene.mesh_facts import is_closed
-from renderer.scene.model import Mesh, MotionTransform, Scene
+from renderer.scene.model import Mesh, Scene
 from renderer.shading.materials import opaque_for_shadows
 
 MAX_TLAS_KEYS = 33  # top-level time keys for moving scenes (32 segments over the shutter)

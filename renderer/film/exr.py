@@ -20,21 +20,21 @@ Conventions at the boundary (the OpenEXR 3.x Python binding decides most attribu
   sequences of str -> stringvector, ``OpenEXR.TimeCode`` -> timecode. ``framesPerSecond`` accepts a number and is
   stored as the closest simple rational (23.976 -> 24000/1001, see ``fps_to_rational``); ``timeCode`` accepts an
   ``OpenEXR.TimeCode`` or an ``(hours, minutes, seconds, frame)`` tuple (see ``timecode_from_frame``).
-- **Atomic writes.** The file is written to a temporary file in the target directory, fsynced and renamed over the
-  target, so readers see the old file or the complete new one, never a partial one.
+- **Atomic writes** (``renderer.files``). The file is written to a temporary file in the target directory, fsynced
+  and renamed over the target, so readers see the old file or the complete new one, never a partial one.
 """
 from __future__ import annotations
 
-import contextlib
 import errno
 import math
 import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from fractions import Fraction
 
 import numpy as np
 import OpenEXR
+
+from renderer.files import replacing
 
 HALF_MAX = 65504.0
 FLOAT_MAX = float(np.finfo(np.float32).max)
@@ -108,20 +108,8 @@ def write_exr(
     header["displayWindow"] = (display_window[:2], display_window[2:])
     exr = OpenEXR.File(header, pixels)
 
-    fd, tmp = tempfile.mkstemp(dir=directory, prefix=f".{os.path.basename(path)}.", suffix=".exr.tmp")
-    try:
-        try:
-            os.fchmod(fd, 0o666 & ~_umask())  # mkstemp makes 0600; give the output a normal file's mode
-            _write_file(exr, tmp)
-            os.fsync(fd)  # same inode as the library's own handle: flushes what it wrote
-        finally:
-            os.close(fd)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
-    _fsync_directory(directory)
+    with replacing(path) as tmp:
+        _write_file(exr, tmp)
     return replaced
 
 
@@ -179,8 +167,9 @@ def fps_to_rational(fps: float | Fraction | OpenEXR.Rational) -> Fraction:
     return rate
 
 
-def timecode_from_frame(frame: int, fps: float | Fraction) -> OpenEXR.TimeCode:
-    """SMPTE time code HH:MM:SS:FF of a frame index counted from 00:00:00:00, non-drop-frame.
+def timecode_fields(frame: int, fps: float | Fraction) -> tuple[int, int, int, int]:
+    """SMPTE time code (hours, minutes, seconds, frame) of a frame index counted from 00:00:00:00, non-drop-frame:
+    the plain tuple ``write_exr`` takes for ``timeCode`` (it pickles; an ``OpenEXR.TimeCode`` does not).
 
     Counts at the nominal integer rate (round(fps): 24 for 23.976, 30 for 29.97), as non-drop-frame time code does;
     hours wrap at 24. Drop-frame counting is not implemented.
@@ -191,7 +180,12 @@ def timecode_from_frame(frame: int, fps: float | Fraction) -> OpenEXR.TimeCode:
     if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)) or frame < 0:
         raise ValueError(f"frame must be a non-negative integer, got {frame!r}")
     seconds, ff = divmod(int(frame), nominal)
-    return OpenEXR.TimeCode((seconds // 3600) % 24, (seconds // 60) % 60, seconds % 60, ff, *_TIMECODE_FLAGS)
+    return (seconds // 3600) % 24, (seconds // 60) % 60, seconds % 60, ff
+
+
+def timecode_from_frame(frame: int, fps: float | Fraction) -> OpenEXR.TimeCode:
+    """``timecode_fields`` as an ``OpenEXR.TimeCode`` (no flags, no binary groups)."""
+    return OpenEXR.TimeCode(*timecode_fields(frame, fps), *_TIMECODE_FLAGS)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -326,28 +320,3 @@ def _plain(value: object) -> object:
             return float(value[0])
         return tuple(v.item() for v in value)
     return value
-
-
-def _umask() -> int:
-    try:
-        with open("/proc/self/status") as status:
-            for line in status:
-                if line.startswith("Umask:"):
-                    return int(line.split()[1], 8)
-    except OSError:
-        pass
-    return 0o022
-
-
-def _fsync_directory(directory: str) -> None:
-    """Make the rename durable; not possible on every platform, so best effort."""
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)

@@ -14,16 +14,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from renderer.accel.intersect import (
-    BIG,
-    Geometry,
-    instance_visible,
-    instance_world_to_object,
-    safe_inverse,
-    tlas_keys_at,
-)
-from renderer.accel.occlusion import mesh_transmittance, transmittance
-from renderer.accel.wide import entries, leaf_range, root_entered, wide_stack_t
+from renderer.accel.intersect import Geometry
+from renderer.accel.occlusion import linked_transmittance
 from renderer.shading.materials import Materials
 from renderer.shading.textures import Textures
 from renderer.struct_refs import by_reference
@@ -95,49 +87,6 @@ def lit_by(links: Links, li: int, inst: int):
 
 
 @wp.func(inline=True)  # one call site: no copy of the Geometry struct
-def caster_transmittance(geo: Geometry, mats: Materials, tex: Textures, links: Links, bit: int, ro: wp.vec3,
-                         rd: wp.vec3, tmax: float, s: float):
-    """``occlusion.transmittance`` through the instances that cast shadows for link group ``bit`` only."""
-    k0, k1, u = tlas_keys_at(geo, s)
-    nk = geo.tlas_nkeys
-    inv_d = safe_inverse(rd)
-    stack = wide_stack_t()  # scratch: not zeroed, read below sp only
-    stack[0] = 0  # the root
-    sp = int(1)
-    if not root_entered(geo.tlas_root, k0, ro, inv_d, tmax):
-        sp = 0  # the ray passes by every instance of the top level
-    tr = float(1.0)
-    while sp > 0 and tr > 0.0:
-        sp -= 1
-        ref = stack[sp]
-        if ref < 0:
-            first, count = leaf_range(ref)
-            for i in range(count):
-                inst = geo.tlas_prim[first + i]
-                casts = ((links.inst_caster[inst] >> bit) & 1) != 0
-                if casts and instance_visible(geo, inst, s) and tr > 0.0:
-                    w2o = instance_world_to_object(geo, inst, s)
-                    tr = mesh_transmittance(geo, mats, tex, geo.inst_mesh[inst], wp.transform_point(w2o, ro),
-                                            wp.transform_vector(w2o, rd), tmax, s, tr)
-        else:
-            c = geo.tlas_child[ref]
-            d = entries(geo.tlas_box, ref * nk, c, k0, k1, u, ro, inv_d, tmax)
-            for j in range(4):
-                if d[j] < BIG:
-                    stack[sp] = c[j]
-                    sp += 1
-    return tr
-
-
-@wp.func(inline=True)  # no copy of the Geometry struct
-def _segment_transmittance(geo: Geometry, mats: Materials, tex: Textures, links: Links, bit: int, ro: wp.vec3,
-                           rd: wp.vec3, tmax: float, s: float):
-    if bit < 0:
-        return transmittance(geo, mats, tex, ro, rd, tmax, s)
-    return caster_transmittance(geo, mats, tex, links, bit, ro, rd, tmax, s)
-
-
-@wp.func(inline=True)  # one call site: no copy of the Geometry struct
 def shadow_factor(geo: Geometry, mats: Materials, tex: Textures, links: Links, li: int, ro: wp.vec3,
                   rd: wp.vec3, tmax: float, s: float):
     """What fraction (per channel) of light li's emission arrives along the shadow ray (ro, rd, tmax)."""
@@ -169,7 +118,7 @@ def shadow_factor(geo: Geometry, mats: Materials, tex: Textures, links: Links, l
             b = wp.min(a + step, t)
             strength = wp.pow(1.0 - (float(k) - 0.5) / float(links.falloff_steps), fo[1])
         if b > a and tr > 0.0:
-            tk = _segment_transmittance(geo, mats, tex, links, bit, ro + rd * a, rd, b - a, s)
+            tk = linked_transmittance(geo, mats, tex, ro + rd * a, rd, b - a, s, links.inst_caster, bit)
             if strength == 1.0:
                 tr = tr * tk
             else:

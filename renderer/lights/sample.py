@@ -1,9 +1,9 @@
 """Sampling lights (the paper's light-area dimension) and the pdfs multiple importance sampling needs.
 
 ``sample_light`` places light ``li`` at the sample's time and picks a point on it from two uniform numbers
-(area, spherical-rectangle or cone sampling of ``sampling``), returning the solid-angle pdf. The same pdf is
-given by ``area_light_hit`` / ``infinite_light_eval`` / ``mesh_light_pdf`` for a direction found by BSDF
-sampling, so both strategies can be weighted by the power heuristic.
+(area, spherical-rectangle or cone sampling: ``lights.shapes``, ``sampling.warps``), returning the solid-angle
+pdf. The same pdf is given by ``area_light_hit`` / ``infinite_light_eval`` / ``mesh_light_pdf`` for a direction
+found by BSDF sampling, so both strategies can be weighted by the power heuristic.
 """
 from __future__ import annotations
 

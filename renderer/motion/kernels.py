@@ -2,7 +2,7 @@
 
 Every moving thing (instances, lights, the camera) stores its ``MotionTransform`` keys in one shared
 ``MotionKeys`` table; a thing refers to its keys by (offset, count). Between keys translation and scale-shear
-are interpolated linearly and rotation by slerp, which is what ``motion.matrix_at`` does in NumPy.
+are interpolated linearly and rotation by slerp, which is what ``transform.matrix_at`` does in NumPy.
 """
 from __future__ import annotations
 

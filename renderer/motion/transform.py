@@ -2,7 +2,7 @@
 
 Transforms are decomposed into translation, rotation and scale-shear keys (polar decomposition, as in pbrt's
 AnimatedTransform) so that rotations interpolate along arcs (slerp) instead of shrinking through a matrix lerp.
-The Warp twins of ``interpolate`` live in ``motion_kernels.py``; tests compare the two.
+The Warp twins of ``interpolate`` live in ``kernels.py``; tests compare the two.
 """
 from __future__ import annotations
 

@@ -21,10 +21,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from renderer.motion.transform import matrix_at
+from renderer.motion.transform import MotionTransform, matrix_at
 from renderer.scene.analytic import analytic_shapes, realize_tessellations
 from renderer.scene.mesh_facts import is_closed
-from renderer.scene.model import LIGHT_MESH, Instance, Mesh, MotionTransform, Scene
+from renderer.scene.model import LIGHT_MESH, Instance, Mesh, Scene
 
 
 def _is_still(scene: Scene, inst: Instance, analytic: list) -> bool:

@@ -1,6 +1,6 @@
 """The renderer's own plain scene description: numpy arrays and dataclasses.
 
-This is the contract between the USD importer (``usd_scene``) and everything that renders. Nothing here
+This is the contract between the USD importer (``renderer.usd``) and everything that renders. Nothing here
 knows about pxr, Warp or HTTP. All positions are in scene units (the stage's units; ``meters_per_unit``
 converts), times are **normalised shutter time** ``s`` in [0, 1] over the frame's shutter interval
 ``[shutter.open, shutter.close]`` (absolute time codes; ``renderer.motion.shutter``), and colours are linear Rec.709 RGB.
@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from renderer.motion.shutter import Shutter
-from renderer.motion.transform import MotionTransform  # noqa: F401  (part of the scene contract)
+from renderer.motion.transform import MotionTransform
 
 # Light kinds (the integer ``kind`` the kernels dispatch on).
 LIGHT_RECT = 0
@@ -69,7 +69,7 @@ class Mesh:
     colors: np.ndarray | None = None
     double_sided: bool = True
     # (T,) bool: the triangle is part of a closed surface (a solid that refracts and absorbs); None: derived
-    # from the whole mesh (``geometry_util.is_closed``). Set when meshes are merged (``flatten``).
+    # from the whole mesh (``mesh_facts.is_closed``). Set when meshes are merged (``flatten``).
     solid: np.ndarray | None = None
     # (T, 4) float32 per-triangle object-space tangent dP/du (unit xyz) and handedness w = +-1 (bitangent =
     # w * cross(n, t)); w = 0 where uvs are missing or degenerate. None: computed from points key 0 and uvs when
@@ -197,7 +197,7 @@ class Material:
     opacity_keys: tuple[tuple[float, float], ...] | None = None
     normal: tuple[float, float, float] = (0.0, 0.0, 1.0)  # tangent-space normal (constant; a map in textures)
     occlusion: float = 1.0  # imported, not used by the renderer
-    # Beer-Lambert absorption inside closed solids (extension attributes, see ``usd_materials``): light that
+    # Beer-Lambert absorption inside closed solids (extension attributes, see ``usd.materials``): light that
     # travels ``absorption_distance`` scene units inside keeps ``absorption_color`` of itself. White: none.
     absorption_color: tuple[float, float, float] = (1.0, 1.0, 1.0)
     absorption_distance: float = 1.0
@@ -337,7 +337,7 @@ class Light:
     specular: float = 1.0  # inputs:specular: ... on their specular response (specular, coat, transmission lobes)
     # LIGHT_DOME with a lat-long texture: (H, W, 3) float32 linear emitted radiance (already multiplied by
     # intensity, 2^exposure, color and blackbody), row 0 = the top of the image. Texel centre (u, v) =
-    # ((col + 0.5) / W, (row + 0.5) / H) is the dome-local direction ``textures.latlong_to_direction(u, v)``
+    # ((col + 0.5) / W, (row + 0.5) / H) is the dome-local direction ``envmap.latlong_to_dir_np(u, v)``
     # (OpenEXR lat-long: v = 0 is +Y, u = 0.5 is +Z, u = 0.25 is +X); ``transform`` carries dome-local to world
     # (including DomeLight_1's poleAxis turn). ``radiance`` then holds the texture's mean over the sphere.
     texture: np.ndarray | None = None

@@ -1,6 +1,6 @@
 """Surface scattering: the UsdPreviewSurface (spec v2.5) as a physically based BSDF for a path tracer with MIS.
 
-The lobes themselves (local frame) live in ``bsdf_lobes.py``, the microfacet pieces in ``microfacet.py``; this
+The lobes themselves (local frame) live in ``lobes.py``, the microfacet pieces in ``microfacet.py``; this
 module mixes them. All vectors are world space and unit; ``wo`` and ``wi`` point AWAY from the surface.
 
 Inputs: ``SurfaceParams`` (after textures). ``n`` is the shading normal and ``ng`` the geometric normal, both on the
@@ -33,7 +33,7 @@ transmission   ``(1 - opacity)`` times, for a solid (thin = 0, |ior - 1| >= 1e-3
                et al. 2007 with eta = ior entering (front = 1) or 1/ior leaving (front = 0), exact Fresnel between
                its reflection and refraction, alpha = roughness^2, refraction CLEAR (untinted: a glass of
                opacity 0 and the default diffuseColor 0.18 must not look smoked; colour inside a solid is
-               Beer-Lambert absorption, ``usd_materials``' documented extension) and divided by eta^2 (radiance
+               Beer-Lambert absorption, ``usd.materials``' documented extension) and divided by eta^2 (radiance
                convention, pbrt-v4 TransportMode::Radiance). For a thin sheet (thin = 1) or ior = 1: straight
                pass-through (delta, wi = -wo), untinted (opacity is coverage, the paper's transparency: the
                holes in a leaf are not green).
@@ -74,20 +74,16 @@ import numpy as np
 import warp as wp
 
 from renderer.sampling.warps import frame_from_normal
-from renderer.shading.lobes import (  # noqa: F401  (the spine's API, re-exported)
+from renderer.shading.lobes import (
     dielectric_eval,
     dielectric_sample,
     dielectric_sample_pdf,
     diffuse_eval,
-    diffuse_fresnel_factor,
     diffuse_sample,
     diffuse_sample_pdf,
     ggx_reflection_eval,
     ggx_reflection_sample,
     ggx_reflection_sample_pdf,
-    lambert_eval,
-    lambert_pdf,
-    lambert_sample,
 )
 from renderer.shading.microfacet import (
     f0_from_ior,
@@ -237,7 +233,7 @@ def bsdf_setup(p: SurfaceParams, n: wp.vec3, ng: wp.vec3, wo: wp.vec3, front: in
     b.cc = wp.clamp(p.clearcoat, 0.0, 1.0)
     b.alpha_cc = roughness_to_alpha(p.clearcoat_roughness)
     b.w_trans = 1.0 - opacity
-    b.tint = wp.vec3(1.0)  # clear: colour inside solids is Beer-Lambert's (usd_materials' absorption extension)
+    b.tint = wp.vec3(1.0)  # clear: colour inside solids is Beer-Lambert's (usd.materials' absorption extension)
     ior = wp.max(p.ior, 1.0e-3)
     b.eta = wp.where(front != 0, ior, 1.0 / ior)
     b.trans = TRANS_NONE

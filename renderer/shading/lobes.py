@@ -197,7 +197,7 @@ def dielectric_sample(alpha: float, eta: float, wo: wp.vec3, u: wp.vec2, uc: flo
     return wt, 1
 
 
-# ---- plain Lambert (the spine's lobe; ``bsdf`` re-exports it) --------------------------------------------------
+# ---- plain Lambert ---------------------------------------------------------------------------------------------
 
 
 @wp.func

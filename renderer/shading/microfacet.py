@@ -6,7 +6,7 @@ Isotropic only (UsdPreviewSurface has no anisotropy).
 
 Conventions
 -----------
-* Every function works in a LOCAL frame whose z axis is the macro-surface normal (use ``sampling.to_local``).
+* Every function works in a LOCAL frame whose z axis is the macro-surface normal (use ``warps.to_local``).
 * ``alpha`` is the GGX width. UsdPreviewSurface roughness r maps to ``alpha = max(r^2, ALPHA_MIN)``
   (``roughness_to_alpha``); below ``ALPHA_DELTA`` a lobe is a delta (perfect mirror / sharp refraction) and the
   callers branch on ``is_delta(alpha)`` instead of evaluating a 1e8-tall density in float32.

@@ -30,9 +30,6 @@ returning the fallback where no tile exists. Channel expansion follows UsdUVText
 grey-alpha -> (g, g, g, a), RGB -> (r, g, b, 1). Every image is mip-mapped (2x2 box levels down to 1x1);
 ``texture_fetch_lod`` filters trilinearly for a footprint in st units (the ray cone's, see
 ``shading.raycone``), ``texture_fetch`` reads level 0.
-
-Dome lights use the lat-long (OpenEXR/UsdLux) convention of ``envmap``, re-exported here as
-``latlong_to_direction``, ``direction_to_latlong`` and ``latlong_mean``.
 """
 from __future__ import annotations
 
@@ -42,9 +39,6 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from renderer.lights.envmap import dir_to_latlong_np as direction_to_latlong  # noqa: F401 - re-exported for the importer
-from renderer.lights.envmap import latlong_mean  # noqa: F401
-from renderer.lights.envmap import latlong_to_dir_np as latlong_to_direction  # noqa: F401
 from renderer.scene.model import Texture
 from renderer.struct_refs import by_reference
 
@@ -540,7 +534,6 @@ def image_bilinear_np(image: np.ndarray, st: np.ndarray, wrap_s: str = "repeat",
 __all__ = [
     "ImageError", "LoadedImage", "Textures", "read_image", "image_texture", "upload_textures", "texture_lookup",
     "texture_fetch", "texture_fetch_lod", "image_trilinear", "mip_chain", "mip_bytes", "atlas_bytes",
-    "image_bilinear", "lookup", "image_bilinear_np", "srgb_to_linear", "linear_to_srgb", "latlong_to_direction",
-    "direction_to_latlong", "latlong_mean", "WRAP_MODES", "OUTPUTS",
+    "image_bilinear", "lookup", "image_bilinear_np", "srgb_to_linear", "linear_to_srgb", "WRAP_MODES", "OUTPUTS",
     "MAX_TEXTURE_SIZE", "TEXTURE_BUDGET",
 ]

@@ -14,7 +14,8 @@ import numpy as np
 from pxr import Sdf, Usd, UsdGeom, UsdRender
 
 from renderer.errors import SceneError
-from renderer.scene.model import CONFORM_POLICIES, Camera, MotionTransform, RenderSettingsInfo
+from renderer.motion.transform import MotionTransform
+from renderer.scene.model import CONFORM_POLICIES, Camera, RenderSettingsInfo
 from renderer.usd.motion import TransformSampler, motion_transform
 
 AUTO_FOCAL_35MM = 35.0  # the automatic camera's lens, in "mm" against a 36 mm wide aperture

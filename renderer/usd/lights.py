@@ -18,7 +18,7 @@ as husk, kick and other renderers agree since they fixed their mirrored mapping 
 
 DomeLight textures (``inputs:texture:file``, OpenEXR/HDR/any OpenImageIO format, resolved relative to the
 authoring layer) become ``Light.texture``: linear radiance (the image times intensity * 2^exposure * color *
-blackbody), rows top to bottom, in the OpenEXR lat-long layout UsdLux specifies (``textures.latlong_to_direction``:
+blackbody), rows top to bottom, in the OpenEXR lat-long layout UsdLux specifies (``lights.envmap.latlong_to_dir_np``:
 top row +Y, image centre +Z, u = 0.25 +X, in the dome's frame). ``texture:format`` mirroredBall, angular and
 cubeMapVerticalCross are resampled to lat-long when loaded (``lights.dome_formats``); automatic picks by the
 image's shape (2:1 lat-long, 3:4 cross, square angular). ``guideRadius`` is a viewport guide: ignored.
@@ -34,11 +34,13 @@ from pxr import Ar, UsdGeom, UsdLux
 
 from renderer.color import LINEAR_REC709
 from renderer.lights import dome_formats, ies
+from renderer.lights.envmap import latlong_mean
+from renderer.motion.transform import MotionTransform
 from renderer.scene import model as sc
-from renderer.shading.textures import ImageError, latlong_mean
+from renderer.shading.textures import ImageError
 from renderer.usd.color import AttributeColors
-from renderer.usd.materials import read_asset_image, resolve_asset
 from renderer.usd.motion import TransformSampler, motion_transform
+from renderer.usd.texture_files import read_asset_image, resolve_asset
 
 # Row-vector matrix of a +90 degree turn about X: the dome's +Y pole to +Z (UsdLuxDomeLight.OrientToStageUpAxis).
 _POLE_Z_ROW = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
@@ -408,7 +410,7 @@ def default_light(camera_row: np.ndarray | None, up_axis: str) -> sc.Light:
         kind=sc.LIGHT_DISTANT,
         name="default key light",
         radiance=(DEFAULT_LIGHT_IRRADIANCE / distant_size_factor(DEFAULT_LIGHT_ANGLE),) * 3,  # nits
-        transform=sc.MotionTransform.static(col),
+        transform=MotionTransform.static(col),
         angle=DEFAULT_LIGHT_ANGLE,
     )
 

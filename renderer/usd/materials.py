@@ -68,8 +68,7 @@ from renderer.usd.shading_network import (Const, Display, Network, Tex, UV, expa
 from renderer.usd import arnold_nodes
 from renderer.usd.surfaces import PREVIEW, PREVIEW_DEFAULTS, surface_inputs, surface_model
 from renderer.usd.color import AttributeColors, attribute_colors
-from renderer.usd.texture_files import (TextureFiles, authoring_layer, read_asset_image,  # noqa: F401 - re-exported
-                                        resolve_asset)
+from renderer.usd.texture_files import TextureFiles
 
 GREY = (0.18, 0.18, 0.18)
 ABSORPTION_COLOR = "drt:absorptionColor"
@@ -163,7 +162,7 @@ class MaterialTable:
     def __init__(self, frame: float, warn, shutter=None, colors: AttributeColors | None = None):
         self.frame = frame
         self.colors = colors  # colours into the rendering space (None: as authored)
-        self.shutter = shutter  # usd_motion.Shutter: constant inputs varying inside it get keys (opacity)
+        self.shutter = shutter  # renderer.motion.shutter.Shutter: constant inputs varying inside it get keys (opacity)
         self.warn = warn
         self.materials: list[Material] = []
         self.files = TextureFiles(warn, colors=None if colors is None else colors.spaces)

@@ -18,7 +18,7 @@ import numpy as np
 from pxr import Gf, Usd, UsdGeom
 
 from renderer.motion.shutter import Shutter
-from renderer.scene.model import MotionTransform
+from renderer.motion.transform import MotionTransform
 
 MAX_SEGMENT_DEGREES = 10.0  # largest rotation between two consecutive keys
 _MAX_REFINE_ROUNDS = 6  # at most 2^6 sub-segments per authored segment
@@ -149,8 +149,8 @@ def to_column(rows: np.ndarray) -> np.ndarray:
 def motion_transforms(times, rows: np.ndarray) -> list[MotionTransform]:
     """One MotionTransform per instance from row-vector world matrices (N, K, 4, 4) at normalised times (K,).
 
-    Equivalent to ``motion.make_transform`` per instance (hemisphere-aligned quaternions, collapsed to one key
-    when nothing moves), vectorised over the N instances.
+    Equivalent to ``renderer.motion.transform.make_transform`` per instance (hemisphere-aligned quaternions,
+    collapsed to one key when nothing moves), vectorised over the N instances.
     """
     rows = np.asarray(rows, np.float64)
     n, k = rows.shape[:2]

@@ -9,12 +9,12 @@ from typing import Annotated
 from fastapi import Depends, Request, Security
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
-from ..auth import CHALLENGE, bearer_ok, client_identity
-from ..db import Store
 from ..errors import UNAUTHORIZED, ApiError
+from ..intake.submission import Inspector, Submitter
+from ..queue.store import Store
 from ..runtime import Runtime
 from ..settings import ServiceSettings
-from ..submission import Inspector, Submitter
+from .auth import CHALLENGE, bearer_ok, client_identity
 
 
 async def get_settings(request: Request) -> ServiceSettings:

@@ -22,11 +22,11 @@ from fastapi.responses import StreamingResponse
 from schemas import ErrorBody
 
 from .. import errors
-from ..db import JobNotFound
 from ..errors import ApiError
-from ..events import ChangeFeed, Subscription
-from ..views import job_public
+from ..queue.changes import ChangeFeed, Subscription
+from ..queue.store import JobNotFound
 from .deps import Authorized, StoreDep
+from .presenters import job_public
 
 router = APIRouter(tags=["events"], dependencies=[Authorized], responses={401: {"model": ErrorBody}})
 

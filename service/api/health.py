@@ -6,7 +6,7 @@ from fastapi.responses import PlainTextResponse, Response
 
 from schemas import Health
 
-from .. import metrics
+from . import metrics
 from .deps import Authorized, RuntimeDep
 from .docs import UNAUTHORIZED_ANSWER
 

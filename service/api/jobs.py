@@ -3,7 +3,8 @@
 Status codes: 202 + ``Location`` on create (also when an Idempotency-Key replays it), 400 malformed multipart, 401
 no or a wrong token, 404 unknown job or frame, 409 illegal state change or frame not ready, 413 upload too large,
 422 invalid input or a job over the limits, 503 cluster unavailable; each operation documents the ones it can
-answer. Detail strings are in ``service.errors`` and ``service.limits``. DELETE cancels an active job first.
+answer. Detail strings are in ``service.errors`` and ``service.intake.limit_checks``. DELETE cancels an active job
+first.
 """
 from __future__ import annotations
 
@@ -14,15 +15,18 @@ import anyio
 from fastapi import APIRouter, File, Form, Header, Query, Request, Response, UploadFile
 from fastapi.responses import FileResponse, JSONResponse
 
+from renderer.film.tiles import split_tiles
 from schemas import JobList, JobPublic, JobState
 
-from .. import errors, jobs as sm, preview
-from ..checkpoints import JobFiles, tile_grid
-from ..db import JobActive, JobNotFound, JobRow, StoreBusy, decode_cursor, encode_cursor
+from .. import errors
 from ..errors import ApiError
-from ..views import find_frame, job_public, job_url
+from ..farm.job_files import JobFiles
+from ..queue import states as sm
+from ..queue.store import JobActive, JobNotFound, JobRow, StoreBusy, decode_cursor, encode_cursor
+from . import preview
 from .deps import Authorized, ClientIdDep, InspectorDep, RuntimeDep, SettingsDep, StoreDep, SubmitterDep
 from .docs import UNAUTHORIZED_ANSWER, errors as answers
+from .presenters import find_frame, job_public, job_url
 
 router = APIRouter(prefix="/jobs", tags=["jobs"], dependencies=[Authorized], responses=UNAUTHORIZED_ANSWER)
 
@@ -172,7 +176,7 @@ def get_preview(store: StoreDep, settings: SettingsDep, job_id: str, frame: str)
     if f.done and exr.is_file():
         data = preview.from_exr(exr)
     else:
-        boxes = tile_grid(row.width, row.height, row.tile_size)
+        boxes = split_tiles(row.width, row.height, row.tile_size)
         data = preview.from_tiles([(files.tile(f.idx, i), b) for i, b in enumerate(boxes)], row.width, row.height,
                                   row.exposure_scale)
     return Response(data, media_type="image/png", headers={"Cache-Control": "no-store"})

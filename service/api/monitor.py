@@ -6,9 +6,10 @@ from fastapi import APIRouter
 
 from schemas import ErrorBody, Farm, TileMap
 
-from .. import errors, farm
-from ..db import JobNotFound
+from .. import errors
 from ..errors import ApiError
+from ..farm import view as farm
+from ..queue.store import JobNotFound
 from .deps import Authorized, RuntimeDep
 
 router = APIRouter(tags=["monitor"], dependencies=[Authorized], responses={401: {"model": ErrorBody}})

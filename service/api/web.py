@@ -14,7 +14,7 @@ from fastapi.responses import FileResponse
 
 from ..errors import ApiError
 
-WEB_DIR = Path(__file__).resolve().parent.parent / "web"
+STATIC_DIR = Path(__file__).resolve().parent / "static"
 FILES = {"app.js": "text/javascript; charset=utf-8", "style.css": "text/css; charset=utf-8",
          "favicon.svg": "image/svg+xml"}
 CSP = ("default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' blob: data:; connect-src 'self'; "
@@ -31,7 +31,7 @@ def is_public(path: str) -> bool:
 
 
 def _shell() -> FileResponse:
-    return FileResponse(WEB_DIR / "index.html", media_type="text/html; charset=utf-8", headers=HEADERS)
+    return FileResponse(STATIC_DIR / "index.html", media_type="text/html; charset=utf-8", headers=HEADERS)
 
 
 @router.get("/")
@@ -53,4 +53,4 @@ def farm_page():
 def asset(name: str):
     if name not in FILES:
         raise ApiError(404, "not found")
-    return FileResponse(WEB_DIR / name, media_type=FILES[name], headers=HEADERS)
+    return FileResponse(STATIC_DIR / name, media_type=FILES[name], headers=HEADERS)

@@ -27,21 +27,21 @@ DEMO = ROOT / "examples" / "demo.usda"
 
 def broken_tile(task, scene):
     """Fail the tiles of one scene (a failed job in the list), render the others."""
-    from service import worker
+    from service.farm import tasks
 
     if Path(task.spec.scene_path).name == "lighting_v3.usda":
         raise RuntimeError("worker ran out of memory loading /World/Set/Hero (26.1 GiB requested)")
-    return worker.render_tile_task(task, scene)
+    return tasks.render_tile_task(task, scene)
 
 
 def main(out: Path) -> None:
     reason = why_no_browser()
     if reason:
         sys.exit(f"make_screenshots: {reason}")
-    import service.scheduler
+    import service.farm.dispatcher
     from pxr import Usd, UsdGeom
 
-    service.scheduler.render_tile_task = broken_tile
+    service.farm.dispatcher.render_tile_task = broken_tile
     tmp = Path(tempfile.mkdtemp(prefix="drt-shots-"))
     scenes = {}
     for name in ("shot010_v2.usda", "shot020_v1.usda", "lighting_v3.usda", "turntable.usda"):

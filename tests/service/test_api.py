@@ -10,9 +10,11 @@ import pytest
 from PIL import Image
 
 from renderer.film.exr import read_exr
-from service import inspection, worker
+from renderer.film.tiles import Tile
+from service.farm import tasks
+from service.intake import inspection
 from service.api.deps import get_settings, get_store
-from service.db import Store, StoreBusy
+from service.queue.store import Store, StoreBusy
 
 from service_helpers import (CONTRACT_LIMITS, assert_same_exr, cli_render, http_contract, service_settings, submit,
                              wait_job, write_card)
@@ -313,33 +315,33 @@ def test_health_metrics_and_docs(client, card):
 
 
 def test_each_frame_is_prepared_once_per_worker(client, card):
-    worker.clear_cache()
-    before = worker.stats()["prepared"]
+    tasks.clear_cache()
+    before = tasks.stats()["prepared"]
     settings = {"width": 32, "height": 32, "spp": 2, "tile": 8, "frames": [0, 1]}  # 16 tiles per frame
     job = wait_job(client, submit(client, card, settings).json()["id"])
     assert job["state"] == "succeeded" and job["tiles_total"] == 32
-    assert worker.stats()["prepared"] - before == 2
+    assert tasks.stats()["prepared"] - before == 2
 
 
 def test_jobs_that_sample_differently_share_a_prepared_scene_and_each_equals_drt_render(client, card, tmp_path):
     """The worker's cache is keyed by what shapes the prepared scene, not by seed, spp, filters or AOVs (the load
     test's jobs differ only in seed: each was loaded and prepared anew). Each job still renders as its own."""
-    worker.clear_cache()
-    before = worker.stats()["prepared"]
+    tasks.clear_cache()
+    before = tasks.stats()["prepared"]
     first = {"width": 24, "height": 16, "spp": 4, "seed": 1}
     second = {"width": 24, "height": 16, "spp": 8, "seed": 2, "filter": "box", "aovs": ["depth"], "max_depth": 2}
     for i, settings in enumerate((first, second)):
         job = wait_job(client, submit(client, card, settings).json()["id"])
         assert job["state"] == "succeeded", job
         (tmp_path / f"svc{i}.exr").write_bytes(client.get(job["frames"][0]["exr_url"]).content)
-    assert worker.stats()["prepared"] - before == 1
+    assert tasks.stats()["prepared"] - before == 1
     cli_render(card, tmp_path / "cli0.exr", "--width", 24, "--height", 16, "--spp", 4, "--seed", 1)
     cli_render(card, tmp_path / "cli1.exr", "--width", 24, "--height", 16, "--spp", 8, "--seed", 2, "--filter", "box",
                "--aov", "depth", "--max-depth", 2)
     assert_same_exr(tmp_path / "svc0.exr", tmp_path / "cli0.exr")
     assert_same_exr(tmp_path / "svc1.exr", tmp_path / "cli1.exr")
     job = wait_job(client, submit(client, card, {**first, "width": 16}).json()["id"])  # a new resolution
-    assert job["state"] == "succeeded" and worker.stats()["prepared"] - before == 2
+    assert job["state"] == "succeeded" and tasks.stats()["prepared"] - before == 2
 
 
 # -- failures inside the cluster -----------------------------------------------------------------------------------
@@ -352,13 +354,13 @@ def flaky_tile(task, scene):
     if any(box[:2] == (0, 0) for box in task.tiles) and not _calls.get("failed"):
         _calls["failed"] = True
         raise RuntimeError("transient")
-    return worker.render_tile_task(task, scene)
+    return tasks.render_tile_task(task, scene)
 
 
 def broken_tile(task, scene):
     if any(box[:2] == (0, 0) for box in task.tiles):
         raise RuntimeError("boom")
-    return worker.render_tile_task(task, scene)
+    return tasks.render_tile_task(task, scene)
 
 
 def renderer_says_no(task, scene):
@@ -366,10 +368,10 @@ def renderer_says_no(task, scene):
 
 
 def test_a_failed_tile_is_retried(make_client, card, monkeypatch, tmp_path):
-    import service.scheduler
+    import service.farm.dispatcher
 
     _calls.clear()
-    monkeypatch.setattr(service.scheduler, "render_tile_task", flaky_tile)
+    monkeypatch.setattr(service.farm.dispatcher, "render_tile_task", flaky_tile)
     client = make_client()
     job = wait_job(client, submit(client, card, SMALL).json()["id"])
     assert job["state"] == "succeeded", job
@@ -380,9 +382,9 @@ def test_a_failed_tile_is_retried(make_client, card, monkeypatch, tmp_path):
 
 
 def test_a_tile_that_keeps_failing_fails_the_job(make_client, card, monkeypatch):
-    import service.scheduler
+    import service.farm.dispatcher
 
-    monkeypatch.setattr(service.scheduler, "render_tile_task", broken_tile)
+    monkeypatch.setattr(service.farm.dispatcher, "render_tile_task", broken_tile)
     client = make_client(tile_retries=2)
     job = wait_job(client, submit(client, card, SMALL).json()["id"])
     assert job["state"] == "failed"
@@ -393,9 +395,9 @@ def test_a_tile_that_keeps_failing_fails_the_job(make_client, card, monkeypatch)
 
 
 def test_a_renderer_error_fails_the_job_at_once(make_client, card, monkeypatch):
-    import service.scheduler
+    import service.farm.dispatcher
 
-    monkeypatch.setattr(service.scheduler, "render_tile_task", renderer_says_no)
+    monkeypatch.setattr(service.farm.dispatcher, "render_tile_task", renderer_says_no)
     client = make_client()
     job = wait_job(client, submit(client, card, SMALL).json()["id"])
     assert (job["state"], job["error"]) == ("failed", "frame 0 has no light")
@@ -426,7 +428,7 @@ def test_a_stopped_service_resumes_from_its_checkpoints(make_client, card, tmp_p
     client2 = make_client(threads_per_worker=2)  # it resumes the job at once, maybe before its first request
     job = wait_job(client2, job_id)
     assert job["state"] == "succeeded"
-    rendered_after = client2.app.state.runtime.coordinator.scheduler.tiles_completed
+    rendered_after = client2.app.state.runtime.coordinator.dispatcher.tiles_completed
     assert rendered_after == job["tiles_total"] - done_before  # checkpointed tiles were not rendered again
     (tmp_path / "got.exr").write_bytes(client2.get(job["frames"][0]["exr_url"]).content)
     cli_render(card, tmp_path / "want.exr", "--width", 64, "--height", 64, "--spp", 128)
@@ -451,7 +453,7 @@ def test_an_unreadable_checkpoint_is_rendered_again(make_client, card, tmp_path)
     client2 = make_client(threads_per_worker=2)
     job = wait_job(client2, job_id)
     assert job["state"] == "succeeded" and job["error"] is None, job
-    assert client2.app.state.runtime.coordinator.scheduler.tiles_completed == job["tiles_total"] - done_before + 2
+    assert client2.app.state.runtime.coordinator.dispatcher.tiles_completed == job["tiles_total"] - done_before + 2
     assert "drt_task_failures_total 0" in client2.get("/metrics").text
     (tmp_path / "got.exr").write_bytes(client2.get(job["frames"][0]["exr_url"]).content)
     cli_render(card, tmp_path / "want.exr", "--width", 64, "--height", 64, "--spp", 64)
@@ -488,14 +490,14 @@ def test_a_running_tile_stops_when_its_future_is_cancelled(card):
     data = card.read_bytes()
     sha = hashlib.sha256(data).hexdigest()
     spec = RenderSpec.from_settings(JobCreate(width=64, height=64, spp=4096), card.name, sha)
-    task = worker.TileTask(spec=spec, frame=0.0, tiles=((0, 0, 64, 64),), width=64, height=64)
+    task = tasks.TileTask(spec=spec, frame=0.0, tiles=(Tile(0, 0, 64, 64),), width=64, height=64)
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster, \
             Client(cluster, set_as_default=False) as client:
-        scene = client.submit(worker.scene_package, sha, card.name, data, pure=False)
-        small = worker.TileTask(spec=spec, frame=0.0, tiles=((0, 0, 1, 1),), width=64, height=64)
-        assert "arrays" in client.submit(worker.render_tile_task, small, scene, pure=False).result()  # prepared
-        before = worker.stats()["stopped"]
-        fut = client.submit(worker.render_tile_task, task, scene, pure=False)
+        scene = client.submit(tasks.scene_package, sha, card.name, data, pure=False)
+        small = tasks.TileTask(spec=spec, frame=0.0, tiles=(Tile(0, 0, 1, 1),), width=64, height=64)
+        assert "arrays" in client.submit(tasks.render_tile_task, small, scene, pure=False).result()  # prepared
+        before = tasks.stats()["stopped"]
+        fut = client.submit(tasks.render_tile_task, task, scene, pure=False)
         deadline = time.monotonic() + 30
         while not any(fut.key in keys for keys in client.processing().values()):
             assert time.monotonic() < deadline
@@ -503,6 +505,6 @@ def test_a_running_tile_stops_when_its_future_is_cancelled(card):
         time.sleep(0.3)
         t0 = time.perf_counter()
         fut.cancel()
-        while worker.stats()["stopped"] == before:
+        while tasks.stats()["stopped"] == before:
             assert time.perf_counter() - t0 < 3.0, "16M samples would take well over 10 s"
             time.sleep(0.02)

@@ -198,7 +198,7 @@ def _explode(task, scene):
 
 
 def test_a_failed_job_shows_its_error_and_warnings_as_text(server, tab, tmp_path, monkeypatch):
-    import service.scheduler
+    import service.farm.dispatcher
     from pxr import Usd, UsdGeom
 
     scene = write_card(tmp_path / "warn.usda")
@@ -206,7 +206,7 @@ def test_a_failed_job_shows_its_error_and_warnings_as_text(server, tab, tmp_path
     stage.GetPrimAtPath("/World/Cam").GetAttribute("projection").Set(HTML)  # the renderer's warning quotes it
     stage.DefinePrim("/World/Smoke", "Volume")  # not rendered: a warning names it
     stage.Save()
-    monkeypatch.setattr(service.scheduler, "render_tile_task", _explode)
+    monkeypatch.setattr(service.farm.dispatcher, "render_tile_task", _explode)
     r = submit(server.http, scene, {"width": 16, "height": 16, "spp": 1, "tile": 8}, name=f"{HTML}.usda")
     assert r.status_code == 202, r.text
     job = wait_job(server.http, r.json()["id"])

@@ -7,7 +7,7 @@ from renderer.options import SETTINGS_TABLE, TIME_LIMITED_SPP
 from schemas import FrameRange, JobCreate
 from service.errors import ApiError
 from service.spec import RenderSpec
-from service.submission import parse_settings
+from service.intake.submission import parse_settings
 
 
 def test_defaults_are_the_tables():

@@ -179,7 +179,7 @@ def test_a_killed_service_resumes_its_running_job(servers, card, tmp_path):
 
 
 def _coordinator(server: Server) -> psutil.Process:
-    """The child process that runs the job scheduler and the Dask client (``service.coordinator``)."""
+    """The child process that runs the job scheduler and the Dask client (``service.farm.coordinator``)."""
     (proc,) = [p for p in psutil.Process(server.proc.pid).children()
                if any("spawn_main" in a for a in p.cmdline())]
     return proc
@@ -243,12 +243,12 @@ def test_a_killed_worker_process_still_yields_the_same_image(card, tmp_path):
         while client.get(f"/v1/jobs/{job_id}").json()["tiles_done"] < 2:
             assert time.monotonic() < deadline
             time.sleep(0.02)
-        assert runtime.coordinator.scheduler.in_flight() > 0  # tiles are running on the worker right now
-        (pid,) = runtime.coordinator.engine.worker_pids().values()
+        assert runtime.coordinator.dispatcher.in_flight() > 0  # tiles are running on the worker right now
+        (pid,) = runtime.coordinator.cluster.worker_pids().values()
         os.kill(pid, signal.SIGKILL)
         job = wait_job(client, job_id, timeout=180)
         assert job["state"] == "succeeded", job
-        (new_pid,) = runtime.coordinator.engine.worker_pids().values()
+        (new_pid,) = runtime.coordinator.cluster.worker_pids().values()
         assert new_pid != pid  # the nanny started a new worker process
         (tmp_path / "svc.exr").write_bytes(client.get(job["frames"][0]["exr_url"]).content)
     cli_render(card, tmp_path / "cli.exr", "--width", 64, "--height", 64, "--spp", 2048)
