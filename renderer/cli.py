@@ -460,9 +460,8 @@ class _Run:
                               options=replace(base.options, aovs=aovs))
             prep = request.prepare(stage=self.stage, reuse=self.prepared.get(key))
             self.prepared[key] = prep
-            if g == 0:
-                for w in prep.warnings:
-                    self.warn(w)
+            for w in prep.warnings:  # each once per run (``_Warnings``)
+                self.warn(w)
             done = g / len(groups)
             bar = _Progress(prep.width * prep.height * prep.options.spp,
                             enabled=sys.stderr.isatty() and not args.quiet and not self.alf.enabled)
