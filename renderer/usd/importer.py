@@ -43,6 +43,15 @@ from renderer.usd.motion import Shutter, TransformSampler, motion_transforms, re
 from renderer.usd.skel import Skinning
 from renderer.usd.subdiv import SubdivisionDetail
 
+# What reading a prim's data can raise (pxr's errors and Boost.Python's ArgumentError, a TypeError): the prim,
+# or the optional step that read it, is skipped with a warning naming the error.
+_READ_ERRORS = (Tf.ErrorException, ValueError, TypeError, ArithmeticError)
+
+
+def _failure(prim, e: Exception) -> str:
+    return f"{prim.GetPath()} ({type(e).__name__}: {' '.join(str(e).split())[:160]})"
+
+
 _PI_ATTRS = ("positions", "orientations", "orientationsf", "scales", "velocities", "angularVelocities",
              "accelerations", "protoIndices")
 
@@ -332,9 +341,8 @@ class _Importer:
         """Run fn(prim, ...); a prim whose data cannot be read (wrong types, bad values) is skipped with a warning."""
         try:
             fn(prim, *args)
-        except (Tf.ErrorException, ValueError, TypeError, ArithmeticError) as e:
-            self.warn("prims with unreadable data skipped",
-                      f"{prim.GetPath()} ({type(e).__name__}: {' '.join(str(e).split())[:160]})")
+        except _READ_ERRORS as e:
+            self.warn("prims with unreadable data skipped", _failure(prim, e))
 
     def _statically_invisible(self, img) -> bool:
         attr = img.GetVisibilityAttr()
@@ -376,7 +384,11 @@ class _Importer:
         path = str(prim.GetPath())
         times = self.skinning.key_times(prim, skin)
         if prim.IsA(UsdGeom.Mesh):
-            keys = self.skinning.skinned_points(prim, skin, times)
+            try:
+                keys = self.skinning.skinned_points(prim, skin, times)
+            except _READ_ERRORS as e:  # the skinning fails, not the mesh: drawn as authored
+                self.warn("skinned meshes UsdSkel cannot skin drawn unskinned", _failure(prim, e))
+                return False
             if keys is None:
                 self.warn("skinned meshes UsdSkel cannot skin drawn unskinned", path)
                 return False
@@ -387,7 +399,11 @@ class _Importer:
                 xf_times, rows = self.xf.motion(skin.skeleton)
                 self._add_instances([mesh], [path], xf_times, rows[None], interval)
             return True
-        rel = self.skinning.skinned_transforms(skin, times)
+        try:
+            rel = self.skinning.skinned_transforms(skin, times)
+        except _READ_ERRORS as e:
+            self.warn("rigidly skinned prims UsdSkel cannot skin drawn unskinned", _failure(prim, e))
+            return False
         if rel is None:
             self.warn("rigidly skinned prims UsdSkel cannot skin drawn unskinned", path)
             return False
@@ -502,8 +518,13 @@ class _Importer:
             geom.uvs = uvs
 
     def _skinned_normals(self, prim, skin, geom) -> np.ndarray | None:
-        """Authored per-corner normals of a skinned polygon mesh carried to the skinned pose at the frame."""
-        mats = self.skinning.normal_matrices(prim, skin, self.frame)
+        """Authored per-corner normals of a skinned polygon mesh carried to the skinned pose at the frame; None
+        (the renderer's own normals, with one warning) where they cannot be: an optional step never drops the mesh."""
+        try:
+            mats = self.skinning.normal_matrices(prim, skin, self.frame)
+        except _READ_ERRORS as e:
+            self.warn("authored normals of skinned meshes that cannot be skinned ignored", _failure(prim, e))
+            return None
         if mats is None or len(mats) != geom.points.shape[1]:
             self.warn("authored normals of skinned meshes that cannot be skinned ignored", str(prim.GetPath()))
             return None
