@@ -2,8 +2,13 @@
 
 **Binding.** Per prim: ``UsdShadeMaterialBindingAPI.ComputeBoundMaterial`` with the "full" purpose, which falls
 back to the all-purpose binding (direct and collection bindings, ``bindingStrength`` honoured by USD); then the
-material's surface shader: the first of a supported model (``surfaces``) among its ``mtlx``, universal and
-``arnold`` surface outputs. Inputs are read through the shading network (``shading_network``: NodeGraphs,
+material's surface shader, as ``UsdShadeMaterial.ComputeSurfaceSource`` picks it for the render contexts of a
+MaterialX-capable renderer, ``mtlx`` then ``arnold`` (``SURFACE_CONTEXTS``), the universal output the fallback:
+the first context whose surface is of a supported model (``surfaces``) and whose network uses only nodes we
+evaluate; where such a network uses others, the universal output is rendered instead, the nodes named in one
+warning (with no universal surface to fall back on, the network is rendered as far as it goes). So a Houdini
+auto-created UsdPreviewSurface (``HoudiniIsAutoCreatedShader``, a flat approximation) beside a MaterialX or
+Arnold network is not what renders. Inputs are read through the shading network (``shading_network``: NodeGraphs,
 interface inputs, multi-output shaders, MaterialX nodes) and mapped onto UsdPreviewSurface inputs. GeomSubsets of family ``materialBind`` give per-face material
 ids, each subset bound the same way.
 
@@ -53,8 +58,8 @@ import numpy as np
 from pxr import Gf, UsdGeom, UsdShade
 
 from renderer.scene.model import Material, Texture, TextureInput
-from renderer.usd.shading_network import (Const, Display, Network, Tex, UV, expand_rgba, select_post, shader_id,
-                                          tex_mean)
+from renderer.usd.shading_network import (Const, Display, Geo, Network, Tex, UV, expand_rgba, geo_texture_input,
+                                          select_post, shader_id, tex_mean)
 from renderer.usd import arnold_nodes
 from renderer.usd.surfaces import PREVIEW, PREVIEW_DEFAULTS, surface_inputs, surface_model
 from renderer.usd.texture_files import (TextureFiles, authoring_layer, read_asset_image,  # noqa: F401 - re-exported
@@ -63,10 +68,9 @@ from renderer.usd.texture_files import (TextureFiles, authoring_layer, read_asse
 GREY = (0.18, 0.18, 0.18)
 ABSORPTION_COLOR = "drt:absorptionColor"
 ABSORPTION_DISTANCE = "drt:absorptionDistance"
-# Render contexts of a Material's surface output, in preference order: the universal output first, the one an
-# author gives every renderer (a material carrying both a UsdPreviewSurface and a MaterialX look renders as its
-# UsdPreviewSurface, as the shared assets' notes ask), then MaterialX, then Arnold's own.
-SURFACE_CONTEXTS = ("", "mtlx", "arnold")
+# Render contexts of a Material's surface output, in preference order (the contextVector of
+# UsdShadeMaterial.ComputeSurfaceSource); the universal output is the fallback of them all.
+SURFACE_CONTEXTS = ("mtlx", "arnold")
 
 # UsdPreviewSurface input -> (the Material field it fills, its spec default) ("color": 3 floats, else a scalar).
 _INPUTS = {name: (field, PREVIEW_DEFAULTS[name]) for name, field in (
@@ -75,6 +79,16 @@ _INPUTS = {name: (field, PREVIEW_DEFAULTS[name]) for name, field in (
     ("metallic", "metallic"), ("roughness", "roughness"), ("clearcoat", "clearcoat"),
     ("clearcoatRoughness", "clearcoat_roughness"), ("opacity", "opacity"),
     ("opacityThreshold", "opacity_threshold"), ("ior", "ior"), ("normal", "normal"), ("occlusion", "occlusion"))}
+
+
+def _output_source(output):
+    """The shader prim an (authored) output is connected to, through NodeGraphs; None if none."""
+    if not output:
+        return None
+    for attr in output.GetValueProducingAttributes():
+        if UsdShade.Output.IsOutput(attr) and attr.GetPrim().IsValid():
+            return attr.GetPrim()
+    return None
 
 
 def display_color(prim, frame: float) -> tuple[float, float, float] | None:
@@ -266,17 +280,28 @@ class MaterialTable:
         self._surfaces[path] = hit
         return hit
 
-    @staticmethod
-    def _surface_shader(mat: UsdShade.Material):
+    def _surface_shader(self, mat: UsdShade.Material):
         """(surface shader prim of a supported model, None) or (None, what was found instead)."""
-        found = []
+        degraded = []  # (context, its surface if of a supported model, nodes we do not evaluate) in context order
         for ctx in SURFACE_CONTEXTS:
-            src = mat.ComputeSurfaceSource(ctx)  # the context's output, else the universal one
-            if src and src[0] and src[0].GetPrim().IsValid():
-                sid = shader_id(src[0].GetPrim())
-                if surface_model(sid) is not None:
-                    return src[0].GetPrim(), None
-                found.append(sid)
+            prim = _output_source(mat.GetSurfaceOutput(ctx))
+            if prim is None:
+                continue
+            sid = shader_id(prim)
+            missing = [sid] if surface_model(sid) is None else self.net.unimplemented(prim)
+            if not missing:
+                return prim, None
+            degraded.append((ctx, prim if surface_model(sid) is not None else None, missing))
+        universal = _output_source(mat.GetSurfaceOutput())
+        if universal is not None and surface_model(shader_id(universal)) is not None:
+            if degraded:
+                self.warn("looks using nodes we do not evaluate: the universal surface output rendered instead",
+                          f"{mat.GetPath()} ({'; '.join(c + ': ' + ', '.join(m) for c, _, m in degraded)})")
+            return universal, None
+        for _, prim, _ in degraded:  # no fallback: the network as far as we evaluate it (its nodes warn)
+            if prim is not None:
+                return prim, None
+        found = [m[0] for _, _, m in degraded] + ([shader_id(universal)] if universal is not None else [])
         for out in mat.GetSurfaceOutputs():  # other render contexts (ri, ...): supported or named in the warning
             for attr in out.GetValueProducingAttributes():
                 if UsdShade.Output.IsOutput(attr):
@@ -296,6 +321,8 @@ class MaterialTable:
         for inp_name, (field_name, default) in _INPUTS.items():
             sig = signals.get(inp_name)
             value = None
+            if isinstance(sig, Geo):  # evaluated at the hit (a binding without a texture)
+                sig = Tex(geo_texture_input(sig), min(len(sig.offset), 3))
             if isinstance(sig, Display):
                 display_fields.append((field_name, _as_field(sig.fallback, default) or default,
                                        tuple(float(x) for x in sig.scale)))
