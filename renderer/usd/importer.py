@@ -231,7 +231,8 @@ class _Importer:
 
         for prim, insts in self._mesh_lights:
             for light in apply_mesh_light(prim, insts, self.meshes, self.instances, self.materials.materials,
-                                          float(self.shutter.normalise([self.frame])[0]), self.frame, self.warn):
+                                          float(self.shutter.normalise([self.frame])[0]), self.frame, self.warn,
+                                          self.shutter):
                 self.lights.append(light)
                 self._light_prims.append((light, prim))
             self._mesh_light_instances.update({i: prim for i in insts})
