@@ -13,35 +13,13 @@ import os
 import sys
 import time
 
-from renderer.options import AOV_NAMES, FILTERS, MAX_DEPTH, TIME_FILTERS, RenderOptions
-
-TIME_LIMITED_SPP = 4096  # the sample cap of a time-limited render when --spp is not given
+from renderer.options import SETTINGS_TABLE, Setting
 
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line, exit 2 (argparse would print the usage block)
         sys.stderr.write(f"drt: error: {message}\n")
         raise SystemExit(2)
-
-
-def _int_between(lo: int, hi: int | None = None):
-    """An argparse type: an integer in [lo, hi] (no upper bound when hi is None)."""
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-        if v < lo or (hi is not None and v > hi):
-            bound = f">= {lo}" if hi is None else f"between {lo} and {hi}"
-            raise argparse.ArgumentTypeError(f"must be {bound}: {text!r}")
-        return v
-
-    return parse
-
-
-_positive_int = _int_between(1)
-_seed = _int_between(0, 2**32 - 1)
-_depth = _int_between(0, MAX_DEPTH)
 
 
 def _number(text: str) -> float:
@@ -54,62 +32,56 @@ def _number(text: str) -> float:
     return v
 
 
-def _number_at_least(lo: float, strict: bool = False):
-    """An argparse type: a finite number >= lo (> lo when strict)."""
-    def parse(text: str) -> float:
-        v = _number(text)
-        if v < lo or (strict and v == lo):
-            raise argparse.ArgumentTypeError(f"must be {'>' if strict else '>='} {lo:g}: {text!r}")
+def _parse_as(setting: Setting):
+    """An argparse type for one value (or number of a pair) of ``setting``: its kind, within its bounds and rules
+    (the table's words on failure)."""
+    def parse(text: str):
+        if setting.kind is str:
+            v = text
+        elif setting.kind is int:
+            try:
+                v = int(text)
+            except ValueError:
+                raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+        else:
+            v = _number(text)
+        problem = setting.problem((v, v) if setting.shape == "pair" else v)
+        if problem:
+            bounds = setting.bounds_text()
+            raise argparse.ArgumentTypeError(f"must be {bounds}: {text!r}" if bounds and setting.kind is not str
+                                             else problem)
         return v
 
     return parse
 
 
-_non_negative = _number_at_least(0.0)
-_positive = _number_at_least(0.0, strict=True)
+def add_setting_flags(p: argparse.ArgumentParser, exclude: tuple[str, ...] = ()) -> None:
+    """One flag per row of ``renderer.options.SETTINGS_TABLE`` (``drt render`` and ``drt submit`` alike). A flag not
+    given is absent from the namespace (``given_settings``), so defaults come from the table alone."""
+    for s in SETTINGS_TABLE:
+        if s.name in exclude:
+            continue
+        common = dict(dest=s.name, default=argparse.SUPPRESS, help=s.describe(flag=True).replace("%", "%%"))
+        if s.kind is bool:
+            p.add_argument(s.cli_flag, action="store_false" if s.default else "store_true", **common)
+        elif s.shape == "many":
+            p.add_argument(s.cli_flag, action="append", choices=list(s.choices), metavar=s.metavar, **common)
+        elif s.choices:
+            p.add_argument(s.cli_flag, choices=list(s.choices), **common)
+        else:
+            p.add_argument(s.cli_flag, type=_parse_as(s), nargs=2 if s.shape == "pair" else None,
+                           metavar=s.metavar, **common)
+
+
+def given_settings(args: argparse.Namespace) -> dict:
+    """The settings the command line gave, by the table's names."""
+    return {s.name: getattr(args, s.name) for s in SETTINGS_TABLE if hasattr(args, s.name)}
 
 
 def add_render_settings(p: argparse.ArgumentParser) -> None:
-    """Flags shared by ``drt render`` and ``drt submit``; defaults are ``RenderOptions``' own."""
-    d = RenderOptions()
+    """Flags shared by ``drt render`` and ``drt submit``: the frame and every render setting."""
     p.add_argument("--frame", type=_number, default=None, help="time code to render (default: stage start)")
-    p.add_argument("--camera", default=None, metavar="PRIM_PATH", help="camera prim (default: render settings)")
-    p.add_argument("--width", type=_positive_int, default=None)
-    p.add_argument("--height", type=_positive_int, default=None)
-    p.add_argument("--spp", type=_positive_int, default=None, help=f"samples per pixel (default {d.spp})")
-    p.add_argument("--seed", type=_seed, default=d.seed)
-    p.add_argument("--filter", choices=list(FILTERS), default=d.filter, help=f"pixel filter (default {d.filter})")
-    p.add_argument("--time-filter", choices=list(TIME_FILTERS), default=d.time_filter,
-                   help=f"shutter weighting (default {d.time_filter}; strobe = instantaneous at the frame time)")
-    p.add_argument("--shutter", nargs=2, type=_number, metavar=("OPEN", "CLOSE"), default=None,
-                   help="shutter interval relative to the frame, overriding the camera's")
-    p.add_argument("--no-motion-blur", action="store_true")
-    p.add_argument("--no-dof", action="store_true")
-    p.add_argument("--focal-length", type=_positive, default=None, metavar="MM",
-                   help="lens override, in the camera's USD units (tenths of a scene unit, like focalLength)")
-    p.add_argument("--f-stop", type=_non_negative, default=None, help="lens override (0 = pinhole)")
-    p.add_argument("--focus-distance", type=_positive, default=None, metavar="D",
-                   help="lens override, in scene units")
-    p.add_argument("--aov", action="append", choices=list(AOV_NAMES), default=[], metavar="NAME",
-                   help=f"extra output ({', '.join(AOV_NAMES)}); repeatable")
-    p.add_argument("--half", action="store_true", help="store colour as 16-bit HALF (default 32-bit FLOAT)")
-    p.add_argument("--max-depth", type=_depth, default=d.max_depth, metavar="N",
-                   help=f"bounces after the camera ray, 0..{MAX_DEPTH} (default {d.max_depth}; 1 = direct lighting only)")
-    p.add_argument("--clamp", type=_non_negative, default=d.clamp, metavar="X",
-                   help="clamp each sample's radiance to X per channel to cut fireflies (default 0 = off)")
-    p.add_argument("--unbiased", action="store_true",
-                   help="no path regularization: turn off the default indirect clamp and glossy filter")
-    p.add_argument("--noise-threshold", type=_non_negative, default=d.noise_threshold, metavar="E",
-                   help="adaptive sampling: a pixel stops once its error estimate is below E, e.g. 0.01 "
-                        "(default 0 = off)")
-    p.add_argument("--min-spp", type=_positive_int, default=d.min_spp, metavar="N",
-                   help=f"adaptive sampling: samples before a pixel may stop (default {d.min_spp})")
-    p.add_argument("--denoise", action="store_true",
-                   help="add an Open Image Denoise layer denoised.R/G/B (the beauty stays raw); "
-                        "needs pip install 'drt[denoise]'")
-    p.add_argument("--time-limit", type=_non_negative, default=d.time_limit, metavar="SECONDS",
-                   help="render progressively for at most this long (default 0 = no limit; --spp is then the "
-                        f"cap, {TIME_LIMITED_SPP} unless given)")
+    add_setting_flags(p)
 
 
 def new_parser() -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
@@ -141,9 +113,8 @@ def add_render_command(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
     r.add_argument("scene", help="a .usd/.usda/.usdc/.usdz file")
     r.add_argument("-o", "--output", required=True, metavar="OUT.exr")
     add_render_settings(r)
-    r.add_argument("--tile", type=_positive_int, default=None,
-                   help="tile size in pixels (default 64, smaller when a small image would leave threads idle)")
-    r.add_argument("--threads", type=_positive_int, default=None, help="render threads (default: all cores)")
+    r.add_argument("--threads", type=_parse_as(Setting("threads", int, None, "", ge=1)), default=None,
+                   help="render threads (default: all cores)")
     r.add_argument("--quiet", action="store_true", help="no warnings or progress bar")
     return r
 
@@ -177,20 +148,9 @@ def _si(x: float) -> str:
 
 def request_from_args(args: argparse.Namespace):
     """The RenderRequest that ``drt render``'s flags describe."""
-    from renderer.request import LensOverrides, RenderRequest
+    from renderer.request import RenderRequest
 
-    spp = args.spp
-    if spp is None:
-        spp = TIME_LIMITED_SPP if args.time_limit else RenderOptions().spp
-    options = RenderOptions(width=args.width, height=args.height, spp=spp, seed=args.seed,
-                            filter=args.filter, time_filter=args.time_filter, dof=not args.no_dof,
-                            aovs=tuple(dict.fromkeys(args.aov)), max_depth=args.max_depth, clamp=args.clamp,
-                            unbiased=args.unbiased, noise_threshold=args.noise_threshold,
-                            min_spp=args.min_spp, time_limit=args.time_limit, denoise=args.denoise)
-    lens = LensOverrides(focal_length=args.focal_length, f_stop=args.f_stop, focus_distance=args.focus_distance)
-    return RenderRequest(scene_path=args.scene, frame=args.frame, camera=args.camera,
-                         shutter=tuple(args.shutter) if args.shutter else None,
-                         motion_blur=not args.no_motion_blur, lens=lens, options=options, half=args.half)
+    return RenderRequest.from_settings(args.scene, args.frame, given_settings(args))
 
 
 def cmd_render(args: argparse.Namespace) -> int:
@@ -213,7 +173,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     threads = args.threads or default_threads()
     bar = _Progress(prep.width * prep.height * options.spp, enabled=sys.stderr.isatty() and not args.quiet)
     try:
-        result = render_frame(prep, tile_size=args.tile, threads=threads, progress=bar)
+        result = render_frame(prep, tile_size=getattr(args, "tile", None), threads=threads, progress=bar)
     finally:
         bar.close()
     zeroed = write_frame(out, prep, result.sums, half=request.half)

@@ -1,50 +1,215 @@
-"""RenderOptions, the names of the options and their limits, without importing Warp (the CLI starts fast).
+"""The render settings, each declared once: ``SETTINGS``, a table of fields with default, bounds, unit and help.
 
-The kernels' integer codes for them live here too, so ``film`` and ``integrator`` use the same tables.
+Everything else is derived from the table: ``drt render`` and ``drt submit``'s flags (``add_setting_flags``), the
+service's wire format (``schemas.RenderSettings``, and so its OpenAPI document), the job spec (a
+``RenderRequest``), and the checks of ``RenderOptions.validate``. Adding a setting is one row here plus its use.
+
+Pure Python, no Warp (the command line starts fast). The kernels' integer codes for the filters live here too, so
+``film`` and ``integrator`` use the same tables.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any, Callable
 
 from renderer.errors import SettingsError
 
 FILTERS = {"box": 0, "triangle": 1, "gaussian": 2, "blackman-harris": 3}  # pixel reconstruction filters
 TIME_FILTERS = {"box": 0, "triangle": 1, "strobe": 2}  # shutter weightings
 AOV_NAMES = ("depth", "normal", "albedo", "spp")
-MAX_DEPTH = 64
-MAX_SPP = 1 << 16
 MAX_PIXELS = 16384 * 16384
 INDIRECT_CLAMP = 10.0  # default indirect clamp (Cycles' default too)
-GLOSSY_FILTER = 0.7  # default glossy filter k: bias within 2 % on the bench scenes (README "Noise defaults")
-MIN_SPP = 16  # default adaptive minimum
-MAX_TIME_LIMIT = 7 * 24 * 3600.0  # seconds
+GLOSSY_FILTER = 0.7  # default glossy filter k: bias within 2 % on the bench scenes (docs/rendering.md "Noise defaults")
+TIME_LIMITED_SPP = 4096  # the sample cap of a time-limited render whose spp was not given
+
+
+def _absolute_prim_path(v: str) -> str | None:
+    return None if v.startswith("/") else f"camera must be an absolute prim path, got {v!r}"
+
+
+def _ordered_shutter(v: tuple[float, float]) -> str | None:
+    return None if v[0] <= v[1] else f"shutter open ({v[0]:g}) is after close ({v[1]:g})"
+
+
+def _num(x: float) -> str:
+    """A bound as people write it: 65536, 4294967295, 0.5."""
+    return str(int(x)) if float(x).is_integer() and abs(x) < 1e16 else f"{x:g}"
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One render setting: its name (a keyword of ``RenderOptions`` / ``RenderRequest``, a JSON key of the wire
+    format, ``--name-with-dashes`` on the command line), type, default, bounds and words."""
+
+    name: str
+    kind: type  # int, float, bool or str: of the value, of each number of a pair, or of each item of a list
+    default: Any
+    help: str
+    unit: str = ""
+    ge: float | None = None  # inclusive bounds ...
+    le: float | None = None
+    gt: float | None = None  # ... and exclusive ones
+    lt: float | None = None
+    choices: tuple[str, ...] = ()
+    optional: bool = False  # None is allowed, and is the default: the scene decides
+    shape: str = "one"  # "one", "pair" (two numbers) or "many" (a list of distinct choices)
+    max_length: int | None = None  # of a string
+    flag: str | None = None  # the command line's flag, if not --name (a default-on bool: --no-name)
+    metavar: str | None = None
+    scene: bool = False  # the prepared scene depends on it; else it steers sampling and output only
+    check: Callable[[Any], str | None] | None = None  # a rule beyond the bounds: the problem, or None
+
+    @property
+    def cli_flag(self) -> str:
+        if self.flag:
+            return self.flag
+        dashed = self.name.replace("_", "-")
+        return f"--no-{dashed}" if self.kind is bool and self.default is True else f"--{dashed}"
+
+    def describe(self, flag: bool = False) -> str:
+        """The help text with its unit and default, as OpenAPI (and, ``flag``, the command line) shows it."""
+        text = self.help + (f" [{self.unit}]" if self.unit else "")
+        if flag and self.kind is bool and self.default is True:
+            return f"turn off {text}"
+        if self.kind is not bool and self.default not in (None, ()):
+            text += f" (default {_num(self.default) if self.kind in (int, float) else self.default})"
+        return text
+
+    def bounds_text(self) -> str:
+        if self.ge is not None and self.le is not None:
+            return f"between {_num(self.ge)} and {_num(self.le)}"
+        parts = [f"{op} {_num(b)}" for op, b in ((">=", self.ge), (">", self.gt), ("<=", self.le), ("<", self.lt))
+                 if b is not None]
+        return " and ".join(parts)
+
+    def problem(self, value: Any) -> str | None:
+        """What is wrong with ``value`` for this setting (its type already right), or None."""
+        if value is None:
+            return None if self.optional else f"{self.name} must be given"
+        items = value if self.shape in ("pair", "many") else (value,)
+        for v in items:
+            if self.choices:
+                if v not in self.choices:
+                    what = "AOV" if self.name == "aovs" else self.name.replace("_", " ")
+                    return f"unknown {what} {v!r} (choose from {', '.join(self.choices)})"
+                continue
+            if self.kind in (int, float):
+                if isinstance(v, float) and not math.isfinite(v):
+                    return f"{self.name} must be a finite number, got {v}"
+                out = ((self.ge is not None and v < self.ge) or (self.le is not None and v > self.le)
+                       or (self.gt is not None and v <= self.gt) or (self.lt is not None and v >= self.lt))
+                if out:
+                    return f"{self.name} must be {self.bounds_text()}, got {v}"
+            if self.max_length is not None and len(v) > self.max_length:
+                return f"{self.name} must be at most {self.max_length} characters"
+        return self.check(value) if self.check else None
+
+
+_WEEK = 7 * 24 * 3600.0
+_MAX_TIME = 1.0e9  # |time code| bound: keeps frame arithmetic exact enough and rejects nonsense early
+
+SETTINGS_TABLE: tuple[Setting, ...] = (
+    # What the frame is seen through: the prepared scene depends on these.
+    Setting("camera", str, None, "camera prim path (default: the render settings' camera, else the first)",
+            optional=True, max_length=1024, metavar="PRIM_PATH", scene=True, check=_absolute_prim_path),
+    Setting("width", int, None, "width of the image written (default: the render settings', else 640)",
+            unit="pixels", optional=True, ge=1, le=16384, scene=True),
+    Setting("height", int, None, "height of the image written (default: the render settings', else at the "
+            "camera's aspect)", unit="pixels", optional=True, ge=1, le=16384, scene=True),
+    Setting("shutter", float, None, "shutter interval (open, close) overriding the camera's",
+            unit="time codes relative to the frame", optional=True, shape="pair", ge=-_MAX_TIME, le=_MAX_TIME,
+            metavar=("OPEN", "CLOSE"), scene=True, check=_ordered_shutter),
+    Setting("motion_blur", bool, True, "motion blur (off: the frame renders still)", scene=True),
+    Setting("time_filter", str, "box", "shutter weighting: box, triangle, strobe (instantaneous, at the frame "
+            "time)", choices=tuple(TIME_FILTERS), scene=True),
+    Setting("dof", bool, True, "depth of field (off: a pinhole)", scene=True),
+    Setting("focal_length", float, None, "lens override", unit="the camera's USD units (tenths of a scene unit, "
+            "like focalLength)", optional=True, gt=0, le=1.0e7, metavar="MM", scene=True),
+    Setting("f_stop", float, None, "lens override; 0 = pinhole", optional=True, ge=0, le=1.0e4, metavar="N",
+            scene=True),
+    Setting("focus_distance", float, None, "lens override", unit="scene units", optional=True, gt=0, le=1.0e12,
+            metavar="D", scene=True),
+    # How it is sampled and written: one prepared scene serves every value of these.
+    Setting("spp", int, 16, "samples per pixel; with a time limit, the cap (then 4096 unless given)", ge=1,
+            le=1 << 16, metavar="N"),
+    Setting("seed", int, 0, "seed of the sample pattern", ge=0, le=2**32 - 1, metavar="S"),
+    Setting("filter", str, "gaussian", "pixel filter: gaussian (radius 1.5 px), box, triangle, blackman-harris",
+            choices=("gaussian", "box", "triangle", "blackman-harris")),
+    Setting("max_depth", int, 8, "bounces after the camera ray (1: direct lighting only, 0: emission only)",
+            ge=0, le=64, metavar="N"),
+    Setting("clamp", float, 0.0, "clamp each sample's radiance to this per channel to cut fireflies (0: off)",
+            ge=0, metavar="X"),
+    Setting("unbiased", bool, False, "no path regularization: the default indirect clamp and glossy filter off"),
+    Setting("noise_threshold", float, 0.0, "adaptive sampling: a pixel stops once its error estimate is below "
+            "this, e.g. 0.01 (0: off)", ge=0, lt=1000, metavar="E"),
+    Setting("min_spp", int, 16, "adaptive sampling: samples before a pixel may stop", ge=1, le=1 << 16,
+            metavar="N"),
+    Setting("time_limit", float, 0.0, "render progressively for at most this long per frame (0: no limit; spp is "
+            "then the cap); not bit-reproducible", unit="seconds", ge=0, le=_WEEK, metavar="SECONDS"),
+    Setting("aovs", str, (), "extra channels: depth (depth.Z), normal (N.X/Y/Z), albedo (albedo.R/G/B), spp "
+            "(spp.Y); repeatable", choices=AOV_NAMES, shape="many", flag="--aov", metavar="NAME"),
+    Setting("denoise", bool, False, "add an Open Image Denoise layer denoised.R/G/B (the beauty stays raw); needs "
+            "pip install 'drt[denoise]'"),
+    Setting("half", bool, False, "store colour and AOVs as 16-bit HALF (depth stays FLOAT)"),
+    # How the work is cut: never changes the image.
+    Setting("tile", int, 64, "tile size (drt render, when not given, halves it down to 16 while a small frame "
+            "would leave threads idle)", unit="pixels", ge=1, le=4096, metavar="N"),
+)
+SETTINGS: dict[str, Setting] = {s.name: s for s in SETTINGS_TABLE}
+
+MAX_SPP = SETTINGS["spp"].le
+MAX_DEPTH = SETTINGS["max_depth"].le
+MIN_SPP = SETTINGS["min_spp"].default
+DEFAULT_TILE = SETTINGS["tile"].default
+
+
+def check_settings(values: dict[str, Any]) -> None:
+    """Raise SettingsError naming the first setting of ``values`` (names of the table) that breaks its rules."""
+    for name, v in values.items():
+        problem = SETTINGS[name].problem(v)
+        if problem:
+            raise SettingsError(problem)
+
+
+def resolve_given(given: dict[str, Any]) -> dict[str, Any]:
+    """The settings a request made, with the defaults that depend on others: a time-limited render whose spp was not
+    given takes ``TIME_LIMITED_SPP`` as its cap. The one place that rule lives (the CLI, ``drt submit`` and
+    ``POST /v1/jobs`` all pass what was given)."""
+    out = dict(given)
+    if out.get("time_limit") and out.get("spp") is None:
+        out["spp"] = TIME_LIMITED_SPP
+    return {k: v for k, v in out.items() if v is not None or SETTINGS[k].optional}
+
+
+def default_of(name: str):
+    """A dataclass field whose default is the table's (how the records that carry settings declare them)."""
+    return dataclasses.field(default=SETTINGS[name].default)
 
 
 @dataclass(frozen=True)
 class RenderOptions:
-    """How to render. Resolution None = the scene's RenderSettings, else 640 wide at the camera's aspect."""
+    """How to render: the sampling and output settings of ``SETTINGS`` (and the image size), plus the path
+    regularization's parameters, which are not settings of their own (``unbiased`` turns them off)."""
 
-    width: int | None = None
-    height: int | None = None
-    spp: int = 16
-    seed: int = 0
-    filter: str = "gaussian"  # pixel reconstruction filter: box, triangle, gaussian, blackman-harris
-    time_filter: str = "box"  # shutter weighting: box, triangle, strobe (the instant of the frame)
-    dof: bool = True
-    aovs: tuple[str, ...] = ()
-    max_depth: int = 8  # bounces after the camera ray; 1 = direct lighting only
-    clamp: float = 0.0  # maximum radiance of a sample per channel, 0 = off (the direct/all clamp)
-    # Path regularization, the production default (README "Noise defaults"); ``unbiased`` turns it all off.
-    unbiased: bool = False
+    width: int | None = default_of("width")
+    height: int | None = default_of("height")
+    spp: int = default_of("spp")
+    seed: int = default_of("seed")
+    filter: str = default_of("filter")
+    time_filter: str = default_of("time_filter")
+    dof: bool = default_of("dof")
+    aovs: tuple[str, ...] = default_of("aovs")
+    max_depth: int = default_of("max_depth")
+    clamp: float = default_of("clamp")
+    unbiased: bool = default_of("unbiased")
     indirect_clamp: float = INDIRECT_CLAMP  # largest channel of a contribution after > 1 bounce, 0 = off
     glossy_filter: float = GLOSSY_FILTER  # later lobes roughened to >= k x the path's roughness so far, 0 = off
-
-    # Adaptive sampling (README "Adaptive sampling"): 0 = off, every pixel takes spp samples
-    noise_threshold: float = 0.0
-    min_spp: int = MIN_SPP  # samples before a pixel may stop
-    time_limit: float = 0.0  # seconds of rendering for the frame, 0 = none; spp is then the cap
-    denoise: bool = False  # add an OIDN-denoised layer (denoised.R/G/B); needs the [denoise] extra
+    noise_threshold: float = default_of("noise_threshold")
+    min_spp: int = default_of("min_spp")
+    time_limit: float = default_of("time_limit")
+    denoise: bool = default_of("denoise")
 
     @property
     def path_indirect_clamp(self) -> float:
@@ -57,31 +222,9 @@ class RenderOptions:
         return 0.0 if self.unbiased else float(self.glossy_filter)
 
     def validate(self) -> "RenderOptions":
-        if self.filter not in FILTERS:
-            raise SettingsError(f"unknown filter {self.filter!r} (choose from {', '.join(FILTERS)})")
-        if self.time_filter not in TIME_FILTERS:
-            raise SettingsError(f"unknown time filter {self.time_filter!r} (choose from {', '.join(TIME_FILTERS)})")
-        if not 1 <= self.spp <= MAX_SPP:
-            raise SettingsError(f"spp must be between 1 and {MAX_SPP}, got {self.spp}")
-        if not 0 <= self.seed < 2**32:
-            raise SettingsError(f"seed must be between 0 and 2^32-1, got {self.seed}")
-        for name, v in (("width", self.width), ("height", self.height)):
-            if v is not None and not 1 <= v <= 16384:
-                raise SettingsError(f"{name} must be between 1 and 16384, got {v}")
-        if not 0 <= self.max_depth <= MAX_DEPTH:
-            raise SettingsError(f"max_depth must be between 0 and {MAX_DEPTH}, got {self.max_depth}")
-        if not (self.clamp >= 0.0 and math.isfinite(self.clamp)):
-            raise SettingsError(f"clamp must be a finite number >= 0, got {self.clamp}")
-        for name, v in (("indirect_clamp", self.indirect_clamp), ("glossy_filter", self.glossy_filter)):
+        check_settings({f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name in SETTINGS})
+        for name in ("indirect_clamp", "glossy_filter"):
+            v = getattr(self, name)
             if not (v >= 0.0 and math.isfinite(v)):
                 raise SettingsError(f"{name} must be a finite number >= 0, got {v}")
-        if not (0.0 <= self.noise_threshold < 1.0e3 and math.isfinite(self.noise_threshold)):
-            raise SettingsError(f"noise_threshold must be a number >= 0, got {self.noise_threshold}")
-        if not 1 <= self.min_spp <= MAX_SPP:
-            raise SettingsError(f"min_spp must be between 1 and {MAX_SPP}, got {self.min_spp}")
-        if not (0.0 <= self.time_limit <= MAX_TIME_LIMIT):
-            raise SettingsError(f"time_limit must be between 0 and {MAX_TIME_LIMIT:g} seconds, got {self.time_limit}")
-        for a in self.aovs:
-            if a not in AOV_NAMES:
-                raise SettingsError(f"unknown AOV {a!r} (choose from {', '.join(AOV_NAMES)})")
         return self

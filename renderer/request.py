@@ -16,7 +16,8 @@ import dataclasses
 import os
 from dataclasses import dataclass, field
 
-from renderer.render import PreparedScene, RenderOptions, prepare
+from renderer.options import SETTINGS, RenderOptions, check_settings, default_of, resolve_given
+from renderer.render import PreparedScene, prepare
 from renderer.scene.model import Scene
 from renderer.usd.importer import load_scene
 
@@ -33,9 +34,9 @@ def usd_lens_to_scene_units(length_usd: float) -> float:
 class LensOverrides:
     """Replacements for the loaded camera's lens; None keeps the scene's value."""
 
-    focal_length: float | None = None  # tenths of a scene unit (USD's focalLength units)
-    f_stop: float | None = None  # unitless; 0 = pinhole
-    focus_distance: float | None = None  # scene units
+    focal_length: float | None = default_of("focal_length")  # tenths of a scene unit (USD's focalLength units)
+    f_stop: float | None = default_of("f_stop")  # unitless; 0 = pinhole
+    focus_distance: float | None = default_of("focus_distance")  # scene units
 
     def apply(self, scene: Scene) -> Scene:
         changes = {}
@@ -56,12 +57,43 @@ class RenderRequest:
 
     scene_path: str
     frame: float | None = None  # time code; None = the stage's start time code
-    camera: str | None = None  # camera prim path; None = the render settings' camera, else the first
-    shutter: tuple[float, float] | None = None  # (open, close) relative to the frame, overriding the camera's
-    motion_blur: bool = True
+    camera: str | None = default_of("camera")  # camera prim path; None = the render settings' camera, else the first
+    shutter: tuple[float, float] | None = default_of("shutter")  # (open, close) relative to the frame
+    motion_blur: bool = default_of("motion_blur")
     lens: LensOverrides = field(default_factory=LensOverrides)
     options: RenderOptions = field(default_factory=RenderOptions)
-    half: bool = False  # store colour and AOVs as HALF in the EXR (does not change the pixels)
+    half: bool = default_of("half")  # store colour and AOVs as HALF in the EXR (does not change the pixels)
+
+    @classmethod
+    def from_settings(cls, scene_path: str, frame: float | None, given: dict) -> "RenderRequest":
+        """The request that the settings ``given`` (names of ``options.SETTINGS``; the rest take their defaults)
+        describe: how ``drt render``'s flags and a job's settings both become a request. ``tile`` is the caller's:
+        it never changes the image."""
+        values = resolve_given({k: v for k, v in given.items() if k != "tile"})
+        check_settings(values)
+        if values.get("shutter") is not None:
+            values["shutter"] = tuple(float(t) for t in values["shutter"])
+        if "aovs" in values:
+            values["aovs"] = tuple(dict.fromkeys(values["aovs"]))  # a repeated name means the same channels
+
+        def take(record) -> dict:
+            return {f.name: values[f.name] for f in dataclasses.fields(record) if f.name in values}
+
+        return cls(scene_path=scene_path, frame=frame, lens=LensOverrides(**take(LensOverrides)),
+                   options=RenderOptions(**take(RenderOptions)), **take(cls))
+
+    def settings(self) -> dict:
+        """The request's values of every setting it carries, by the table's names."""
+        out = {"camera": self.camera, "shutter": self.shutter, "motion_blur": self.motion_blur, "half": self.half}
+        out.update((f.name, getattr(self.lens, f.name)) for f in dataclasses.fields(LensOverrides))
+        out.update((f.name, getattr(self.options, f.name)) for f in dataclasses.fields(RenderOptions)
+                   if f.name in SETTINGS)
+        return out
+
+    def scene_key(self) -> tuple:
+        """What the prepared scene depends on besides the scene's content: the frame and the settings the table
+        marks ``scene``. Jobs that differ only in sampling and output settings share one prepared scene."""
+        return (self.frame, tuple(sorted((k, v) for k, v in self.settings().items() if SETTINGS[k].scene)))
 
     @property
     def motion_blur_keys(self) -> bool:

@@ -1,13 +1,14 @@
 """The service's wire format (pydantic v2): what clients send and what they get back.
 
-``schemas`` knows nothing of the renderer, the database or the queue; the service converts these models to the
-renderer's own plain dataclasses. Settings keys are named like the ``drt render`` flags.
+``schemas`` knows nothing of the database or the queue; of the renderer it reads only the settings table
+(``renderer.options``, pure Python), from which ``RenderSettings`` is derived. Settings keys are named like the
+``drt render`` flags.
 """
 from .jobs import ErrorBody, FramePublic, FrameState, Health, JobList, JobPublic, JobState, SceneInfo
 from .limits import Limits
 from .monitor import Farm, FarmTask, FarmWorker, FrameTiles, TileMap
-from .settings import AOVS, FILTERS, MAX_FRAMES, TIME_FILTERS, FrameRange, JobCreate, RenderSettings
+from .settings import MAX_FRAMES, FrameRange, JobCreate, RenderSettings
 
-__all__ = ["AOVS", "FILTERS", "MAX_FRAMES", "TIME_FILTERS", "ErrorBody", "Farm", "FarmTask", "FarmWorker",
+__all__ = ["MAX_FRAMES", "ErrorBody", "Farm", "FarmTask", "FarmWorker",
            "FramePublic", "FrameRange", "FrameState", "FrameTiles", "Health", "JobCreate", "JobList", "JobPublic",
            "JobState", "Limits", "RenderSettings", "SceneInfo", "TileMap"]

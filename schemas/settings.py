@@ -5,27 +5,21 @@ Keys follow the ``drt render`` flags (``--no-motion-blur`` is ``"motion_blur": f
 relative to the frame), ``focal_length`` is in the camera's USD units (tenths of a scene unit, like the
 ``focalLength`` attribute), ``focus_distance`` in scene units, ``f_stop`` unitless (0 = pinhole).
 
-Bounds here are the hard ones of the format; the service adds configurable limits (frames, tiles per job).
+Every field but ``frames`` is a row of the renderer's settings table (``renderer.options.SETTINGS_TABLE``, pure
+Python): its default, bounds, unit and help are written there once and reach OpenAPI from here. Bounds are the
+hard ones of the format; the service adds configurable limits (frames, tiles per job).
 """
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, create_model, field_validator, model_validator
 
-# The renderer's names (tests check they match renderer.film.film.FILTERS, renderer.integrator.TIME_FILTERS and
-# renderer.render.AOV_NAMES); repeated here so the wire format does not import the renderer.
-FILTERS = ("gaussian", "box", "triangle", "blackman-harris")
-TIME_FILTERS = ("box", "triangle", "strobe")
-AOVS = ("depth", "normal", "albedo", "spp")
+from renderer.options import SETTINGS, SETTINGS_TABLE, Setting, resolve_given
+
 MAX_FRAMES = 100_000
-MAX_DEPTH = 64  # renderer.render.MAX_DEPTH
 MAX_TIME = 1.0e9  # |time code| bound: keeps frame arithmetic exact enough and rejects nonsense early
-
-FilterName = Literal["gaussian", "box", "triangle", "blackman-harris"]
-TimeFilterName = Literal["box", "triangle", "strobe"]
-AovName = Literal["depth", "normal", "albedo", "spp"]
 
 
 class _Strict(BaseModel):
@@ -66,41 +60,26 @@ Frames = Annotated[Annotated[FrameRange, Tag("range")] | Annotated[list[float], 
                    Discriminator(_frames_kind)]
 
 
-class RenderSettings(_Strict):
-    """How to render each frame (everything that affects the pixels)."""
+def _annotation(s: Setting):
+    one = Literal[s.choices] if s.choices else s.kind
+    t = list[one] if s.shape == "many" else tuple[one, one] if s.shape == "pair" else one
+    return t | None if s.optional else t
 
+
+def _field(s: Setting) -> tuple[Any, Any]:
+    """A pydantic field from a row of the settings table: its bounds become JSON Schema bounds in OpenAPI."""
+    numbers = s.kind in (int, float) and s.shape == "one"
+    bounds = {k: getattr(s, k) for k in ("ge", "le", "gt", "lt") if numbers and getattr(s, k) is not None}
+    extra = {"max_length": len(s.choices)} if s.shape == "many" else {}
+    if s.kind is str and s.shape == "one" and not s.choices:
+        extra = {"min_length": 1, "max_length": s.max_length}
+    default = list(s.default) if s.shape == "many" else s.default
+    return _annotation(s), Field(default, description=s.describe(), **bounds, **extra)
+
+
+class _SettingsBase(_Strict):
     frames: Frames | None = Field(
         None, description="time codes to render: a list, or {start, end, step}; default: the stage's start time code")
-    camera: str | None = Field(None, min_length=1, max_length=1024,
-                               description="camera prim path (default: the render settings' camera, else the first)")
-    width: int | None = Field(None, ge=1, le=16384)
-    height: int | None = Field(None, ge=1, le=16384)
-    spp: int = Field(16, ge=1, le=65536, description="samples per pixel")
-    seed: int = Field(0, ge=0, le=2**32 - 1, description="seed of the sample pattern")
-    tile: int = Field(64, ge=1, le=4096, description="tile size in pixels (the image does not depend on it)")
-    filter: FilterName = "gaussian"
-    time_filter: TimeFilterName = "box"
-    shutter: tuple[float, float] | None = Field(
-        None, description="(open, close) relative to the frame, overriding the camera's shutter")
-    motion_blur: bool = True
-    dof: bool = Field(True, description="depth of field (false: pinhole)")
-    focal_length: float | None = Field(None, gt=0, le=1.0e7,
-                                       description="override, in the camera's USD units (tenths of a scene unit)")
-    f_stop: float | None = Field(None, ge=0, le=1.0e4, description="override; 0 = pinhole")
-    focus_distance: float | None = Field(None, gt=0, le=1.0e12, description="override, in scene units")
-    max_depth: int = Field(8, ge=0, le=MAX_DEPTH, description="bounces after the camera ray (1: direct lighting only)")
-    clamp: float = Field(0.0, ge=0, description="clamp each sample's radiance to this per channel (0: off)")
-    unbiased: bool = Field(False, description="no path regularization (default indirect clamp and glossy filter off)")
-    noise_threshold: float = Field(0.0, ge=0, lt=1000,
-                                   description="adaptive sampling: a pixel stops at this error estimate (0: off)")
-    min_spp: int = Field(16, ge=1, le=65536, description="adaptive sampling: samples before a pixel may stop")
-    time_limit: float = Field(0.0, ge=0, le=7 * 24 * 3600,
-                              description="seconds of rendering per frame, split among its tiles (0: none; "
-                                          "spp is then the cap); time-limited frames are not bit-reproducible")
-    aovs: list[AovName] = Field(default_factory=list, max_length=len(AOVS),
-                                description="extra channels: depth, normal, albedo, spp")
-    denoise: bool = Field(False, description="add an Open Image Denoise layer denoised.R/G/B (beauty stays raw)")
-    half: bool = Field(False, description="store colour and AOVs as HALF (depth stays FLOAT)")
 
     @field_validator("frames")
     @classmethod
@@ -116,27 +95,27 @@ class RenderSettings(_Strict):
                 raise ValueError("frames must be unique")
         return v
 
-    @field_validator("camera")
+    @field_validator(*SETTINGS, mode="after", check_fields=False)
     @classmethod
-    def _camera(cls, v):
-        if v is not None and not v.startswith("/"):
-            raise ValueError(f"camera must be an absolute prim path, got {v!r}")
+    def _table_rules(cls, v, info):
+        """The table's rules beyond JSON Schema's bounds (an ordered shutter, an absolute camera path, a pair's
+        bounds); a list of choices keeps each name once, as ``drt render --aov`` does."""
+        s = SETTINGS[info.field_name]
+        if s.shape == "many":
+            v = list(dict.fromkeys(v))
+        if v is not None and (s.check or s.shape == "pair"):
+            problem = s.problem(tuple(v) if s.shape == "pair" else v)
+            if problem:
+                raise ValueError(problem)
         return v
 
-    @field_validator("shutter")
-    @classmethod
-    def _shutter(cls, v):
-        if v is not None:
-            if v[0] > v[1]:
-                raise ValueError(f"shutter open ({v[0]:g}) is after close ({v[1]:g})")
-            if max(abs(v[0]), abs(v[1])) > MAX_TIME:
-                raise ValueError(f"shutter must be within +-{MAX_TIME:g}")
-        return v
-
-    @field_validator("aovs")
-    @classmethod
-    def _aovs(cls, v):
-        return list(dict.fromkeys(v))  # repeated names mean the same channels, as with `drt render --aov`
+    @model_validator(mode="after")
+    def _dependent_defaults(self):
+        # The time-limit rule of renderer.options.resolve_given: a time-limited job's spp, if not given, is the cap.
+        given = {k: getattr(self, k) for k in self.model_fields_set if k in SETTINGS}
+        if "spp" not in given and resolve_given(given).get("spp") is not None:
+            self.spp = resolve_given(given)["spp"]
+        return self
 
     def frame_times(self) -> list[float] | None:
         """The requested time codes, or None for the stage's start time code."""
@@ -145,6 +124,16 @@ class RenderSettings(_Strict):
         if isinstance(self.frames, FrameRange):
             return self.frames.times()
         return [float(t) for t in self.frames]
+
+    def render_settings(self) -> dict:
+        """The render settings by the table's names (``RenderRequest.from_settings`` takes them)."""
+        return {s.name: getattr(self, s.name) for s in SETTINGS_TABLE}
+
+
+# Every field but ``frames`` comes from the renderer's settings table (renderer/options.py).
+RenderSettings = create_model(
+    "RenderSettings", __base__=_SettingsBase, __doc__="How to render each frame (everything that affects the pixels).",
+    **{s.name: _field(s) for s in SETTINGS_TABLE})
 
 
 class JobCreate(RenderSettings):

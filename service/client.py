@@ -194,7 +194,6 @@ def add_commands(sub) -> None:
     add_render_settings(s)
     s.add_argument("--frames", type=_frames, default=None, metavar="A:B[:STEP]|F1,F2",
                    help="several frames (instead of --frame)")
-    s.add_argument("--tile", type=_int, default=64, help="tile size in pixels (default 64)")
     s.add_argument("--priority", type=_int, default=0, help="higher runs first (default 0)")
     s.add_argument("--idempotency-key", default=None, help="makes retrying this submission safe (default: random)")
     s.add_argument("--wait", action="store_true", help="wait for the job to finish, with a progress bar")
@@ -224,22 +223,14 @@ def add_commands(sub) -> None:
 
 
 def settings_from_args(args: argparse.Namespace) -> dict:
+    """The job's JSON settings from ``drt submit``'s flags: the frames, the render settings that were given (the
+    server fills in the table's defaults, as ``drt render`` does) and the priority."""
+    from renderer.cli import given_settings
+
     if args.frames is not None and args.frame is not None:
         raise ClientError("give --frame or --frames, not both")
     frames = args.frames if args.frames is not None else ([args.frame] if args.frame is not None else None)
-    out = {"frames": frames, "camera": args.camera, "width": args.width, "height": args.height, "spp": args.spp,
-           "seed": args.seed, "tile": args.tile, "filter": args.filter, "time_filter": args.time_filter,
-           "shutter": list(args.shutter) if args.shutter else None, "motion_blur": not args.no_motion_blur,
-           "dof": not args.no_dof, "aovs": list(dict.fromkeys(args.aov)), "half": args.half,
-           "max_depth": args.max_depth, "clamp": args.clamp, "unbiased": args.unbiased,
-           "noise_threshold": args.noise_threshold, "min_spp": args.min_spp, "time_limit": args.time_limit,
-           "denoise": args.denoise,
-           "priority": args.priority, "focal_length": args.focal_length, "f_stop": args.f_stop,
-           "focus_distance": args.focus_distance}
-    if args.time_limit and args.spp is None:  # as drt render: the time limit decides, spp is only a cap
-        from renderer.cli import TIME_LIMITED_SPP
-
-        out["spp"] = TIME_LIMITED_SPP
+    out = {"frames": frames, **given_settings(args), "priority": args.priority}
     return {k: v for k, v in out.items() if v is not None}
 
 

@@ -179,7 +179,8 @@ class InspectionPool:
 
     def run(self, task: InspectTask) -> dict:
         # The stored path is content-addressed (<sha>/<name>) and the seed never changes what loads.
-        key = (task.frames, dataclasses.replace(task.spec, seed=0))
+        key = (task.frames, task.spec.scene_path,
+               tuple(sorted((k, v) for k, v in task.spec.request.settings().items() if k != "seed")))
         with self._lock:
             if key in self._answers:
                 self._answers.move_to_end(key)

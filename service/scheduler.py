@@ -250,7 +250,7 @@ class Scheduler:
                 self._succeed(plan)
                 continue
             # a time limit is shared out tile by tile over the threads: its tiles go one per task
-            batch = 0 if plan.spec.time_limit else self.settings.task_samples
+            batch = 0 if plan.spec.request.options.time_limit else self.settings.task_samples
             while len(self._inflight) < cap:
                 work = plan.next_work(batch)
                 if work is None:
@@ -296,7 +296,7 @@ class Scheduler:
     def _frame_task(self, plan: JobPlan, frame: FramePlan) -> FrameTask:
         """The frame's checkpointed tiles, assembled (the sums ``render_frame`` would give: tiles are pure)."""
         parts, bad = [], set()
-        margin = film.filter_margin(film.FILTERS[plan.spec.filter])
+        margin = film.filter_margin(film.FILTERS[plan.spec.request.options.filter])
         for t, box in enumerate(plan.boxes):
             try:
                 arrays = load_tile(plan.files.tile(frame.idx, t))
@@ -414,7 +414,7 @@ class Scheduler:
 
     def _frame_image(self, plan: JobPlan, frame: FramePlan, result: dict) -> None:
         try:
-            write_exr(plan.files.frame(frame.idx), result["channels"], half=plan.spec.half,
+            write_exr(plan.files.frame(frame.idx), result["channels"], half=plan.spec.request.half,
                       attributes=exr_attributes(result["attributes"]), **result.get("windows", {}))
         except FileNotFoundError:  # the job's files are gone: it was deleted
             self._drop(plan.job_id)

@@ -89,7 +89,7 @@ class _LocalScene:
 
         with self.lock, Usd.StageCacheContext(self.stages):
             before = self.stages.Size()
-            scene = dataclasses.replace(spec, scene_path=str(self.path)).load(frame)
+            scene = spec.load(frame, scene_path=str(self.path))
             if self.stages.Size() > before:
                 with _cache_lock:
                     _stats["stages"] += 1

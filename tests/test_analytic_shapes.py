@@ -23,7 +23,7 @@ from renderer.scene.model import (
     MotionTransform,
     Scene,
 )
-from renderer.usd.geometry import _AXIS_PERM, _analytic_shape, _sphere, _tessellate, tessellate_primitive
+from renderer.usd.primitives import _AXIS_PERM, _analytic_shape, _sphere, _tessellate, tessellate_primitive
 from renderer.usd.importer import load_scene
 from test_accel import _probe, random_mesh, ray_triangles
 

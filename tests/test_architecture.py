@@ -128,3 +128,135 @@ def test_renderer_imports_and_parses_without_the_service_libraries():
     """)
     r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert r.returncode == 0 and r.stdout.strip().endswith("ok"), r.stderr[-2000:]
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Render settings: declared once, in renderer/options.py's table; everything else is derived from it.
+
+def _setting_cases():
+    from renderer.options import SETTINGS_TABLE
+
+    return [pytest.param(s, id=s.name) for s in SETTINGS_TABLE]
+
+
+def _flag_args(s, value) -> list[str]:
+    if s.kind is bool:
+        return [s.cli_flag] if value != s.default else []
+    if s.shape == "pair":
+        return [s.cli_flag, str(value[0]), str(value[1])]
+    if s.shape == "many":
+        return [a for v in value for a in (s.cli_flag, v)]
+    return [s.cli_flag, str(value)]
+
+
+def _edge_values(s):
+    """A value at each bound of a setting (accepted) and one beyond it (refused), from the table alone."""
+    inside, outside = [], []
+    if s.kind is bool:
+        return [not s.default], []
+    if s.choices:
+        inside = [(s.choices[-1],) if s.shape == "many" else s.choices[-1]]
+        outside = [("bogus",) if s.shape == "many" else "bogus"]
+        return inside, outside
+    if s.kind is str:
+        return ["/World/Cam"], ["World/Cam"] if s.check else []
+    step = 1 if s.kind is int else 0.5
+    for bound, sign, closed in ((s.ge, -1, True), (s.gt, -1, False), (s.le, 1, True), (s.lt, 1, False)):
+        if bound is None:
+            continue
+        edge = s.kind(bound) if closed else bound - sign * step
+        inside.append(edge)
+        outside.append(s.kind(bound + sign * step) if closed else s.kind(bound))
+    if s.shape == "pair":
+        inside = [(v, v) for v in inside]
+        outside = [(v, v) for v in outside]
+    return inside, outside
+
+
+@pytest.mark.parametrize("s", _setting_cases())
+def test_the_cli_derives_each_setting_from_the_table(s):
+    """`drt render` and `drt submit` take the table's flag, accept its bounds, refuse beyond them, and a flag not given
+    leaves the table's default."""
+    from renderer.cli import request_from_args
+    from service.cli import build_parser
+    from service.client import settings_from_args
+
+    parser = build_parser()
+    base = ["render", "scene.usda", "-o", "out.exr"]
+    default = request_from_args(parser.parse_args(base)).settings()
+    if s.name != "tile":  # the tile size is execution, never part of the request
+        expected = s.default
+        assert default[s.name] == expected, s.name
+    inside, outside = _edge_values(s)
+    for v in inside:
+        args = parser.parse_args(base + _flag_args(s, v))
+        got = getattr(args, s.name)
+        assert (tuple(got) if s.shape in ("pair", "many") else got) == v
+        sub = settings_from_args(parser.parse_args(["submit", "scene.usda"] + _flag_args(s, v)))
+        assert sub[s.name] == (list(v) if s.shape in ("pair", "many") else v)
+    for v in outside:
+        with pytest.raises(SystemExit):
+            parser.parse_args(base + _flag_args(s, v))
+
+
+@pytest.mark.parametrize("s", _setting_cases())
+def test_the_wire_format_and_openapi_derive_each_setting_from_the_table(s):
+    """schemas.RenderSettings' default and bounds are the table's, and so is what OpenAPI documents."""
+    import pydantic
+
+    from schemas import JobCreate
+    from service.app import create_app
+    from service.settings import ServiceSettings
+
+    field = JobCreate.model_fields[s.name]
+    assert field.default == (list(s.default) if s.shape == "many" else s.default)
+    assert field.description == s.describe()
+    inside, outside = _edge_values(s)
+    for v in inside:
+        JobCreate(**{s.name: v})
+    for v in outside:
+        with pytest.raises(pydantic.ValidationError):
+            JobCreate(**{s.name: v})
+    schema = JobCreate.model_json_schema()["properties"][s.name]
+    if s.kind in (int, float) and s.shape == "one":
+        numbers = next((o for o in schema.get("anyOf", [schema]) if o.get("type") in ("integer", "number")), {})
+        for key, bound in (("minimum", s.ge), ("maximum", s.le), ("exclusiveMinimum", s.gt),
+                           ("exclusiveMaximum", s.lt)):
+            assert numbers.get(key) == bound, (s.name, key)
+    global _OPENAPI
+    if "_OPENAPI" not in globals():
+        _OPENAPI = create_app(ServiceSettings(data_dir="/nonexistent-not-started")).openapi()
+    assert s.name in str(_OPENAPI)
+
+
+SETTINGS_HOME = ROOT / "renderer" / "options.py"
+SCENE_MODEL = ROOT / "renderer" / "scene" / "model.py"  # what a loaded scene holds (a camera's own f-stop), not settings
+
+
+def test_no_setting_is_declared_outside_the_table():
+    """No flag string of a setting is written anywhere but the table, and no record that carries settings (a class with
+    three or more fields named like settings: a pydantic model, a dataclass) gives one a literal default: such
+    records take ``options.default_of`` (the table's default), or no default."""
+    from renderer.options import SETTINGS_TABLE
+
+    flags = {s.cli_flag for s in SETTINGS_TABLE}
+    names = {s.name for s in SETTINGS_TABLE}
+    bad = []
+    for top in ("renderer", "schemas", "service"):
+        for p in (ROOT / top).rglob("*.py"):
+            if p in (SETTINGS_HOME, SCENE_MODEL):
+                continue
+            tree = ast.parse(p.read_text(), str(p))
+            for node in ast.walk(tree):
+                if isinstance(node, ast.Constant) and node.value in flags:
+                    bad.append(f"{p.relative_to(ROOT)}:{node.lineno}: flag {node.value}")
+                if not isinstance(node, ast.ClassDef):
+                    continue
+                fields = [f for f in node.body if isinstance(f, ast.AnnAssign) and isinstance(f.target, ast.Name)
+                          and f.target.id in names]
+                if len(fields) < 3:
+                    continue
+                for f in fields:
+                    if f.value is not None and getattr(getattr(f.value, "func", None), "id", "") != "default_of":
+                        bad.append(f"{p.relative_to(ROOT)}:{f.lineno}: {node.name}.{f.target.id}")
+    assert not bad, "settings declared outside renderer/options.py:\n" + "\n".join(bad)

@@ -17,10 +17,10 @@ import pytest
 import warp as wp
 
 from chi2 import expected_probabilities
+from sampling_twins import np_to_world
 from renderer.shading import bsdf as B
 from renderer.shading import lobes as L
 from renderer.shading import microfacet as M
-from renderer.sampling.warps import np_to_world
 from test_microfacet import HemisphereCharts, chi2_directions, direction, seed_of
 
 wp.set_module_options({"enable_backward": False})

@@ -1,4 +1,5 @@
-"""Tests of renderer/sampling.py: chi-square of every warp and light sampler against its pdf, and Warp == NumPy."""
+"""Tests of renderer/sampling/warps.py and renderer/lights/shapes.py: chi-square of every warp and light sampler
+against its pdf, and Warp == NumPy (the twins in sampling_twins.py)."""
 from __future__ import annotations
 
 import zlib
@@ -8,7 +9,9 @@ import pytest
 import warp as wp
 
 from chi2 import AzimuthWedge, Interval, Rectangle, SphericalCap, assert_chi2, cap_around
-from renderer.sampling import warps as S
+import sampling_twins as N
+from renderer.lights import shapes as L
+from renderer.sampling import warps as W
 
 wp.set_module_options({"enable_backward": False})
 
@@ -90,23 +93,23 @@ def k_warps(
 ):
     i = wp.tid()
     x = u[i]
-    disk[i] = S.square_to_uniform_disk_concentric(x)
-    cos_hemi[i] = S.square_to_cosine_hemisphere(x)
-    sphere[i] = S.square_to_uniform_sphere(x)
-    hemi[i] = S.square_to_uniform_hemisphere(x)
-    cone[i] = S.square_to_uniform_cone(x, cos_max)
-    tri[i] = S.square_to_uniform_triangle(x)
-    tent[i] = S.sample_tent(x[0])
-    pdfs[i, 0] = S.square_to_uniform_disk_concentric_pdf(disk[i])
-    pdfs[i, 1] = S.square_to_cosine_hemisphere_pdf(cos_hemi[i])
-    pdfs[i, 2] = S.square_to_uniform_sphere_pdf(sphere[i])
-    pdfs[i, 3] = S.square_to_uniform_hemisphere_pdf(hemi[i])
-    pdfs[i, 4] = S.square_to_uniform_cone_pdf(cone[i], cos_max)
-    pdfs[i, 5] = S.square_to_uniform_triangle_pdf(tri[i])
-    pdfs[i, 6] = S.sample_tent_pdf(tent[i])
+    disk[i] = W.square_to_uniform_disk_concentric(x)
+    cos_hemi[i] = W.square_to_cosine_hemisphere(x)
+    sphere[i] = W.square_to_uniform_sphere(x)
+    hemi[i] = W.square_to_uniform_hemisphere(x)
+    cone[i] = W.square_to_uniform_cone(x, cos_max)
+    tri[i] = W.square_to_uniform_triangle(x)
+    tent[i] = W.sample_tent(x[0])
+    pdfs[i, 0] = W.square_to_uniform_disk_concentric_pdf(disk[i])
+    pdfs[i, 1] = W.square_to_cosine_hemisphere_pdf(cos_hemi[i])
+    pdfs[i, 2] = W.square_to_uniform_sphere_pdf(sphere[i])
+    pdfs[i, 3] = W.square_to_uniform_hemisphere_pdf(hemi[i])
+    pdfs[i, 4] = W.square_to_uniform_cone_pdf(cone[i], cos_max)
+    pdfs[i, 5] = W.square_to_uniform_triangle_pdf(tri[i])
+    pdfs[i, 6] = W.sample_tent_pdf(tent[i])
     n = normals[i]
-    frames[i] = S.frame_from_normal(n)
-    round_trip[i] = S.to_local(S.to_world(sphere[i], n), n)
+    frames[i] = W.frame_from_normal(n)
+    round_trip[i] = W.to_local(W.to_world(sphere[i], n), n)
 
 
 @wp.struct
@@ -122,29 +125,29 @@ class LightGeom:
 
 
 @wp.func
-def light_sample(g: LightGeom, p: wp.vec3, u: wp.vec2) -> S.LightSampleGeom:
+def light_sample(g: LightGeom, p: wp.vec3, u: wp.vec2) -> L.LightSampleGeom:
     if g.kind == 0:
-        return S.sample_rect(p, g.a, g.b, g.c, u)
+        return L.sample_rect(p, g.a, g.b, g.c, u)
     if g.kind == 1:
-        return S.sample_disk_light(p, g.a, g.b, g.s0, u)
+        return L.sample_disk_light(p, g.a, g.b, g.s0, u)
     if g.kind == 2:
-        return S.sample_sphere_light(p, g.a, g.s0, u)
+        return L.sample_sphere_light(p, g.a, g.s0, u)
     if g.kind == 3:
-        return S.sample_cylinder_light(p, g.a, g.b, g.s0, g.s1, u)
-    return S.sample_triangle_light(p, g.a, g.b, g.c, u)
+        return L.sample_cylinder_light(p, g.a, g.b, g.s0, g.s1, u)
+    return L.sample_triangle_light(p, g.a, g.b, g.c, u)
 
 
 @wp.func
 def light_pdf(g: LightGeom, p: wp.vec3, d: wp.vec3) -> float:
     if g.kind == 0:
-        return S.rect_pdf(p, d, g.a, g.b, g.c)
+        return L.rect_pdf(p, d, g.a, g.b, g.c)
     if g.kind == 1:
-        return S.disk_light_pdf(p, d, g.a, g.b, g.s0)
+        return L.disk_light_pdf(p, d, g.a, g.b, g.s0)
     if g.kind == 2:
-        return S.sphere_light_pdf(p, d, g.a, g.s0)
+        return L.sphere_light_pdf(p, d, g.a, g.s0)
     if g.kind == 3:
-        return S.cylinder_light_pdf(p, d, g.a, g.b, g.s0, g.s1)
-    return S.triangle_light_pdf(p, d, g.a, g.b, g.c)
+        return L.cylinder_light_pdf(p, d, g.a, g.b, g.s0, g.s1)
+    return L.triangle_light_pdf(p, d, g.a, g.b, g.c)
 
 
 @wp.kernel
@@ -153,7 +156,7 @@ def k_lights(
     p_ref: wp.vec3,
     u: wp.array(dtype=wp.vec2),
     dirs: wp.array(dtype=wp.vec3),
-    out: wp.array(dtype=S.LightSampleGeom),
+    out: wp.array(dtype=L.LightSampleGeom),
     pdf_back: wp.array(dtype=float),
     pdf_dirs: wp.array(dtype=float),
 ):
@@ -199,14 +202,14 @@ def run_light(kind: str, p_ref, geom: dict, u: np.ndarray, dirs: np.ndarray | No
     """Warp light sampler: (dir, dist, point, normal, pdf) arrays, pdf of the sampled dirs, pdf of ``dirs``."""
     n = len(u)
     dirs = np.zeros((n, 3)) if dirs is None else dirs
-    out = wp.zeros(n, dtype=S.LightSampleGeom)
+    out = wp.zeros(n, dtype=L.LightSampleGeom)
     pdf_back, pdf_dirs = wp.zeros(n, dtype=float), wp.zeros(n, dtype=float)
     wp.launch(k_lights, dim=n, inputs=[make_geom(kind, geom), wp.vec3(*map(float, p_ref)),
                                        wp.array(u.astype(np.float32), dtype=wp.vec2),
                                        wp.array(dirs.astype(np.float32), dtype=wp.vec3)],
               outputs=[out, pdf_back, pdf_dirs], device="cpu")
     o = out.numpy()
-    sample = S.NpLightSample(*(np.asarray(o[f], np.float64) for f in S.NpLightSample._fields))
+    sample = N.NpLightSample(*(np.asarray(o[f], np.float64) for f in N.NpLightSample._fields))
     return sample, pdf_back.numpy(), pdf_dirs.numpy()
 
 
@@ -219,32 +222,32 @@ def np_light(kind: str, geom: dict):
     """(sample(p_ref, u), pdf(p_ref, dirs), bounding sphere (center, radius)) for a light configuration."""
     if kind == "rect":
         c, eu, ev = (np.asarray(geom[k], float) for k in ("corner", "edge_u", "edge_v"))
-        return (lambda p, u: S.np_sample_rect(p, c, eu, ev, u), lambda p, d: S.np_rect_pdf(p, d, c, eu, ev),
+        return (lambda p, u: N.np_sample_rect(p, c, eu, ev, u), lambda p, d: N.np_rect_pdf(p, d, c, eu, ev),
                 (c + 0.5 * (eu + ev), 0.5 * np.linalg.norm(eu + ev)))
     if kind == "disk":
         c, n, r = np.asarray(geom["center"], float), np.asarray(geom["normal"], float), geom["radius"]
-        return (lambda p, u: S.np_sample_disk_light(p, c, n, r, u), lambda p, d: S.np_disk_light_pdf(p, d, c, n, r),
+        return (lambda p, u: N.np_sample_disk_light(p, c, n, r, u), lambda p, d: N.np_disk_light_pdf(p, d, c, n, r),
                 (c, r))
     if kind == "sphere":
         c, r = np.asarray(geom["center"], float), geom["radius"]
-        return (lambda p, u: S.np_sample_sphere_light(p, c, r, u), lambda p, d: S.np_sphere_light_pdf(p, d, c, r),
+        return (lambda p, u: N.np_sample_sphere_light(p, c, r, u), lambda p, d: N.np_sphere_light_pdf(p, d, c, r),
                 (c, r))
     if kind == "cylinder":
         c, a, ln, r = np.asarray(geom["center"], float), np.asarray(geom["axis"], float), geom["length"], geom["radius"]
-        return (lambda p, u: S.np_sample_cylinder_light(p, c, a, ln, r, u),
-                lambda p, d: S.np_cylinder_light_pdf(p, d, c, a, ln, r),
+        return (lambda p, u: N.np_sample_cylinder_light(p, c, a, ln, r, u),
+                lambda p, d: N.np_cylinder_light_pdf(p, d, c, a, ln, r),
                 (c, np.hypot(0.5 * ln, r)))
     p0, p1, p2 = (np.asarray(geom[k], float) for k in ("p0", "p1", "p2"))
     cen = (p0 + p1 + p2) / 3
-    return (lambda p, u: S.np_sample_triangle_light(p, p0, p1, p2, u),
-            lambda p, d: S.np_triangle_light_pdf(p, d, p0, p1, p2),
+    return (lambda p, u: N.np_sample_triangle_light(p, p0, p1, p2, u),
+            lambda p, d: N.np_triangle_light_pdf(p, d, p0, p1, p2),
             (cen, max(np.linalg.norm(q - cen) for q in (p0, p1, p2))))
 
 
 def cylinder_direction_density(p_ref, dirs, geom) -> np.ndarray:
     """Density of directions produced by area-sampling a cylinder: the sum over BOTH crossings of the ray."""
     args = (geom["center"], geom["axis"], geom["length"], geom["radius"])
-    t0, ok0, t1, ok1, cos_l = S.np_cylinder_hits(p_ref, dirs, *args)
+    t0, ok0, t1, ok1, cos_l = N.np_cylinder_hits(p_ref, dirs, *args)
     area = 2 * np.pi * geom["radius"] * geom["length"]
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(ok0, t0 * t0 / (cos_l * area), 0.0) + np.where(ok1, t1 * t1 / (cos_l * area), 0.0)
@@ -256,20 +259,20 @@ def cylinder_direction_density(p_ref, dirs, geom) -> np.ndarray:
 
 COS_WIDE, COS_NARROW = 0.3, float(np.cos(0.02))
 BASIC = {
-    "disk": (S.np_square_to_uniform_disk_concentric, S.np_square_to_uniform_disk_concentric_pdf,
+    "disk": (N.np_square_to_uniform_disk_concentric, N.np_square_to_uniform_disk_concentric_pdf,
              lambda: Rectangle((-1, -1), (1, 1))),
-    "cosine_hemisphere": (S.np_square_to_cosine_hemisphere, S.np_square_to_cosine_hemisphere_pdf,
+    "cosine_hemisphere": (N.np_square_to_cosine_hemisphere, N.np_square_to_cosine_hemisphere_pdf,
                           lambda: SphericalCap()),
-    "uniform_sphere": (S.np_square_to_uniform_sphere, S.np_square_to_uniform_sphere_pdf, lambda: SphericalCap()),
-    "uniform_hemisphere": (S.np_square_to_uniform_hemisphere, S.np_square_to_uniform_hemisphere_pdf,
+    "uniform_sphere": (N.np_square_to_uniform_sphere, N.np_square_to_uniform_sphere_pdf, lambda: SphericalCap()),
+    "uniform_hemisphere": (N.np_square_to_uniform_hemisphere, N.np_square_to_uniform_hemisphere_pdf,
                            lambda: SphericalCap()),
-    "cone_wide": (lambda u: S.np_square_to_uniform_cone(u, COS_WIDE),
-                  lambda v: S.np_square_to_uniform_cone_pdf(v, COS_WIDE), lambda: SphericalCap(cos_min=0.2)),
-    "cone_narrow": (lambda u: S.np_square_to_uniform_cone(u, COS_NARROW),
-                    lambda v: S.np_square_to_uniform_cone_pdf(v, COS_NARROW),
+    "cone_wide": (lambda u: N.np_square_to_uniform_cone(u, COS_WIDE),
+                  lambda v: N.np_square_to_uniform_cone_pdf(v, COS_WIDE), lambda: SphericalCap(cos_min=0.2)),
+    "cone_narrow": (lambda u: N.np_square_to_uniform_cone(u, COS_NARROW),
+                    lambda v: N.np_square_to_uniform_cone_pdf(v, COS_NARROW),
                     lambda: SphericalCap(cos_min=1 - 1.1 * (1 - COS_NARROW))),
-    "triangle": (S.np_square_to_uniform_triangle, S.np_square_to_uniform_triangle_pdf, lambda: Rectangle()),
-    "tent": (S.np_sample_tent, S.np_sample_tent_pdf, lambda: Interval(0.0, 1.0)),
+    "triangle": (N.np_square_to_uniform_triangle, N.np_square_to_uniform_triangle_pdf, lambda: Rectangle()),
+    "tent": (N.np_sample_tent, N.np_sample_tent_pdf, lambda: Interval(0.0, 1.0)),
 }
 
 
@@ -295,8 +298,8 @@ def _light_chi2(kind, p_ref, geom, seed, density=None, domain=None, **kw):
 @pytest.mark.parametrize("case", list(RECT_CASES))
 def test_chi2_rect(case):
     p_ref, geom = RECT_CASES[case]
-    omega = S.np_rect_solid_angle(p_ref, *(np.asarray(geom[k], float) for k in ("corner", "edge_u", "edge_v")))
-    spherical = S.SPH_RECT_MIN_SOLID_ANGLE <= omega <= S.SPH_RECT_MAX_SOLID_ANGLE
+    omega = N.np_rect_solid_angle(p_ref, *(np.asarray(geom[k], float) for k in ("corner", "edge_u", "edge_v")))
+    spherical = L.SPH_RECT_MIN_SOLID_ANGLE <= omega <= L.SPH_RECT_MAX_SOLID_ANGLE
     assert spherical == case.endswith("spherical"), f"{case}: solid angle {omega} picks the other strategy"
     if case == "very_near_area":  # the density peaks sharply at the horizon: lower hemisphere, finer cells there
         _light_chi2("rect", p_ref, geom, seed=seed_of("rect", case), domain=SphericalCap((0, 0, -1), 0.0, power=3))
@@ -322,7 +325,7 @@ def cylinder_wedge(p_ref, geom) -> AzimuthWedge:
     rho = np.linalg.norm(o_perp)
     assert rho > geom["radius"]
     # Zoom the cos(angle to axis) range onto the cylinder: its extremes are on the rims.
-    f = S.np_frame_from_normal(axis)
+    f = N.np_frame_from_normal(axis)
     phi = np.linspace(0, 2 * np.pi, 721)
     ring = geom["radius"] * (np.cos(phi)[:, None] * f[:, 0] + np.sin(phi)[:, None] * f[:, 1])
     rims = np.concatenate([center + ring + h * geom["length"] * axis for h in (-0.5, 0.5)])
@@ -366,54 +369,54 @@ def test_warps_match_numpy():
     rng = np.random.default_rng(1)
     u = rng.random((20_000, 2)).astype(np.float32).astype(np.float64)
     u[:4] = [[0.5, 0.5], [0.0, 0.0], [0.999, 0.001], [0.25, 0.75]]
-    normals = S.np_square_to_uniform_sphere(rng.random((20_000, 2)))
+    normals = N.np_square_to_uniform_sphere(rng.random((20_000, 2)))
     normals[:3] = [[0, 0, 1], [0, 0, -1], [1, 0, 0]]
     w = run_warps(u, COS_NARROW, normals)
     close = dict(rtol=1e-4, atol=2e-5)
-    np.testing.assert_allclose(w["disk"], S.np_square_to_uniform_disk_concentric(u), **close)
-    np.testing.assert_allclose(w["cos_hemi"], S.np_square_to_cosine_hemisphere(u), rtol=1e-4, atol=1e-3)
-    np.testing.assert_allclose(w["sphere"], S.np_square_to_uniform_sphere(u), **close)
-    np.testing.assert_allclose(w["hemi"], S.np_square_to_uniform_hemisphere(u), rtol=1e-4, atol=1e-3)
-    np.testing.assert_allclose(w["cone"], S.np_square_to_uniform_cone(u, COS_NARROW), **close)
-    np.testing.assert_allclose(w["tri"], S.np_square_to_uniform_triangle(u), **close)
-    np.testing.assert_allclose(w["tent"], S.np_sample_tent(u[:, 0]), **close)
+    np.testing.assert_allclose(w["disk"], N.np_square_to_uniform_disk_concentric(u), **close)
+    np.testing.assert_allclose(w["cos_hemi"], N.np_square_to_cosine_hemisphere(u), rtol=1e-4, atol=1e-3)
+    np.testing.assert_allclose(w["sphere"], N.np_square_to_uniform_sphere(u), **close)
+    np.testing.assert_allclose(w["hemi"], N.np_square_to_uniform_hemisphere(u), rtol=1e-4, atol=1e-3)
+    np.testing.assert_allclose(w["cone"], N.np_square_to_uniform_cone(u, COS_NARROW), **close)
+    np.testing.assert_allclose(w["tri"], N.np_square_to_uniform_triangle(u), **close)
+    np.testing.assert_allclose(w["tent"], N.np_sample_tent(u[:, 0]), **close)
     # every sample has the disk's density, also those float32 rounding put a hair outside the unit circle (u = (0, 0)
     # maps to the rim: the reference is taken a millionth inside)
-    np.testing.assert_allclose(w["pdfs"][:, 0], S.np_square_to_uniform_disk_concentric_pdf(w["disk"] * (1 - 1e-6)),
+    np.testing.assert_allclose(w["pdfs"][:, 0], N.np_square_to_uniform_disk_concentric_pdf(w["disk"] * (1 - 1e-6)),
                                rtol=1e-6)
-    np.testing.assert_allclose(w["pdfs"][:, 1], S.np_square_to_cosine_hemisphere_pdf(w["cos_hemi"]), rtol=1e-5,
+    np.testing.assert_allclose(w["pdfs"][:, 1], N.np_square_to_cosine_hemisphere_pdf(w["cos_hemi"]), rtol=1e-5,
                                atol=1e-6)
     np.testing.assert_allclose(w["pdfs"][:, 2], 1 / (4 * np.pi), rtol=1e-6)
     np.testing.assert_allclose(w["pdfs"][:, 3], 1 / (2 * np.pi), rtol=1e-6)
     inside = w["cone"][:, 2] >= np.float32(COS_NARROW)
-    np.testing.assert_allclose(w["pdfs"][inside, 4], S.np_square_to_uniform_cone_pdf(w["cone"][inside], COS_NARROW),
+    np.testing.assert_allclose(w["pdfs"][inside, 4], N.np_square_to_uniform_cone_pdf(w["cone"][inside], COS_NARROW),
                                rtol=1e-3)
     np.testing.assert_allclose(w["pdfs"][:, 5], 2.0)
-    np.testing.assert_allclose(w["pdfs"][:, 6], S.np_sample_tent_pdf(w["tent"]), rtol=1e-5, atol=1e-6)
-    np.testing.assert_allclose(w["frames"], S.np_frame_from_normal(normals), rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose(w["pdfs"][:, 6], N.np_sample_tent_pdf(w["tent"]), rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(w["frames"], N.np_frame_from_normal(normals), rtol=1e-4, atol=1e-5)
     np.testing.assert_allclose(w["round_trip"], w["sphere"], atol=1e-5)
 
 
 def test_frame_is_orthonormal_and_right_handed():
     rng = np.random.default_rng(2)
-    n = S.np_square_to_uniform_sphere(rng.random((10_000, 2)))
+    n = N.np_square_to_uniform_sphere(rng.random((10_000, 2)))
     n = np.concatenate([n, [[0, 0, 1], [0, 0, -1], [0, 0, -1 + 1e-12], [1, 0, 0]]])
     n /= np.linalg.norm(n, axis=1, keepdims=True)
-    f = S.np_frame_from_normal(n)
+    f = N.np_frame_from_normal(n)
     np.testing.assert_allclose(np.einsum("nji,njk->nik", f, f), np.broadcast_to(np.eye(3), f.shape), atol=1e-9)
     np.testing.assert_allclose(np.linalg.det(f), 1.0, atol=1e-9)
     np.testing.assert_allclose(f[:, :, 2], n)
 
 
 def test_warp_pdfs_outside_support():
-    assert S.np_square_to_uniform_disk_concentric_pdf([1.0, 0.1]) == 0.0
-    assert S.np_square_to_cosine_hemisphere_pdf([0.0, 0.6, -0.8]) == 0.0
-    assert S.np_square_to_uniform_hemisphere_pdf([0.0, 0.6, -0.8]) == 0.0
-    assert S.np_square_to_uniform_cone_pdf([0.6, 0.0, 0.8], 0.9) == 0.0
-    assert S.np_square_to_uniform_cone_pdf([0.0, 0.0, 1.0], 1.0) == 0.0  # a zero-angle cone is a delta
-    assert S.np_square_to_uniform_triangle_pdf([0.7, 0.4]) == 0.0
-    assert S.np_sample_tent_pdf(1.2) == 0.0 and S.np_sample_tent_pdf(0.5) == 2.0
-    assert S.np_sample_tent(0.5) == 0.5 and S.np_sample_tent(0.0) == 0.0 and S.np_sample_tent(1.0) == 1.0
+    assert N.np_square_to_uniform_disk_concentric_pdf([1.0, 0.1]) == 0.0
+    assert N.np_square_to_cosine_hemisphere_pdf([0.0, 0.6, -0.8]) == 0.0
+    assert N.np_square_to_uniform_hemisphere_pdf([0.0, 0.6, -0.8]) == 0.0
+    assert N.np_square_to_uniform_cone_pdf([0.6, 0.0, 0.8], 0.9) == 0.0
+    assert N.np_square_to_uniform_cone_pdf([0.0, 0.0, 1.0], 1.0) == 0.0  # a zero-angle cone is a delta
+    assert N.np_square_to_uniform_triangle_pdf([0.7, 0.4]) == 0.0
+    assert N.np_sample_tent_pdf(1.2) == 0.0 and N.np_sample_tent_pdf(0.5) == 2.0
+    assert N.np_sample_tent(0.5) == 0.5 and N.np_sample_tent(0.0) == 0.0 and N.np_sample_tent(1.0) == 1.0
 
 
 LIGHT_CASES = ([("rect", c) for c in RECT_CASES] + [("disk", c) for c in DISK_CASES]
@@ -439,13 +442,13 @@ def test_light_sampler_consistency(kind, case):
     np.testing.assert_allclose(np.linalg.norm(s.normal, axis=1), 1.0, atol=1e-9)
     back = pdf(p_ref, s.dir)
     if kind == "cylinder":  # *_pdf counts the first crossing only; compare where the sample is that crossing
-        t0 = S.np_cylinder_hits(p_ref, s.dir, geom["center"], geom["axis"], geom["length"], geom["radius"])[0]
+        t0 = N.np_cylinder_hits(p_ref, s.dir, geom["center"], geom["axis"], geom["length"], geom["radius"])[0]
         ok &= np.abs(t0 - s.dist) < 1e-6 * (1 + s.dist)
         assert ok.mean() > 0.3
     np.testing.assert_allclose(back[ok], s.pdf[ok], rtol=1e-6)
 
     # Warp twin: same samples (float32), same pdfs, same *_pdf on arbitrary directions (hits and misses).
-    dirs = S.np_square_to_uniform_sphere(rng.random((4000, 2)))
+    dirs = N.np_square_to_uniform_sphere(rng.random((4000, 2)))
     dirs[: len(dirs) // 2] = s.dir[: len(dirs) // 2] + 0.02 * dirs[: len(dirs) // 2]  # many near-edge rays
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     ws, w_back, w_dirs = run_light(kind, p_ref, geom, u, dirs)
@@ -467,11 +470,11 @@ def test_light_sampler_consistency(kind, case):
 def test_degenerate_light_queries_return_zero_pdf():
     rect = {k: np.asarray(v, float) for k, v in RECT.items()}
     in_plane = np.array([5.0, 0.0, 0.0])
-    s = S.np_sample_rect(in_plane, rect["corner"], rect["edge_u"], rect["edge_v"], np.array([[0.3, 0.6]]))
+    s = N.np_sample_rect(in_plane, rect["corner"], rect["edge_u"], rect["edge_v"], np.array([[0.3, 0.6]]))
     assert s.pdf[0] == 0.0
-    assert S.np_rect_pdf(np.zeros(3) + [0, 0, 1.0], np.array([0.0, 0.0, 1.0]), **rect) == 0.0  # pointing away
-    assert S.np_disk_light_pdf([0, 0, 1.0], [1.0, 0, 0], [0, 0, 0], [0, 0, 1.0], 1.0) == 0.0  # parallel ray
-    assert S.np_sphere_light_pdf([0, 0, 0], [0, 1.0, 0], [3.0, 0, 0], 1.0) == 0.0  # outside the cone
+    assert N.np_rect_pdf(np.zeros(3) + [0, 0, 1.0], np.array([0.0, 0.0, 1.0]), **rect) == 0.0  # pointing away
+    assert N.np_disk_light_pdf([0, 0, 1.0], [1.0, 0, 0], [0, 0, 0], [0, 0, 1.0], 1.0) == 0.0  # parallel ray
+    assert N.np_sphere_light_pdf([0, 0, 0], [0, 1.0, 0], [3.0, 0, 0], 1.0) == 0.0  # outside the cone
     ws, _, _ = run_light("rect", in_plane, RECT, np.array([[0.3, 0.6]]))
     assert ws.pdf[0] == 0.0
 
@@ -479,7 +482,7 @@ def test_degenerate_light_queries_return_zero_pdf():
 @wp.kernel
 def _acos_kernel(x: wp.array(dtype=float), y: wp.array(dtype=float)):
     i = wp.tid()
-    y[i] = S._safe_acos(x[i])
+    y[i] = L._safe_acos(x[i])
 
 
 def test_the_polynomial_acos_of_spherical_rectangles_is_within_5e7_rad_and_clamps():
@@ -496,7 +499,7 @@ def test_the_polynomial_acos_of_spherical_rectangles_is_within_5e7_rad_and_clamp
 @wp.kernel
 def _sin_cos_kernel(x: wp.array(dtype=float), s: wp.array(dtype=float), c: wp.array(dtype=float)):
     i = wp.tid()
-    a, b = S.sin_cos(x[i])
+    a, b = W.sin_cos(x[i])
     s[i] = a
     c[i] = b
 
@@ -510,15 +513,30 @@ def test_the_polynomial_sin_cos_of_the_samplers_is_within_1e7_up_to_100():
     assert np.abs(c.numpy() - np.cos(xd)).max() <= 1e-7
 
 
+@wp.func
+def _sph_rect_angles_reference(x0: float, y0: float, z0: float, x1: float, y1: float):
+    """``_sph_rect_angles`` (renderer/lights/shapes.py) in Warp's scalar code: what its vector lanes must equal."""
+    r0 = wp.sqrt(z0 * z0 + y0 * y0)
+    r1 = wp.sqrt(z0 * z0 + x1 * x1)
+    r2 = wp.sqrt(z0 * z0 + y1 * y1)
+    r3 = wp.sqrt(z0 * z0 + x0 * x0)
+    g01 = L._safe_acos(y0 * x1 / (r0 * r1)) + L._safe_acos(-x1 * y1 / (r1 * r2))
+    g23 = L._safe_acos(x0 * y1 / (r2 * r3)) + L._safe_acos(-x0 * y0 / (r3 * r0))
+    solid_angle = g01 + g23 - W.TWO_PI
+    if z0 == 0.0:
+        solid_angle = 0.0
+    return g01, g23, -y0 / r0, y1 / r2, solid_angle
+
+
 @wp.kernel
 def _sph_rect_kernel(q: wp.array(dtype=wp.vec4), y1: wp.array(dtype=wp.float32), native: wp.array(dtype=wp.vec4),
                      native_b: wp.array(dtype=wp.float32), reference: wp.array(dtype=wp.vec4),
                      reference_b: wp.array(dtype=wp.float32)):
     i = wp.tid()
-    g01, g23, b0, b1, sa = S._sph_rect_angles(q[i][0], q[i][1], q[i][2], q[i][3], y1[i])
+    g01, g23, b0, b1, sa = L._sph_rect_angles(q[i][0], q[i][1], q[i][2], q[i][3], y1[i])
     native[i] = wp.vec4(g01, g23, b0, b1)
     native_b[i] = sa
-    g01, g23, b0, b1, sa = S._sph_rect_angles_reference(q[i][0], q[i][1], q[i][2], q[i][3], y1[i])
+    g01, g23, b0, b1, sa = _sph_rect_angles_reference(q[i][0], q[i][1], q[i][2], q[i][3], y1[i])
     reference[i] = wp.vec4(g01, g23, b0, b1)
     reference_b[i] = sa
 

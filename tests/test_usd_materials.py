@@ -13,7 +13,7 @@ from renderer.shading import materials as M
 from renderer.scene import model as sc
 from renderer.shading import textures as T
 from renderer.motion.transform import matrix_at
-from renderer.usd.geometry import read_named_uvs
+from renderer.usd.primvars import read_named_uvs
 from renderer.usd.materials import MaterialTable
 from renderer.usd.importer import WarningLog, load_scene
 

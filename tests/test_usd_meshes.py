@@ -1,4 +1,4 @@
-"""Mesh features read from USD (renderer/usd/geometry.py): holes, GeomSubsets through holes and refinement,
+"""Mesh features read from USD (renderer/usd/mesh.py, renderer/usd/primvars.py): holes, GeomSubsets through holes and refinement,
 subdivision surfaces as imported and rendered."""
 from __future__ import annotations
 
@@ -166,7 +166,7 @@ def test_subdivided_texture_coordinates_and_named_uv_sets(tmp_path):
     """st (faceVarying, linear 'all') on a flat subdivided grid is the bilinear map of the cage: every refined
     corner keeps uv = xy of the cage; a second set read by name for materials lines up with the same
     triangles; varying uvs refine linearly too."""
-    from renderer.usd.geometry import read_named_uvs
+    from renderer.usd.primvars import read_named_uvs
     from renderer.usd.importer import WarningLog
 
     stage = stages.new_stage(tmp_path / "uv.usda")

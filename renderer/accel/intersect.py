@@ -10,7 +10,7 @@ Design (the paper asks that a moving object cost no more per ray than a still on
 * **Top level, per instance.** Rigid motion never touches the bottom level: the ray is carried into object
   space by the inverse of the instance's transform *at the ray's time* (translation lerp, rotation slerp). The
   top-level nodes store one box per key on a uniform grid of ``K`` shutter times, each box conservative for
-  the instance's swept bounds on the adjacent segments (``geometry.instance_key_bounds`` pads the keys with
+  the instance's swept bounds on the adjacent segments (``instance_bounds.instance_key_bounds`` pads the keys with
   the measured deviation of curved motion from the linear blend). A still scene has ``K = 1``.
 
 Both levels are binned-SAH trees (``build``) collapsed to four-wide nodes (``wide``): a node holds its four

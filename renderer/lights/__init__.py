@@ -1,1 +1,2 @@
-"""Lights as the kernels see them: the light table, light sampling with pdfs, the environment map."""
+"""Lights as the kernels see them: the light table, the light shapes' samplers, light sampling with pdfs, the
+environment map."""

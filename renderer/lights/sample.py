@@ -20,10 +20,7 @@ from renderer.accel.intersect import (
 )
 from renderer.accel.occlusion import hit_uv
 from renderer.lights.envmap import env_pdf, env_radiance, env_sample
-from renderer.lights.shaping import shaping_eval
-from renderer.lights.table import Lights
-from renderer.motion.kernels import keys_matrix
-from renderer.sampling.warps import (
+from renderer.lights.shapes import (
     cylinder_light_pdf,
     disk_light_pdf,
     rect_pdf,
@@ -33,11 +30,12 @@ from renderer.sampling.warps import (
     sample_sphere_light,
     sample_triangle_light,
     sphere_light_pdf,
-    square_to_cosine_hemisphere,
-    square_to_uniform_cone,
-    square_to_uniform_triangle,
-    to_world,
 )
+from renderer.lights.shaping import shaping_eval
+from renderer.lights.table import Lights
+from renderer.motion.kernels import keys_matrix
+from renderer.sampling.warps import (square_to_cosine_hemisphere, square_to_uniform_cone, square_to_uniform_triangle,
+                                     to_world)
 from renderer.scene.model import (
     LIGHT_CYLINDER,
     LIGHT_DISK,

@@ -38,8 +38,9 @@ from pxr import UsdGeom
 from renderer.scene import tessellate_curves as tc
 from renderer.scene import tessellate_points as tp
 from renderer.scene.model import AnalyticShape
-from renderer.usd.geometry import GeomData, point_keys, varying_colors
-from renderer.usd.motion import Shutter
+from renderer.usd.mesh import GeomData
+from renderer.usd.motion import Shutter, point_keys
+from renderer.usd.primvars import varying_colors
 
 DEFAULT_WIDTH = 1.0  # scene units; the schema has no fallback, Hydra and RenderMan use 1
 NOMINAL_WIDTH = 1920  # pixels across assumed for density when the stage sets no resolution

@@ -1,9 +1,10 @@
 """USD import entry point: ``load_scene(path, frame)`` turns a USD stage into the renderer's plain ``Scene``.
 
-No pxr object leaves the ``usd_*`` modules. This module opens the stage (payloads loaded), picks the camera and
+No pxr object leaves ``renderer/usd``. This module opens the stage (payloads loaded), picks the camera and
 shutter, walks the stage (native instances expanded as instance proxies, PointInstancers expanded per instance,
 purpose and visibility honoured) and assembles meshes, instances, materials, lights and camera. The parts live in
-``usd_geometry`` (meshes, primitives), ``usd_materials``, ``usd_lights``, ``usd_camera`` and ``usd_motion``.
+the package's other modules: ``mesh``, ``primitives``, ``curves``, ``materials``, ``lights``, ``camera``,
+``motion``.
 
 Policies worth knowing:
 
@@ -33,13 +34,14 @@ from renderer.usd import camera as usd_camera
 from renderer.usd import csg as usd_csg
 from renderer.usd import curves as usd_curves
 from renderer.usd import lights as usd_lights
-from renderer.usd.geometry import (PRIMITIVE_TYPES, collapse_keys, default_uv_name, primitive_signature,
-                                   read_display_colors, read_geometry, read_named_uvs)
 from renderer.usd.linking import apply_linking
 from renderer.usd.materials import MaterialTable
+from renderer.usd.mesh import read_mesh
 from renderer.usd.mesh_lights import apply_mesh_light
 from renderer.usd.mtlx import compose_mtlx
-from renderer.usd.motion import Shutter, TransformSampler, motion_transforms, refine_keys
+from renderer.usd.motion import Shutter, TransformSampler, collapse_keys, motion_transforms, refine_keys
+from renderer.usd.primitives import PRIMITIVE_TYPES, primitive_signature, read_primitive
+from renderer.usd.primvars import default_uv_name, read_display_colors, read_named_uvs
 from renderer.usd.skel import Skinning
 from renderer.usd.subdiv import SubdivisionDetail
 
@@ -471,7 +473,10 @@ class _Importer:
         else:
             if world is None and prim.IsA(UsdGeom.Mesh):
                 world = self.xf.world(prim, [self.frame])[0]
-            geom = read_geometry(prim, self.shutter, self.warn, self.detail, world, keys)
+            if prim.IsA(UsdGeom.Mesh):
+                geom = read_mesh(prim, self.shutter, self.warn, self.detail, world, keys)
+            else:
+                geom = read_primitive(prim, self.shutter, self.warn) if prim.GetTypeName() in PRIMITIVE_TYPES else None
             if geom is not None:
                 self._material_uv_set(prim, geom)
             if geom is not None and skin is not None and geom.normals is not None and geom.subdivision_level is None:

@@ -1,6 +1,6 @@
-"""Motion over the shutter, USD side: which time codes to sample and how to turn USD matrices into keys.
+"""Motion over the shutter, USD side: which time codes to sample, how to turn USD matrices and points into keys.
 
-Conventions used by every ``usd_*`` module:
+Conventions used by every module of ``renderer/usd``:
 
 * Times handed around are **absolute time codes**; only the final keys are normalised to ``s`` in [0, 1] over
   ``[shutter.open, shutter.close]`` (``Shutter.normalise``).
@@ -299,3 +299,60 @@ def refine_keys(evaluate, times) -> tuple[np.ndarray, np.ndarray]:
         times, mats = times[order], mats[:, order]
         open_seg = starts_half[order][:-1]
     return times, mats
+
+
+def point_keys(pb: UsdGeom.PointBased, shutter: Shutter, count: int, warn) -> tuple[np.ndarray, np.ndarray] | None:
+    """(times (P,), points (P, V, 3) float32) over the shutter, or None if the frame has no usable points.
+
+    With ``velocities`` authored, ``UsdGeomPointBased.ComputePointsAtTimes`` applies the USD formula
+    p(t) = p(tS) + v (t - tS)/tcps + a/2 ((t - tS)/tcps)^2 from the sample tS at or before the frame (five keys
+    when ``accelerations`` make the path curved). Otherwise every authored points sample inside the shutter is a
+    key, evaluated with USD's own interpolation; samples whose point count differs from the frame's are dropped.
+    """
+    attr = pb.GetPointsAttr()
+    frame = shutter.frame
+    base = attr.Get(frame)
+    if base is None:
+        return None
+    base = np.asarray(base, np.float32).reshape(-1, 3)
+    if len(base) != count:
+        return None
+    single = (np.array([frame]), base[None])
+    if shutter.static:
+        return single
+    path = str(pb.GetPath())
+    vel = pb.GetVelocitiesAttr()
+    if vel and vel.HasAuthoredValue():
+        v = vel.Get(frame)
+        if v is not None and len(v) == len(base):
+            acc = pb.GetAccelerationsAttr()
+            curved = bool(acc and acc.HasAuthoredValue())
+            times = shutter.uniform(5) if curved else shutter.keys()
+            arrays = pb.ComputePointsAtTimes([Usd.TimeCode(float(t)) for t in times], Usd.TimeCode(frame))
+            if arrays and all(len(a) == len(base) for a in arrays):
+                keys = np.stack([np.asarray(a, np.float32).reshape(-1, 3) for a in arrays])
+                return collapse_keys(times, keys)
+            warn("velocities could not be applied (point counts differ); those prims are not deformation-blurred",
+                 path)
+    if not attr.ValueMightBeTimeVarying():
+        return single
+    times = shutter.keys(attr.GetTimeSamplesInInterval(shutter.interval()))
+    keys, kept = [], []
+    for t in times:
+        a = attr.Get(float(t))
+        a = None if a is None else np.asarray(a, np.float32).reshape(-1, 3)
+        if a is None or len(a) != len(base):
+            continue
+        keys.append(a)
+        kept.append(t)
+    if len(kept) < len(times):
+        warn("point count changes within the shutter; deformation blur dropped for", path)
+        return single
+    return collapse_keys(np.array(kept), np.stack(keys))
+
+
+def collapse_keys(times: np.ndarray, keys: np.ndarray):
+    """(times, keys) as one key when every key equals the first (nothing moves), else unchanged."""
+    if len(keys) > 1 and all(np.array_equal(keys[0], k) for k in keys[1:]):
+        return times[:1], keys[:1]
+    return times, keys

@@ -34,6 +34,15 @@ def test_flags_become_settings():
     assert JobCreate(**settings("--frames", "1,4")).frame_times() == [1.0, 4.0]
 
 
+def test_a_time_limit_without_spp_is_capped_alike_by_submit_render_and_a_plain_post():
+    from renderer.cli import request_from_args
+    from renderer.options import TIME_LIMITED_SPP
+
+    render = request_from_args(build_parser().parse_args(["render", "s.usda", "-o", "o.exr", "--time-limit", "5"]))
+    assert render.options.spp == JobCreate(**settings("--time-limit", "5")).spp == JobCreate(time_limit=5).spp \
+        == TIME_LIMITED_SPP
+
+
 def test_frame_and_frames_conflict():
     with pytest.raises(ClientError):
         settings("--frame", "1", "--frames", "1:3")
@@ -41,4 +50,5 @@ def test_frame_and_frames_conflict():
 
 def test_render_is_still_drt_render():
     args = build_parser().parse_args(["render", "scene.usda", "-o", "out.exr", "--spp", "4"])
-    assert (args.command, args.spp, args.tile, args.output) == ("render", 4, None, "out.exr")  # None: auto tiles
+    assert (args.command, args.spp, args.output) == ("render", 4, "out.exr")
+    assert not hasattr(args, "tile")  # not given: drt render picks tiles for its threads

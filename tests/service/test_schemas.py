@@ -3,34 +3,25 @@ from __future__ import annotations
 
 import pytest
 
-from schemas import AOVS, FILTERS, TIME_FILTERS, FrameRange, JobCreate
+from renderer.options import SETTINGS_TABLE, TIME_LIMITED_SPP
+from schemas import FrameRange, JobCreate
 from service.errors import ApiError
 from service.spec import RenderSpec
 from service.submission import parse_settings
 
 
-def test_names_match_the_renderer():
-    from renderer.film.film import FILTERS as R_FILTERS
-    from renderer.integrator import TIME_FILTERS as R_TIME
-    from renderer.render import AOV_NAMES
-
-    assert set(FILTERS) == set(R_FILTERS)
-    assert set(TIME_FILTERS) == set(R_TIME)
-    assert set(AOVS) == set(AOV_NAMES)
-
-
-def test_defaults_are_drt_render_defaults():
+def test_defaults_are_the_tables():
     s = JobCreate()
-    assert (s.spp, s.seed, s.tile, s.filter, s.time_filter, s.motion_blur, s.dof, s.half, s.priority) == \
-        (16, 0, 64, "gaussian", "box", True, True, False, 0)
-    from renderer.render import MAX_DEPTH, RenderOptions
+    assert {t.name: getattr(s, t.name) for t in SETTINGS_TABLE} == \
+        {t.name: list(t.default) if t.shape == "many" else t.default for t in SETTINGS_TABLE}
+    assert (s.priority, s.frame_times()) == (0, None)
 
-    o = RenderOptions()
-    assert (s.max_depth, s.clamp) == (o.max_depth, o.clamp)
-    assert (s.unbiased, s.noise_threshold, s.min_spp, s.time_limit, s.denoise) == \
-        (o.unbiased, o.noise_threshold, o.min_spp, o.time_limit, o.denoise)
-    assert JobCreate.model_fields["max_depth"].metadata[-1].le == MAX_DEPTH
-    assert s.frame_times() is None
+
+def test_a_time_limit_without_spp_caps_at_the_tables_figure_as_drt_render_does():
+    assert JobCreate(time_limit=5).spp == TIME_LIMITED_SPP
+    assert JobCreate(time_limit=5, spp=8).spp == 8
+    assert JobCreate.model_validate_json('{"time_limit": 2}').spp == TIME_LIMITED_SPP
+    assert JobCreate().spp == 16
 
 
 def test_frames_list_or_range():
@@ -84,7 +75,7 @@ def test_spec_maps_settings_like_drt_render():
     spec = RenderSpec.from_settings(s, "/x/scene.usda", "abc")
     o = spec.options()
     assert (o.spp, o.seed, o.time_filter, o.dof, o.aovs) == (8, 3, "strobe", False, ("depth",))
-    assert spec.shutter == (-0.25, 0.25)
+    assert spec.request.shutter == (-0.25, 0.25)
     # sampling and output settings leave the prepared scene as it is: one serves them all
     for change in ({"half": True}, {"seed": 9, "spp": 64, "aovs": ["normal"], "max_depth": 2, "unbiased": True}):
         other = RenderSpec.from_settings(s.model_copy(update=change), "/y", "abc")
