@@ -336,6 +336,11 @@ class RenderSettingsInfo:
     aspect_ratio_conform_policy: str = "expandAperture"
     # UsdRender's dataWindowNDC (xmin, ymin, xmax, ymax), (0, 0) bottom left; None = the whole image
     data_window_ndc: tuple[float, float, float, float] | None = None
+    # UsdRender's includedPurposes: the purposes drawn; None = not authored (the importer's own policy)
+    included_purposes: tuple[str, ...] | None = None
+    # the material binding purpose asked for first by materialBindingPurposes ("full", "preview", or "" for
+    # all-purpose bindings only); a purpose falls back to all-purpose bindings, as UsdShade computes them
+    material_binding_purpose: str = "full"
 
 
 @dataclass

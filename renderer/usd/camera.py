@@ -16,6 +16,7 @@ from pxr import Sdf, Usd, UsdGeom, UsdRender
 from renderer.errors import SceneError
 from renderer.scene.model import CONFORM_POLICIES, Camera, MotionTransform, RenderSettingsInfo
 from renderer.usd.motion import TransformSampler, motion_transform
+from renderer.usd.reads import reads
 
 AUTO_FOCAL_35MM = 35.0  # the automatic camera's lens, in "mm" against a 36 mm wide aperture
 
@@ -26,6 +27,9 @@ def _get(prim, name: str, frame: float, default):
     return default if v is None else v
 
 
+@reads("RenderSettings", "disableMotionBlur", "instantaneousShutter", "disableDepthOfField", "includedPurposes",
+       "materialBindingPurposes")
+@reads("RenderProduct")
 def render_settings(stage: Usd.Stage, frame: float, warn) -> tuple[RenderSettingsInfo, object]:
     """(RenderSettingsInfo, settings prim or None) from ``renderSettingsPrimPath`` or the only RenderSettings prim."""
     prim = None
@@ -50,6 +54,7 @@ def render_settings(stage: Usd.Stage, frame: float, warn) -> tuple[RenderSetting
     info.disable_motion_blur = bool(_get(prim, "disableMotionBlur", frame, False)) or bool(
         _get(prim, "instantaneousShutter", frame, False))
     info.disable_depth_of_field = bool(_get(prim, "disableDepthOfField", frame, False))
+    _read_purposes(info, rs, frame, warn)
     # the first RenderProduct's authored values override the settings' (UsdRenderSettingsBase is shared)
     products = [stage.GetPrimAtPath(t) for t in rs.GetProductsRel().GetForwardedTargets()]
     products = [p for p in products if p and p.IsA(UsdRender.Product)]
@@ -59,9 +64,26 @@ def render_settings(stage: Usd.Stage, frame: float, warn) -> tuple[RenderSetting
     return info, prim
 
 
+def _read_purposes(info: RenderSettingsInfo, rs, frame: float, warn) -> None:
+    """includedPurposes (the purposes drawn) and materialBindingPurposes (the binding purpose asked for first;
+    Houdini writes the all-purpose token as "allPurpose")."""
+    attr = rs.GetIncludedPurposesAttr()
+    if attr.HasAuthoredValue():
+        info.included_purposes = tuple(str(p) for p in attr.Get(frame) or ())
+    attr = rs.GetMaterialBindingPurposesAttr()
+    if attr.HasAuthoredValue():
+        purposes = ["" if str(p) in ("", "allPurpose") else str(p) for p in attr.Get(frame) or ()]
+        known = [p for p in purposes if p in ("full", "preview", "")]
+        if len(known) < len(purposes):
+            warn(f"{rs.GetPath()}: materialBindingPurposes other than full, preview and all-purpose ignored",
+                 ", ".join(p for p in purposes if p not in known))
+        info.material_binding_purpose = known[0] if known else "full"
+
+
 BEAUTY_SOURCES = {"color", "ci", "c", "rgba", "rgb", "beauty", "c.*", "c.*[<l.>o]", "c<.*>"}
 
 
+@reads("RenderVar", "sourceName", "sourceType")
 def _warn_unwritten_vars(stage: Usd.Stage, product, warn) -> None:
     """The EXR holds the beauty (R, G, B, A) and the AOVs asked for on the command line or in the job; a product's
     other render vars (light groups, LPEs, primvars) are named in one warning rather than dropped silently."""
@@ -77,6 +99,7 @@ def _warn_unwritten_vars(stage: Usd.Stage, product, warn) -> None:
                  f"{target} ({kind} {source})")
 
 
+@reads("RenderSettingsBase", "resolution", "pixelAspectRatio", "aspectRatioConformPolicy", "dataWindowNDC")
 def _read_settings_base(info: RenderSettingsInfo, base, frame: float, warn) -> None:
     """Fill ``info`` from a RenderSettingsBase (settings or product), taking only what is authored."""
     prim = base.GetPrim()
@@ -140,6 +163,7 @@ def shutter_offsets(prim, frame: float) -> tuple[float, float]:
     return float(cam.GetShutterOpenAttr().Get(frame) or 0.0), float(cam.GetShutterCloseAttr().Get(frame) or 0.0)
 
 
+@reads("Camera", "exposure", "exposure:time", "exposure:iso", "exposure:fStop", "exposure:responsivity")
 def _exposure_stops(cam: UsdGeom.Camera, frame: float) -> float:
     """Exposure in stops: log2 of UsdGeomCamera's linear exposure scale (``exposure`` and the ``exposure:*``
     time/iso/fStop/responsivity inputs), or the plain ``exposure`` attribute if that cannot be computed."""
@@ -152,6 +176,9 @@ def _exposure_stops(cam: UsdGeom.Camera, frame: float) -> float:
     return float(cam.GetExposureAttr().Get(frame) or 0.0)
 
 
+@reads("Camera", "clippingRange", "projection", "focalLength", "horizontalAperture", "verticalAperture",
+       "horizontalApertureOffset", "verticalApertureOffset", "fStop", "focusDistance", "shutter:open",
+       "shutter:close")
 def read_camera(prim, sampler: TransformSampler, settings: RenderSettingsInfo, warn) -> Camera:
     """A UsdGeomCamera with its lens in scene units and its camera-to-world motion over the shutter."""
     frame = sampler.shutter.frame

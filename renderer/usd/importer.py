@@ -8,8 +8,11 @@ the package's other modules: ``mesh``, ``primitives``, ``curves``, ``materials``
 
 Policies worth knowing:
 
-* **Purpose**: ``default`` and ``render`` prims are drawn, ``guide`` never; ``proxy`` prims are drawn only when the
-  stage has no prim of purpose ``render`` at all (a stage-wide rule, simpler than per-model proxy pairing).
+* **Purpose**: the purposes the render settings' ``includedPurposes`` name; without it ``default`` and ``render``
+  prims are drawn, ``guide`` never, ``proxy`` prims only when the stage has no prim of purpose ``render`` at all (a
+  stage-wide rule, simpler than per-model proxy pairing).
+* **Unread attributes**: every authored attribute of a UsdGeom, UsdLux, UsdShade, UsdSkel, UsdRender or UsdVol
+  schema that no reader declared (``reads``) is named in one warning per attribute and prim type.
 * **Visibility**: inherited ``invisible`` hides the subtree. Time-sampled visibility becomes the instance's
   ``visible_from``/``visible_to`` (the hull of the visible part of the shutter, with a warning if it toggles more
   than once). Prims inside PointInstancer prototypes use their visibility at the frame.
@@ -42,6 +45,7 @@ from renderer.usd.mtlx import compose_mtlx
 from renderer.usd.motion import Shutter, TransformSampler, collapse_keys, motion_transforms, refine_keys
 from renderer.usd.primitives import PRIMITIVE_TYPES, primitive_signature, read_primitive
 from renderer.usd.primvars import default_uv_name, read_display_colors, read_named_uvs
+from renderer.usd.reads import reads, report_unread
 from renderer.usd.skel import Skinning
 from renderer.usd.subdiv import SubdivisionDetail
 
@@ -191,6 +195,7 @@ class _Importer:
         self._density_camera = None  # (camera row matrix, aperture, focal length, width px, ortho) for curves
         self._in_prototype = 0  # > 0 while reading PointInstancer prototypes (no single view)
         self.csg = usd_csg.CsgGroups(self.warn)
+        self._skipped: set[str] = set()  # prims skipped with a warning of their own (not checked for unread data)
 
     # -- top level ------------------------------------------------------------------------------------------------
     def run(self) -> sc.Scene:
@@ -205,7 +210,8 @@ class _Importer:
         self._frame_bounds = cam_prim is None
         self.shutter = self._shutter(cam_prim, settings)
         self.xf = TransformSampler(self.shutter)
-        self.materials = MaterialTable(self.frame, warn, self.shutter)
+        self.materials = MaterialTable(self.frame, warn, self.shutter, settings.material_binding_purpose)
+        self._included = settings.included_purposes  # None: default and render, proxy where no render
         self.detail = self._subdivision_detail(cam_prim, settings)
         self.skinning = Skinning(self.shutter, warn)
         if cam_prim is not None:
@@ -244,6 +250,7 @@ class _Importer:
         if not self.lights:
             self.lights.append(usd_lights.default_light(cam_row, self._up_axis()))
             warn(usd_lights.default_light_warning())
+        report_unread(stage, warn, self._skipped)
 
         return realize_tessellations(sc.Scene(
             meshes=self.meshes,
@@ -295,6 +302,9 @@ class _Importer:
         return Shutter(self.frame, self.frame + o, self.frame + c, tcps)
 
     # -- traversal ------------------------------------------------------------------------------------------------
+    @reads("Imageable", "visibility", "purpose")
+    @reads("Xform")
+    @reads("Scope")
     def _traverse(self) -> None:
         predicate = Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)
         it = iter(Usd.PrimRange.Stage(self.stage, predicate))
@@ -317,17 +327,19 @@ class _Importer:
             if self._statically_invisible(img):
                 it.PruneChildren()
                 continue
+            if prim.IsModel() or prim.HasAttribute("model:applyDrawMode"):
+                self._draw_mode(prim)
             info = img.ComputePurposeInfo(parent_info) if parent_info is not None else img.ComputePurposeInfo()
             purposes[str(prim.GetPath())] = info
             purpose = str(info.purpose)
             if prim.IsA(UsdGeom.PointInstancer):
                 it.PruneChildren()
-                if purpose != "guide":
+                if self._may_draw(purpose):
                     self._guarded(self._visit_gprim, prim, purpose)
             elif prim.IsA(UsdGeom.Mesh) or prim.GetTypeName() in PRIMITIVE_TYPES or usd_curves.handles(prim):
                 it.PruneChildren()
                 first = len(self.instances)
-                if purpose != "guide":
+                if self._may_draw(purpose):
                     self._guarded(self._visit_gprim, prim, purpose)
                 if usd_lights.is_light(prim):  # MeshLightAPI: its instances become emitters (see mesh_lights)
                     self._mesh_lights.append((prim, list(range(first, len(self.instances)))))
@@ -335,10 +347,25 @@ class _Importer:
                 self._guarded(self._light, prim)
             elif prim.IsA(UsdLux.LightFilter):
                 self.warn("light filters ignored (not modelled)", f"{prim.GetPath()} ({prim.GetTypeName()})")
+                self._skipped.add(str(prim.GetPath()))
             elif prim.IsA(UsdGeom.Gprim):
                 it.PruneChildren()
-                if purpose != "guide":
+                self._skipped.add(str(prim.GetPath()))  # what is not drawn is not read, whatever its type
+                if self._may_draw(purpose):
                     self.warn("unsupported geometry types skipped", f"{prim.GetPath()} ({prim.GetTypeName()})")
+
+    @reads("GeomModelAPI", "model:drawMode", "model:applyDrawMode", "model:cardGeometry", "model:cardVisibility",
+           "model:drawModeColor", *(f"model:cardTexture{a}{s}" for a in "XYZ" for s in ("Pos", "Neg")))
+    def _draw_mode(self, prim) -> None:
+        """UsdGeomModelAPI draw modes (cards, bounds, origin) are stand-ins for imaging; the full geometry is
+        rendered, and one warning names the models where a draw mode would apply (their card settings with it)."""
+        api = UsdGeom.ModelAPI(prim)
+        attr = api.GetModelApplyDrawModeAttr()
+        applies = bool(attr.Get()) if attr and attr.HasAuthoredValue() else Usd.ModelAPI(prim).IsKind("component")
+        if applies:
+            mode = str(api.ComputeModelDrawMode())
+            if mode not in ("default", "inherited"):
+                self.warn("model draw modes not applied: the full geometry rendered", f"{prim.GetPath()} ({mode})")
 
     def _guarded(self, fn, prim, *args) -> None:
         """Run fn(prim, ...); a prim whose data cannot be read (wrong types, bad values) is skipped with a warning."""
@@ -355,11 +382,16 @@ class _Importer:
             return False
         return attr.Get(self.frame) == UsdGeom.Tokens.invisible
 
+    def _may_draw(self, purpose: str) -> bool:
+        """Whether prims of a purpose may be drawn: those the render settings' includedPurposes name, else all but
+        guides (proxies then only where the stage has no render purpose, see ``_visit_gprim``)."""
+        return purpose in self._included if self._included is not None else purpose != "guide"
+
     def _visit_gprim(self, prim, purpose: str) -> None:
         interval = self._visible_interval(prim)
         if interval is None:
             return
-        if purpose == "proxy":
+        if purpose == "proxy" and self._included is None:
             self._proxies.append((prim, interval))
             return
         if purpose == "render":
@@ -565,6 +597,7 @@ class _Importer:
             group = self._pending.setdefault((len(norm), norm.tobytes()), (norm, []))
             group[1].append((np.arange(first, len(self.instances)), rows[finite], np.asarray(kept, np.int64)))
 
+    @reads("Boundable", "extent")  # a cache of bounds: ours are computed from the geometry itself
     def _place_instances(self) -> None:
         """The transforms of the instances added since the last call (``MotionTransform``s, decomposed per set of
         key times in one batch), and their world bounds for the automatic camera."""
@@ -642,6 +675,8 @@ class _Importer:
         keys = sh.keys(samples)
         return np.union1d(keys, sh.uniform(5)) if curved else keys
 
+    @reads("PointInstancer", "positions", "orientations", "orientationsf", "scales", "velocities",
+           "angularVelocities", "accelerations", "protoIndices", "ids", "invisibleIds")  # ids: the mask
     def _pi_placements(self, prim, times) -> tuple[list[int], list[str], np.ndarray]:
         """(mesh per placement, names, row-vector world matrices (M, K, 4, 4)) of every instance's geometry."""
         pi = UsdGeom.PointInstancer(prim)
@@ -724,10 +759,10 @@ class _Importer:
                 it.PruneChildren()
                 continue
             purpose = img.GetPurposeAttr().Get()
-            if purpose == UsdGeom.Tokens.guide:
+            if not self._may_draw(str(purpose)):
                 it.PruneChildren()
                 continue
-            if purpose == UsdGeom.Tokens.proxy and self._saw_render:
+            if purpose == UsdGeom.Tokens.proxy and self._saw_render and self._included is None:
                 it.PruneChildren()
                 continue
             if prim.IsA(UsdGeom.PointInstancer):
@@ -758,6 +793,8 @@ class _Importer:
 
     # -- lights ---------------------------------------------------------------------------------------------------
     def _light(self, prim) -> None:
+        if prim.GetTypeName() not in usd_lights.LIGHT_TYPES:  # read_light names it among unsupported light types
+            self._skipped.add(str(prim.GetPath()))
         if self._visible_interval(prim) is None:
             return
         light = usd_lights.read_light(prim, self.xf, self.warn)

@@ -37,6 +37,7 @@ from renderer.scene import model as sc
 from renderer.shading.textures import ImageError, latlong_mean
 from renderer.usd.materials import read_asset_image, resolve_asset
 from renderer.usd.motion import TransformSampler, motion_transform
+from renderer.usd.reads import reads
 
 # Row-vector matrix of a +90 degree turn about X: the dome's +Y pole to +Z (UsdLuxDomeLight.OrientToStageUpAxis).
 _POLE_Z_ROW = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
@@ -84,6 +85,8 @@ def _axis_lengths(row_matrix: np.ndarray) -> np.ndarray:
     return np.linalg.norm(np.asarray(row_matrix)[:3, :3], axis=1)
 
 
+@reads("LightAPI", "inputs:intensity", "inputs:exposure", "inputs:color", "inputs:enableColorTemperature",
+       "inputs:colorTemperature", "inputs:normalize")
 def base_emission(prim, frame: float) -> np.ndarray:
     """intensity * 2^exposure * color * blackbody (if enabled): the radiance before sizeFactor, nits (RGB)."""
     get = lambda n, d: _value(prim, n, frame, d)  # noqa: E731
@@ -116,6 +119,14 @@ def dome_seen_by_camera(prim, frame: float) -> bool:
     return True
 
 
+@reads("LightAPI", "inputs:diffuse", "inputs:specular")
+@reads("RectLight", "inputs:width", "inputs:height", "inputs:texture:file")
+@reads("DiskLight", "inputs:radius")
+@reads("SphereLight", "inputs:radius", "treatAsPoint")
+@reads("CylinderLight", "inputs:length", "inputs:radius")
+@reads("DistantLight", "inputs:angle")
+@reads("DomeLight", "inputs:texture:file", "inputs:texture:format")
+@reads("DomeLight_1", "inputs:texture:file", "inputs:texture:format", "poleAxis")
 def read_light(prim, sampler: TransformSampler, warn, placement=None, name: str | None = None) -> sc.Light | None:
     """A UsdLux light prim to a Light (None for unsupported kinds, with a warning). ``placement`` (absolute
     times (K,), row-vector world matrices (K, 4, 4)) places one instance of a light in a PointInstancer
@@ -225,6 +236,9 @@ def _has_shaping(prim) -> bool:
                or (prim.GetAttribute(n) and prim.GetAttribute(n).HasAuthoredValue()) for n in _SHAPING_NAMES)
 
 
+@reads("ShapingAPI", "inputs:shaping:cone:angle", "inputs:shaping:cone:softness", "inputs:shaping:focus",
+       "inputs:shaping:focusTint", "inputs:shaping:ies:file", "inputs:shaping:ies:angleScale",
+       "inputs:shaping:ies:normalize")
 def read_shaping(prim, shutter, warn) -> sc.Shaping | None:
     """ShapingAPI of a light (None when it has none): cone, softness and focus at the shutter's open and close
     (an animated cone blurs), focus tint and IES profile at the frame."""

@@ -1,7 +1,7 @@
 """Material import: bound UsdShade materials to the renderer's ``Material`` s (UsdPreviewSurface 2.5, textured).
 
-**Binding.** Per prim: ``UsdShadeMaterialBindingAPI.ComputeBoundMaterial`` with the "full" purpose, which falls
-back to the all-purpose binding (direct and collection bindings, ``bindingStrength`` honoured by USD); then the
+**Binding.** Per prim: ``UsdShadeMaterialBindingAPI.ComputeBoundMaterial`` with the "full" purpose (or the first
+the render settings' ``materialBindingPurposes`` name), which falls back to the all-purpose binding (direct and collection bindings, ``bindingStrength`` honoured by USD); then the
 material's surface shader, as ``UsdShadeMaterial.ComputeSurfaceSource`` picks it for the render contexts of a
 MaterialX-capable renderer, ``mtlx`` then ``arnold`` (``SURFACE_CONTEXTS``), the universal output the fallback:
 the first context whose surface is of a supported model (``surfaces``) and whose network uses only nodes we
@@ -58,6 +58,7 @@ import numpy as np
 from pxr import Gf, UsdGeom, UsdShade
 
 from renderer.scene.model import Material, Texture, TextureInput
+from renderer.usd.reads import reads
 from renderer.usd.shading_network import (Const, Display, Geo, Network, Tex, UV, expand_rgba, geo_texture_input,
                                           select_post, shader_id, tex_mean)
 from renderer.usd import arnold_nodes
@@ -91,6 +92,7 @@ def _output_source(output):
     return None
 
 
+@reads("Gprim", "primvars:displayColor")
 def display_color(prim, frame: float) -> tuple[float, float, float] | None:
     """The prim's displayColor: the constant value, or the average of a varying one; None if not authored."""
     pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar("displayColor")
@@ -159,8 +161,9 @@ def _vec(value, n: int, default) -> tuple:
 class MaterialTable:
     """Deduplicated materials of one scene; ``assign`` returns material ids for a prim."""
 
-    def __init__(self, frame: float, warn, shutter=None):
+    def __init__(self, frame: float, warn, shutter=None, purpose: str = "full"):
         self.frame = frame
+        self.purpose = purpose  # the binding purpose ("" all-purpose), falling back to all-purpose bindings
         self.shutter = shutter  # usd_motion.Shutter: constant inputs varying inside it get keys (opacity)
         self.warn = warn
         self.materials: list[Material] = []
@@ -181,6 +184,7 @@ class MaterialTable:
         mat = self._bound(prim)
         return self._material_id(mat, prim)
 
+    @reads("GeomSubset", "elementType", "indices", "familyName")
     def assign(self, prim, tri_faces: np.ndarray, num_faces: int) -> np.ndarray:
         """Per-triangle material ids (T,) int32, honouring GeomSubset ``materialBind`` bindings."""
         default = self.prim_material(prim)
@@ -227,9 +231,8 @@ class MaterialTable:
         except Exception:  # noqa: BLE001 - exotic schemas: no subsets
             return []
 
-    @staticmethod
-    def _bound(prim) -> UsdShade.Material | None:
-        mat, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)
+    def _bound(self, prim) -> UsdShade.Material | None:
+        mat, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(self.purpose)
         return mat if mat and mat.GetPrim().IsValid() else None
 
     def _add(self, key: tuple, material: Material) -> int:
@@ -280,6 +283,9 @@ class MaterialTable:
         self._surfaces[path] = hit
         return hit
 
+    @reads("Material", "outputs:surface")
+    @reads("NodeGraph")
+    @reads("Shader", "info:id", "info:implementationSource")  # UsdShadeShader.GetShaderId
     def _surface_shader(self, mat: UsdShade.Material):
         """(surface shader prim of a supported model, None) or (None, what was found instead)."""
         degraded = []  # (context, its surface if of a supported model, nodes we do not evaluate) in context order
@@ -355,7 +361,7 @@ class MaterialTable:
             if (nm.scale[:3] == (1.0, 1.0, 1.0) and nm.bias[:3] == (0.0, 0.0, 0.0)
                     and nm.post_scale == (1.0, 1.0, 1.0) and nm.post_bias == (0.0, 0.0, 0.0)):
                 self.warn("normal maps without scale 2 / bias -1 read as authored (values in [0, 1])", path)
-        self._displacement(shader, path)
+        self._displacement(mat, shader, path)
         if len(set(uv_sets)) > 1:
             self.warn("materials reading several uv sets: meshes have one (their st or first texCoord2f primvar)",
                       f"{path} ({', '.join(sorted(set(uv_sets)))})")
@@ -403,7 +409,13 @@ class MaterialTable:
             distance = 1.0
         return color, distance
 
-    def _displacement(self, shader, path: str) -> None:
-        inp = UsdShade.ConnectableAPI(shader).GetInput("displacement")
-        if inp and (inp.HasConnectedSource() or (inp.Get(self.frame) or 0.0) != 0.0):
-            self.warn("UsdPreviewSurface displacement ignored", path)
+    @reads("Material", "outputs:displacement")
+    def _displacement(self, mat: UsdShade.Material, shader, path: str) -> None:
+        """One warning when the material displaces: its surface shader's (or its displacement output's shader's)
+        ``displacement`` input connected or non-zero."""
+        shaders = [shader, _output_source(mat.GetDisplacementOutput())]
+        for node in [s for s in shaders if s is not None]:
+            inp = UsdShade.ConnectableAPI(node).GetInput("displacement")
+            if inp and (inp.HasConnectedSource() or (inp.Get(self.frame) or 0.0) != 0.0):
+                self.warn("UsdPreviewSurface displacement ignored", path)
+                return

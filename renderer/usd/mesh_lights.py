@@ -27,10 +27,12 @@ import numpy as np
 from renderer.motion.transform import matrix_at
 from renderer.scene import model as sc
 from renderer.usd.lights import base_emission, normalized, read_shaping
+from renderer.usd.reads import reads
 
 SYNC_MODES = ("materialGlowTintsLight", "independent", "noMaterialResponse")
 
 
+@reads("MeshLightAPI", "light:materialSyncMode")
 def sync_mode(prim, warn) -> str:
     attr = prim.GetAttribute("light:materialSyncMode")
     mode = str(attr.Get()) if attr and attr.Get() is not None else "materialGlowTintsLight"

@@ -15,6 +15,7 @@ import numpy as np
 from pxr import Tf, Usd, UsdGeom, UsdSkel, Vt
 
 from renderer.usd.motion import Shutter
+from renderer.usd.reads import reads
 
 CURVE_KEYS = 5
 
@@ -26,6 +27,12 @@ class SkinBinding:
     skeleton: Usd.Prim
 
 
+@reads("SkelRoot")
+@reads("Skeleton", "joints", "bindTransforms", "restTransforms")
+@reads("SkelAnimation", "joints", "translations", "rotations", "scales", "blendShapes", "blendShapeWeights")
+@reads("BlendShape", "offsets", "pointIndices")
+@reads("SkelBindingAPI", "skel:joints", "skel:blendShapes", "primvars:skel:jointIndices", "primvars:skel:jointWeights",
+       "primvars:skel:geomBindTransform", "primvars:skel:skinningMethod")
 class Skinning:
     """Finds the skinning of gprims below SkelRoots (one UsdSkel.Cache for the stage) and evaluates it."""
 
