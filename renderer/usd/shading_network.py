@@ -305,6 +305,9 @@ _NODE_KINDS = {"UsdUVTexture": "texture", "image": "texture", "tiledimage": "tex
 _SEPARATE_OUTPUTS = {"outr": 0, "outg": 1, "outb": 2, "outa": 3, "outx": 0, "outy": 1, "outz": 2, "outw": 3}
 
 
+_PROBES = (np.array([0.3, 0.71, 0.13, 0.57]), np.array([-1.7, 2.9, 0.45, 3.3]))  # irregular: no channel symmetry
+
+
 def _affine(fn, n: int) -> tuple[np.ndarray, np.ndarray] | None:
     """(a, b) with fn(x) == a * x + b for x of n components (a, b broadcast per output channel), else None.
 
@@ -313,7 +316,7 @@ def _affine(fn, n: int) -> tuple[np.ndarray, np.ndarray] | None:
         with np.errstate(all="ignore"):
             b = np.asarray(fn(np.zeros(n)), np.float64)
             a = np.asarray(fn(np.ones(n)), np.float64) - b
-            for probe in (np.array([0.3, 0.71, 0.13, 0.57][:n]), np.array([-1.7, 2.9, 0.45, 3.3][:n])):
+            for probe in (p[:n] for p in _PROBES):
                 got = np.asarray(fn(probe), np.float64)
                 want = a * (probe if n > 1 else probe[0]) + b
                 if got.shape != np.broadcast(a, b).shape or want.shape != got.shape:
@@ -322,9 +325,7 @@ def _affine(fn, n: int) -> tuple[np.ndarray, np.ndarray] | None:
                     return None
     except (ValueError, IndexError):
         return None
-    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
-        return None
-    return a, b
+    return _finite_pair(a, b)
 
 
 def _affine_matrix(fn, n: int) -> tuple[np.ndarray, np.ndarray] | None:
@@ -338,15 +339,17 @@ def _affine_matrix(fn, n: int) -> tuple[np.ndarray, np.ndarray] | None:
             if any(col.shape != c.shape for col in cols) or c.size == 0:
                 return None
             m = np.stack(cols, axis=1)
-            for probe in (np.array([0.3, 0.71, 0.13, 0.57][:n]), np.array([-1.7, 2.9, 0.45, 3.3][:n])):
+            for probe in (p[:n] for p in _PROBES):
                 got = np.asarray(fn(probe), np.float64).reshape(-1)
                 if got.shape != c.shape or not np.allclose(got, m @ probe + c, rtol=1e-6, atol=1e-9):
                     return None
     except (ValueError, IndexError):
         return None
-    if not (np.all(np.isfinite(m)) and np.all(np.isfinite(c))):
-        return None
-    return m, c
+    return _finite_pair(m, c)
+
+
+def _finite_pair(a: np.ndarray, b: np.ndarray):
+    return (a, b) if np.all(np.isfinite(a)) and np.all(np.isfinite(b)) else None
 
 
 def _fold(tex: Tex, a: np.ndarray, b: np.ndarray) -> Tex:
@@ -521,15 +524,23 @@ class Network:
                       f"{where} ({space})")
         return geo(_GEO_NODES[cat], _SPACES.get(space, "object"))
 
-    def _triplanar(self, prim, typ: str | None, where: str) -> Signal | None:
-        """MaterialX triplanarprojection: three images projected along the axes of an (affinely mapped) hit
-        position, blended by the hit's normal (see ``TextureInput``)."""
+    def _image_output(self, prim, typ: str | None):
+        """(components, TextureInput output, fallback RGBA, the authored default or None) of a MaterialX image
+        node of output type ``typ`` (its ``default`` where there is no file or tile)."""
         n = _TYPES.get(typ or "color3", 3) or 3
         output = {1: "r", 2: "rgb", 3: "rgb", 4: "rgba"}[n]
         default = _numeric(self.value(prim, "default", None))
         d = np.resize(default.value, 4) if default is not None else np.zeros(4)
         fallback = (tuple(float(x) for x in d) if n == 4 else (float(d[0]),) * 4 if n == 1
                     else (float(d[0]), float(d[1]), float(d[2 % len(d)]), 1.0))
+        if default is not None and default.value.size >= 3 and n >= 3:
+            fallback = tuple(float(x) for x in np.resize(default.value, 3)) + (fallback[3],)
+        return n, output, fallback, default
+
+    def _triplanar(self, prim, typ: str | None, where: str) -> Signal | None:
+        """MaterialX triplanarprojection: three images projected along the axes of an (affinely mapped) hit
+        position, blended by the hit's normal (see ``TextureInput``)."""
+        n, output, fallback, _ = self._image_output(prim, typ)
         pos = self.input(prim, "position")
         if pos is None:
             pos = geo("P")
@@ -669,14 +680,7 @@ class Network:
             fallback = _vec(self.value(prim, "fallback", None), 4, (0.0, 0.0, 0.0, 1.0))
             wrap_names = [str(self.value(prim, w, "useMetadata")) for w in ("wrapS", "wrapT")]
         else:
-            n = _TYPES.get(typ or "color3", 3) or 3
-            output = {1: "r", 2: "rgb", 3: "rgb", 4: "rgba"}[n]
-            default = _numeric(self.value(prim, "default", None))
-            d = np.resize(default.value, 4) if default is not None else np.zeros(4)
-            fallback = (tuple(float(x) for x in d) if n == 4 else (float(d[0]),) * 4 if n == 1
-                        else (float(d[0]), float(d[1]), float(d[2 % len(d)]), 1.0))
-            if default is not None and default.value.size >= 3 and n >= 3:
-                fallback = tuple(float(x) for x in np.resize(default.value, 3)) + (fallback[3],)
+            n, output, fallback, default = self._image_output(prim, typ)
             scale, bias = (1.0, 1.0, 1.0, 1.0), (0.0, 0.0, 0.0, 0.0)
             uv = self.input(prim, "texcoord")
             if uv is None:
