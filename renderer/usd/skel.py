@@ -6,6 +6,11 @@ Skinned points are in the skeleton's space (UsdSkel): the geometry is placed by 
 local-to-world transform, not its own. Keys: the shutter ends, every joint-animation, blend-shape-weight, points
 and skinning-primvar sample inside it, and ``CURVE_KEYS`` evenly spaced times when the skeleton moves (joint
 rotations are slerped by UsdSkel, so points travel on arcs between samples).
+
+A mesh's own ``skel:joints`` (any order, even the skeleton's) makes UsdSkel give it a joint mapper, which the
+normals use too. What UsdSkel cannot do degrades alone, with one warning each: blend shapes it cannot apply are
+left out, authored normals it cannot skin give way to the renderer's own; only when the points themselves cannot
+be skinned is the mesh drawn as authored (never dropped).
 """
 from __future__ import annotations
 
