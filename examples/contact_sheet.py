@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""A contact sheet of every scene under ../shared/usd-assets, so a person can look at them all at once.
+"""A contact sheet of every scene under ../shared/usd-assets and of this directory's own scenes that show what
+those lack (``EXAMPLES``: volumes), so a person can look at them all at once.
 
     python examples/contact_sheet.py [--size 256] [--spp 32] [-o docs/contact_sheet.png]
 
@@ -33,6 +34,8 @@ def entry_scenes(assets: pathlib.Path) -> list[str]:
     return [f"{name}/{root}" for name, entry in sorted(manifest.items()) for root in entry["roots"]]
 
 
+# Example scenes of examples/ shown after the assets' (features the shared assets have no scene of).
+EXAMPLES = ["volumes.usda"]
 # The rock of arnold_velocity_blur flies through the camera's view only around frames 30-35.
 FRAME = {"arnold_velocity_blur/data/test.usda": 30.0}
 
@@ -79,14 +82,15 @@ def main() -> int:
 
     init_warp()
     assets = assets_dir()
-    names = entry_scenes(assets)
+    names = entry_scenes(assets) + [f"examples/{n}" for n in EXAMPLES]
     cols = args.columns
     rows = (len(names) + cols - 1) // cols
     sheet = np.zeros((rows * args.size, cols * args.size, 3), np.float32)
     for i, name in enumerate(names):
         t0 = time.perf_counter()
         try:
-            tile = np.clip(render_tile(assets / name, args.size, args.spp, FRAME.get(name)), 0.0, 1.0)
+            path = ROOT / name if name.startswith("examples/") else assets / name
+            tile = np.clip(render_tile(path, args.size, args.spp, FRAME.get(name)), 0.0, 1.0)
             note = f"{time.perf_counter() - t0:.1f} s"
         except Exception as e:  # noqa: BLE001 - a sheet shows failures instead of stopping
             tile = np.full((args.size, args.size, 3), 0.2, np.float32)

@@ -16,6 +16,13 @@ csg.usda -- constructive solid geometry (the paper's section 5) with ``drt:csg:o
 a ball subtracted while a drill (a cylinder subtracted too) slides through it during the shutter, so the carved
 hole is motion-blurred; beside it the intersection and the union of two balls. Hair (BasisCurves, bspline) and
 a cloud of points stand in front.
+
+volumes.usda -- participating media: a puff of smoke (a UsdVol Volume whose density field is read from
+volumes.vdb by fieldName, the default fog material) drifting through the shutter (motion blur) and casting a soft
+shadow from a rect light; a fireball (the same file's second "density" grid, fieldIndex 1, and its temperature
+grid under Arnold's standard_volume, blackbody emission); a ball of milky glass filled with a homogeneous
+scattering medium (drt:scatterColor). volumes.vdb is written with OpenVDB's own Python module (as the tests
+write theirs: tests/vdb_files.py), so it is re-made only where that module is installed.
 """
 import math
 import pathlib
@@ -325,7 +332,89 @@ def csg(path):
     stage.GetRootLayer().Save()
 
 
+def volume_grids(n=40, seed=4):
+    """(smoke density, fire density, fire temperature): noisy puffs, (n, n, n) arrays indexed x, y, z."""
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    x = (np.arange(n) + 0.5) / n * 2 - 1
+    X, Y, Z = np.meshgrid(x, x, x, indexing="ij")
+    smoke = np.zeros((n, n, n))
+    for _ in range(24):  # a puff of overlapping blobs
+        c = rng.normal(0, 0.3, 3)
+        r = rng.uniform(0.15, 0.35)
+        smoke += np.exp(-((X - c[0]) ** 2 + (Y - c[1]) ** 2 + (Z - c[2]) ** 2) / (2 * r * r))
+    smoke = np.clip(smoke - 0.6, 0, None) * 6.0
+    rr = np.sqrt(X ** 2 + (Y * 0.8) ** 2 + Z ** 2)
+    fire = np.clip(1.0 - rr, 0, None) * 4.0
+    temperature = np.clip(1.0 - rr * 1.3, 0, None) * 0.6  # x blackbody_kelvin 5000: up to 3000 K at the core
+    return [a.astype(np.float32) for a in (smoke, fire, temperature)]
+
+
+def volumes(path):
+    import sys
+
+    sys.path.insert(0, str(HERE.parent / "tests"))
+    from pxr import UsdVol
+    from vdb_files import have_openvdb, write_vdb
+
+    vdb = HERE / "volumes.vdb"
+    if have_openvdb():
+        smoke, fire, temperature = volume_grids()
+        write_vdb(vdb, [{"name": "density", "data": smoke, "voxel_size": 0.025, "ijk": (-20, -20, -20)},
+                        {"name": "density", "data": fire, "voxel_size": 0.02, "ijk": (-20, -20, -20)},
+                        {"name": "temperature", "data": temperature, "voxel_size": 0.02, "ijk": (-20, -20, -20)}])
+        for f in HERE.glob("volumes_*.npy"):
+            f.unlink()
+        (HERE / "volumes.json").unlink()
+    stage = new_stage(path)
+    floor = surface(stage, "Floor", diffuseColor=(0.5, 0.5, 0.5), roughness=0.8)
+    box(stage, "/World/Floor", (8.0, 0.1, 6.0), (0, -0.05, 0), floor)
+
+    def volume(prim_path, fields, translate):
+        vol = UsdVol.Volume.Define(stage, prim_path)
+        for rel, (name, index) in fields.items():
+            asset = UsdVol.OpenVDBAsset.Define(stage, f"{prim_path}/{rel}")
+            asset.CreateFilePathAttr(Sdf.AssetPath("./volumes.vdb"))
+            asset.CreateFieldNameAttr(name)
+            asset.CreateFieldIndexAttr(index)
+            vol.CreateFieldRelationship(rel, asset.GetPath())
+        op = UsdGeom.Xformable(vol).AddTranslateOp()
+        for t, v in translate.items():
+            op.Set(Gf.Vec3d(*v), t)
+        return vol
+
+    # the smoke drifts 0.4 to the right during the frame: blurred by its transform over the shutter
+    volume("/World/Smoke", {"density": ("density", 0)}, {0.5: (-1.1, 0.75, 0.0), 1.5: (-0.3, 0.75, 0.0)})
+    fire = volume("/World/Fire", {"density": ("density", 1), "temperature": ("temperature", 0)},
+                  {1.0: (1.0, 0.5, -0.2)})
+    mat = UsdShade.Material.Define(stage, "/World/Looks/Fire")
+    sh = UsdShade.Shader.Define(stage, "/World/Looks/Fire/standard_volume")
+    sh.CreateIdAttr("arnold:standard_volume")
+    sh.CreateInput("density", Sdf.ValueTypeNames.Float).Set(0.6)
+    sh.CreateInput("scatter_color", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(0.3, 0.3, 0.3))
+    sh.CreateInput("emission_mode", Sdf.ValueTypeNames.String).Set("blackbody")
+    sh.CreateInput("emission", Sdf.ValueTypeNames.Float).Set(1.0)
+    sh.CreateInput("blackbody_intensity", Sdf.ValueTypeNames.Float).Set(400.0)
+    mat.CreateOutput("arnold:volume", Sdf.ValueTypeNames.Token).ConnectToSource(sh.ConnectableAPI(), "out")
+    UsdShade.MaterialBindingAPI.Apply(fire.GetPrim()).Bind(mat)
+    milk = surface(stage, "MilkyGlass", diffuseColor=(1.0, 1.0, 1.0), opacity=0.0, ior=1.0, roughness=0.0,
+                   **{"drt:scatterColor": (6.0, 5.0, 4.0), "drt:absorptionColor": (0.9, 0.8, 0.7),
+                      "drt:scatterAnisotropy": 0.3})
+    ball = UsdGeom.Sphere.Define(stage, "/World/MilkBall")
+    ball.CreateRadiusAttr(0.35)
+    UsdGeom.Xformable(ball).AddTranslateOp().Set(Gf.Vec3d(0.1, 0.35, 0.9))
+    bind(ball, milk)
+    rect_light(stage, "/World/Key", 1.5, 1.0, 14.0, (-1.5, 3.0, 2.0), (-55.0, -30.0, 0.0))
+    UsdLux.DomeLight.Define(stage, "/World/Sky").CreateIntensityAttr(0.25)
+    cam = look_at_camera(stage, (0.0, 1.4, 4.6), (0.0, 0.6, 0.0))
+    cam.CreateShutterOpenAttr(-0.25)
+    cam.CreateShutterCloseAttr(0.25)
+    stage.GetRootLayer().Save()
+
+
 if __name__ == "__main__":
-    for name, make in (("demo", demo), ("gloss", gloss), ("translucent", translucent), ("csg", csg)):
+    for name, make in (("demo", demo), ("gloss", gloss), ("translucent", translucent), ("csg", csg),
+                       ("volumes", volumes)):
         make(HERE / f"{name}.usda")
         print("wrote", HERE / f"{name}.usda")

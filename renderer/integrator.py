@@ -10,7 +10,10 @@ At every surface, light is gathered twice and the two estimates combined by the 
 multiple importance sampling): a light chosen by power and a point on it (a shadow ray), and the direction
 the BSDF samples, which may hit an emitter by itself. Paths end by Russian roulette after a few bounces.
 Inside a closed solid entered through its surface, light is absorbed along the distance travelled
-(Beer-Lambert). Samples with NaN/Inf radiance are counted and zeroed; ``clamp`` (off by default) limits a
+(Beer-Lambert). Participating media (``renderer.media``: grid volumes, and solids whose material holds a scattering
+medium) are walked by delta tracking along every ray before its surface: a real collision makes a volume vertex
+(``FLAG_VOLUME``), lit like a surface vertex by light sampling and phase sampling combined with MIS; shadow rays
+take the media's transmittance (ratio tracking). Samples with NaN/Inf radiance are counted and zeroed; ``clamp`` (off by default) limits a
 sample's radiance to cut fireflies, never silently.
 
 Path regularization (the production default, off with ``unbiased``; see README "Noise defaults"):
@@ -52,6 +55,15 @@ from renderer.lights.sample import (
 from renderer.lights.linking import lit_by, shadow_factor
 from renderer.lights.select import infinite_light, select_light, select_pdf
 from renderer.lights.table import Lights
+from renderer.media.phase import hg_pdf, hg_sample
+from renderer.media.tracking import (
+    MEDIUM_ABSORB,
+    MEDIUM_NONE,
+    Media,
+    grid_transmittance,
+    interior_transmittance,
+    sample_media,
+)
 from renderer.options import TIME_FILTERS
 from renderer.sampling.sobol import (
     BOUNCE_LIGHT_CHOICE,
@@ -62,7 +74,12 @@ from renderer.sampling.sobol import (
     CAMERA_LIGHT_0,
     DIM_FILM,
     DIM_LIGHT_BASE,
+    DIM_MEDIUM,
+    DIM_MEDIUM_SHADOW,
     DIMS_PER_BOUNCE,
+    MEDIUM_DIMS_PER_BOUNCE,
+    MEDIUM_SHADOW_DIMS_PER_BOUNCE,
+    MEDIUM_SHADOW_DIMS_PER_PICK,
     sample_1d,
     sample_3d,
     sample_camera_pair,
@@ -95,6 +112,7 @@ RR_START = 5  # bounces before Russian roulette may end a path (equal-time effic
 RAY_EPSILON = 2.0e-5  # relative offset of secondary ray origins (times 1 + |p|_inf, scene units)
 FLAG_DELTA = 1
 FLAG_TRANSMISSION = 2
+FLAG_VOLUME = 4  # the event was a scattering in a participating medium: the V of light path expressions
 
 
 @wp.func
@@ -388,6 +406,98 @@ def regularized_params(ms: MaterialSample, thin: int, k: float, path_roughness: 
     return p
 
 
+@wp.func(inline=True)  # no copy of the big structs
+def media_shadow(geo: Geometry, mats: Materials, media: Media, ro: wp.vec3, rd: wp.vec3, tmax: float, s: float,
+                 in_sa: wp.vec3, in_ss: wp.vec3, seed: wp.uint32, pixel: wp.uint32, index: wp.uint32,
+                 dim: wp.uint32):
+    """Transmittance of the media along a shadow ray that starts in the homogeneous medium (in_sa, in_ss)."""
+    tr = grid_transmittance(media, ro, rd, tmax, s, seed, pixel, index, dim)
+    if media.mesh_media != 0 and (tr[0] > 0.0 or tr[1] > 0.0 or tr[2] > 0.0):
+        tr = wp.cw_mul(tr, interior_transmittance(geo, mats, media, ro, rd, tmax, s, in_sa, in_ss))
+    return tr
+
+
+@wp.func(inline=True)  # one call site: no copy of the big structs
+def volume_direct(L: wp.vec3, geo: Geometry, mats: Materials, tex: Textures, lights: Lights, media: Media,
+                  p: wp.vec3, rd: wp.vec3, g: float, s: float, in_sa: wp.vec3, in_ss: wp.vec3, beta: wp.vec3,
+                  u_light: wp.vec3, nee_clamp: float, seed: wp.uint32, pixel: wp.uint32, index: wp.uint32,
+                  bounce: int):
+    """L plus the light sampled at a scattering point p of a medium (each infinite light and one finite light,
+    as at a surface), weighted against phase sampling by the power heuristic; and the shadow rays traced. The
+    phase function takes the place of BSDF x cosine; ``rd`` (the direction of travel) is the axis constant domes
+    are sampled about."""
+    n_infinite = lights.select.count - lights.select.n_finite
+    n_picks = n_infinite + wp.min(lights.select.n_finite, 1)
+    rays = int(0)
+    for pick in range(n_picks):
+        li = int(-1)
+        p_sel = float(1.0)
+        u_tri = u_light[2]
+        if pick < n_infinite:
+            li = infinite_light(lights.select, pick)
+        else:
+            li, p_sel, u_tri = select_light(lights.select, p, u_light[2])
+        wi = wp.vec3(0.0)
+        dist = float(0.0)
+        Le_l = wp.vec3(0.0)
+        pdf_l = float(0.0)
+        delta = False
+        if li >= 0:
+            wi, dist, Le_l, pdf_l, delta = sample_light(lights, geo, mats, tex, li, p, rd, s, u_tri,
+                                                        wp.vec2(u_light[0], u_light[1]))
+        if pdf_l > 0.0 and (Le_l[0] > 0.0 or Le_l[1] > 0.0 or Le_l[2] > 0.0) and lit_by(lights.links, li, -1):
+            ph = hg_pdf(g, wp.dot(rd, wi))
+            rays += 1
+            tmax = dist * (1.0 - 1.0e-4)
+            tr = shadow_factor(geo, mats, tex, lights.links, li, p, wi, tmax, s)
+            if tr[0] > 0.0 or tr[1] > 0.0 or tr[2] > 0.0:
+                dim = wp.uint32(DIM_MEDIUM_SHADOW + bounce * MEDIUM_SHADOW_DIMS_PER_BOUNCE
+                                + pick * MEDIUM_SHADOW_DIMS_PER_PICK)
+                tr = wp.cw_mul(tr, media_shadow(geo, mats, media, p, wi, tmax, s, in_sa, in_ss, seed, pixel,
+                                                index, dim))
+                w = float(1.0)
+                if not delta:
+                    w = power_heuristic(p_sel * pdf_l, ph)
+                if lights.lobe_mults != 0:  # a medium responds as a diffuse surface does
+                    Le_l = wp.cw_mul(Le_l, sampled_weight(lights, li, wp.vec3(1.0)))
+                L += clamp_contribution(wp.cw_mul(wp.cw_mul(beta, Le_l), tr) * (ph * w / (p_sel * pdf_l)),
+                                        nee_clamp)
+    return L, rays
+
+
+@wp.func
+def shadow_start_medium(media: Media, mats: Materials, mat: int, front: int, through: bool, sa: wp.vec3,
+                        ss: wp.vec3):
+    """The medium a surface's shadow ray starts in: the path's own on the side it came from; through the surface,
+    the material's medium when entering its solid, none when leaving it."""
+    if not through:
+        return sa, ss
+    m = media.mat_scatter[mat]
+    if front != 0 and (m[0] > 0.0 or m[1] > 0.0 or m[2] > 0.0):
+        return mats.absorption[mat], wp.vec3(m[0], m[1], m[2])
+    return wp.vec3(0.0), wp.vec3(0.0)
+
+
+@wp.func
+def medium_boundary(media: Media, mat: int, flags: int):
+    """Is this event a straight pass through the surface of a solid that holds a medium? Such a boundary is no
+    vertex of the path for multiple importance sampling: shadow rays from inside pass it (with the medium's
+    transmittance), so light found beyond it keeps the weights of the vertex before it."""
+    if media.mesh_media == 0 or (flags & FLAG_DELTA) == 0 or (flags & FLAG_TRANSMISSION) == 0:
+        return False
+    m = media.mat_scatter[mat]
+    return m[0] > 0.0 or m[1] > 0.0 or m[2] > 0.0
+
+
+@wp.func
+def roulette(beta: wp.vec3, u: float):
+    """Russian roulette once the path has carried light a few bounces: (survives, reweighted throughput)."""
+    q = wp.max(0.05, 1.0 - wp.max(wp.max(beta[0], beta[1]), beta[2]))
+    if u < q:
+        return 0, beta
+    return 1, beta / (1.0 - q)
+
+
 @wp.struct
 class PathSettings:
     max_depth: int  # bounces after the camera ray (0: emission and direct light only... see README)
@@ -421,6 +531,7 @@ def trace_wave_kernel(
     mats: Materials,
     tex: Textures,
     lights: Lights,
+    media: Media,
     cam: CameraParams,
     buf: SampleBuffer,
     settings: PathSettings,
@@ -462,6 +573,9 @@ def trace_wave_kernel(
     prev_inst = int(-1)  # instance the path last left (light linking of what it finds)
     prev_p = wp.vec3(0.0)  # where the path last chose a light (the selection pdf of what it finds)
     sigma = wp.vec3(0.0)  # absorption coefficient of the solid the path is inside (1/scene unit)
+    in_ss = wp.vec3(0.0)  # scattering coefficient of the solid's medium, if it holds one (1/scene unit)
+    in_g = float(0.0)  # and the anisotropy of its phase function
+    prev_event = int(0)  # FLAG_* of the last scattering event (FLAG_VOLUME: in a medium)
     see_through = int(1)  # so far only straight pass-through events: domes hidden from the camera stay hidden
     bounce = int(0)
     alive = int(1)
@@ -479,11 +593,57 @@ def trace_wave_kernel(
         hit = intersect_closest(geo, origin, rd, t_far, s)
         if geo.csg_groups > 0:
             hit = csg_closest(geo, origin, rd, s, hit)
+        # participating media before the surface: emission gathered, and a real collision ends the ray there
+        event = int(MEDIUM_NONE)
+        t_seg = hit.t
+        in_medium = in_ss[0] > 0.0 or in_ss[1] > 0.0 or in_ss[2] > 0.0
+        g_event = float(0.0)
+        if media.count > 0 or in_medium:
+            walk = sample_media(media, origin, rd, hit.t, s, sigma, in_ss, in_g, seed, pixel, index,
+                                wp.uint32(DIM_MEDIUM + bounce * MEDIUM_DIMS_PER_BOUNCE))
+            L += clamp_contribution(wp.cw_mul(beta, walk.emitted), hit_clamp)
+            beta = wp.cw_mul(beta, walk.weight)
+            event = walk.event
+            t_seg = walk.t_end
+            g_event = walk.g
         # UsdLux area lights are not in the scene's hierarchy: rays after the first bounce may reach them directly
         if bounce > 0:
-            L = add_area_lights(L, lights, origin, rd, hit.t, s, prev_inst, prev_delta, prev_pdf, prev_p, lobe_frac,
+            L = add_area_lights(L, lights, origin, rd, t_seg, s, prev_inst, prev_delta, prev_pdf, prev_p, lobe_frac,
                                 beta, hit_clamp)
-        if hit.inst < 0:
+        if event != MEDIUM_NONE:  # a volume vertex: absorbed, or scattered by the phase function
+            p = origin + rd * t_seg
+            cone_w = cone_w + cone_spread * t_seg
+            if bounce == 0:
+                depth_aov = wp.dot(p - cam_origin, fwd)
+                alpha = 1.0  # the medium covers the pixel as far as it stops camera rays
+            if event == MEDIUM_ABSORB or bounce >= settings.max_depth:
+                alive = 0
+            else:
+                dim = wp.uint32(DIM_LIGHT_BASE + bounce * DIMS_PER_BOUNCE)
+                u_light = sample_3d(seed, pixel, index, dim + wp.uint32(BOUNCE_LIGHT_CHOICE))
+                L, nee_rays = volume_direct(L, geo, mats, tex, lights, media, p, rd, g_event, s, sigma, in_ss, beta,
+                                            u_light, nee_clamp, seed, pixel, index, bounce)
+                rays += nee_rays
+                u_phase = sample_3d(seed, pixel, index, dim + wp.uint32(BOUNCE_LOBE))
+                wi, pdf = hg_sample(g_event, rd, wp.vec2(u_phase[0], u_phase[1]))
+                # the phase function is sampled exactly: the throughput keeps its value
+                lobe_frac = wp.vec3(1.0)
+                path_roughness = wp.max(path_roughness, roughness_of_pdf(pdf))
+                cone_spread = bounce_spread(cone_spread, 1.0, 0)
+                prev_delta = 0
+                prev_pdf = pdf
+                prev_n = rd
+                prev_inst = -1
+                prev_p = p
+                prev_event = FLAG_VOLUME
+                see_through = 0
+                origin = p
+                rd = wi
+                t_far = float(BIG)
+                bounce += 1
+                if bounce >= RR_START:
+                    alive, beta = roulette(beta, sample_1d(seed, pixel, index, dim + wp.uint32(BOUNCE_ROULETTE)))
+        elif hit.inst < 0:
             for k in range(lights.reach.n_infinite):  # the distant and dome lights, in light order
                 li = lights.reach.infinite[k]
                 kind = lights.kind[li]
@@ -502,7 +662,7 @@ def trace_wave_kernel(
             alive = 0
         else:
             # Beer-Lambert: absorbed along the way through a solid
-            if sigma[0] > 0.0 or sigma[1] > 0.0 or sigma[2] > 0.0:
+            if (sigma[0] > 0.0 or sigma[1] > 0.0 or sigma[2] > 0.0) and not in_medium:  # (a medium's: tracked)
                 beta = wp.cw_mul(beta, beer_lambert(sigma, hit.t))
             sp = surface_at(geo, hit.inst, hit.tri, hit.b1, hit.b2, hit.ng, origin, rd, hit.t, s)
             cone_w = cone_w + cone_spread * hit.t
@@ -588,6 +748,14 @@ def trace_wave_kernel(
                             # light/shadow linking and shadow controls (lights.linking)
                             tr = shadow_factor(geo, mats, tex, lights.links, li, o_sh, wi, dist * (1.0 - 1.0e-4),
                                                s)
+                            if (media.count > 0 or media.mesh_media != 0) and (tr[0] > 0.0 or tr[1] > 0.0 or
+                                                                               tr[2] > 0.0):
+                                sh_sa, sh_ss = shadow_start_medium(media, mats, sp.material, sp.front,
+                                                                   wp.dot(wi, sp.ng) < 0.0, sigma, in_ss)
+                                tr = wp.cw_mul(tr, media_shadow(
+                                    geo, mats, media, o_sh, wi, dist * (1.0 - 1.0e-4), s, sh_sa, sh_ss, seed, pixel,
+                                    index, wp.uint32(DIM_MEDIUM_SHADOW + bounce * MEDIUM_SHADOW_DIMS_PER_BOUNCE
+                                                     + pick * MEDIUM_SHADOW_DIMS_PER_PICK)))
                             if tr[0] > 0.0 or tr[1] > 0.0 or tr[2] > 0.0:
                                 w = float(1.0)
                                 if not delta:
@@ -617,11 +785,13 @@ def trace_wave_kernel(
                     cone_spread = bounce_spread(cone_spread, ms.roughness, flags & FLAG_DELTA)
                     if (flags & FLAG_DELTA) == 0:
                         path_roughness = wp.max(path_roughness, roughness_of_pdf(pdf))
-                    prev_delta = flags & FLAG_DELTA
-                    prev_pdf = pdf
-                    prev_n = ns
-                    prev_inst = hit.inst
-                    prev_p = sp.p
+                    if not medium_boundary(media, sp.material, flags):
+                        prev_delta = flags & FLAG_DELTA
+                        prev_event = flags
+                        prev_pdf = pdf
+                        prev_n = ns
+                        prev_inst = hit.inst
+                        prev_p = sp.p
                     passthrough = (flags & FLAG_TRANSMISSION) != 0 and thin != 0 and (flags & FLAG_DELTA) != 0
                     if not passthrough:
                         see_through = 0
@@ -630,20 +800,20 @@ def trace_wave_kernel(
                         if thin == 0:  # into or out of a solid
                             if sp.front != 0:
                                 sigma = ms.absorption
+                                if media.mesh_media != 0:
+                                    m = media.mat_scatter[sp.material]
+                                    in_ss = wp.vec3(m[0], m[1], m[2])
+                                    in_g = m[3]
                             else:
                                 sigma = wp.vec3(0.0)
+                                in_ss = wp.vec3(0.0)
                     else:
                         origin = offset_origin(sp.p, sp.ng)
                     rd = wi
                     t_far = float(BIG)
                     bounce += 1
-                    # Russian roulette once the path has carried light a few bounces
                     if bounce >= RR_START:
-                        q = wp.max(0.05, 1.0 - wp.max(wp.max(beta[0], beta[1]), beta[2]))
-                        if sample_1d(seed, pixel, index, dim + wp.uint32(BOUNCE_ROULETTE)) < q:
-                            alive = 0
-                        else:
-                            beta = beta / (1.0 - q)
+                        alive, beta = roulette(beta, sample_1d(seed, pixel, index, dim + wp.uint32(BOUNCE_ROULETTE)))
     if settings.clamp > 0.0:
         L = wp.vec3(wp.min(L[0], settings.clamp), wp.min(L[1], settings.clamp), wp.min(L[2], settings.clamp))
     sample = wp.vec4(L[0], L[1], L[2], alpha)

@@ -29,6 +29,11 @@ def _absolute_prim_path(v: str) -> str | None:
     return None if v.startswith("/") else f"camera must be an absolute prim path, got {v!r}"
 
 
+def _ocio_config(v: str) -> str | None:
+    ok = v.startswith("ocio://") or v.startswith("/")
+    return None if ok else f"ocio config must be an ocio:// URI or an absolute path, got {v!r}"
+
+
 def _ordered_shutter(v: tuple[float, float]) -> str | None:
     return None if v[0] <= v[1] else f"shutter open ({v[0]:g}) is after close ({v[1]:g})"
 
@@ -131,6 +136,9 @@ SETTINGS_TABLE: tuple[Setting, ...] = (
             scene=True),
     Setting("focus_distance", float, None, "lens override", unit="scene units", optional=True, gt=0, le=1.0e12,
             metavar="D", scene=True),
+    Setting("ocio_config", str, None, "OpenColorIO config the colours are converted with (default: $OCIO, else "
+            "OpenColorIO's built-in ocio://default)", optional=True, max_length=4096, metavar="CONFIG", scene=True,
+            check=_ocio_config),
     # How it is sampled and written: one prepared scene serves every value of these.
     Setting("spp", int, 16, "samples per pixel; with a time limit, the cap (then 4096 unless given)", ge=1,
             le=1 << 16, metavar="N"),

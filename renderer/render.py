@@ -25,6 +25,7 @@ from renderer.accel import build_kernels, quantize, triangle_kernels, wide
 from renderer.accel.quads import order_for_quads
 from renderer.accel.upload import GeometryStats, upload_geometry
 from renderer.camera import CameraSetup, ndc_matrix, setup_camera
+from renderer.color import ColorSpaces
 from renderer.device import init_warp
 from renderer.errors import Cancelled, SettingsError
 from renderer.film import borders, denoise, film
@@ -33,6 +34,8 @@ from renderer.film.exr import timecode_from_frame, write_exr
 from renderer.framing import Framing, resolve_framing
 from renderer.integrator import PathSettings, Wave, trace_wave_kernel
 from renderer.lights.table import upload_lights
+from renderer.media import upload as media_upload
+from renderer.media.upload import MediaUpload, upload_media
 from renderer.motion.transform import matrix_at
 # MAX_SPP and RenderOptions are re-exported: ``renderer.render`` is the library API the README shows.
 from renderer.options import AOV_NAMES, MAX_DEPTH, MAX_PIXELS, MAX_SPP, TIME_FILTERS, RenderOptions  # noqa: F401
@@ -87,6 +90,7 @@ class PreparedScene:
     stats: GeometryStats
     device: str = "cpu"
     warnings: list[str] = field(default_factory=list)
+    media: MediaUpload | None = None  # participating media (volumes, and materials' interior media)
 
 
 def resolve_resolution(scene: Scene, options: RenderOptions) -> tuple[int, int]:
@@ -96,7 +100,7 @@ def resolve_resolution(scene: Scene, options: RenderOptions) -> tuple[int, int]:
 
 
 # every Warp module a render launches kernels of (hierarchy build, integrator, film)
-RENDER_MODULES = (build_kernels, triangle_kernels, wide, quantize, integrator, film)
+RENDER_MODULES = (build_kernels, triangle_kernels, wide, quantize, integrator, film, media_upload)
 
 
 def load_kernels(device: str = "cpu") -> dict[str, str]:
@@ -124,13 +128,16 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> Prepar
     textures = upload_material_textures(flat.materials, device, warn=warnings.append)
     materials = upload_materials(flat.materials, device)
     lights, light_count = upload_lights(flat, device, warn=lambda what, name="": warnings.append(f"{what}: {name}"))
+    media = upload_media(scene, flat.materials, device,
+                         warn=lambda what, name="": warnings.append(f"{what}: {name}"))
     cam = setup_camera(scene.camera, framing, policy=scene.render_settings.aspect_ratio_conform_policy, dof=dof,
                        device=device)
     if cam.warning:
         warnings.append(cam.warning)
     return PreparedScene(scene=scene, options=options, width=width, height=height, framing=framing,
                          geometry=geometry, materials=materials, textures=textures, lights=lights,
-                         light_count=light_count, camera=cam, stats=stats, device=device, warnings=warnings)
+                         light_count=light_count, camera=cam, stats=stats, device=device, warnings=warnings,
+                         media=media)
 
 
 def with_options(prep: PreparedScene, options: RenderOptions) -> PreparedScene:
@@ -197,7 +204,7 @@ def render_tile(prep: PreparedScene, tile: Tile,
     settings.indirect_clamp = opts.path_indirect_clamp
     settings.glossy_filter = opts.path_glossy_filter
     settings.time_filter = TIME_FILTERS[opts.time_filter]
-    settings.frame_s = frame_shutter_time(prep.scene)
+    settings.frame_s = prep.scene.shutter.frame_s
     settings.seed = wp.uint32(opts.seed)
     slot_of = np.full(sw * sh, -1, np.int32)
     # the tile's own pixels among the sample pixels (its samples-per-pixel count and progress)
@@ -224,7 +231,8 @@ def render_tile(prep: PreparedScene, tile: Tile,
         launch.start, launch.count = start, wave
         launch.counters = counters
         wp.launch(trace_wave_kernel, dim=pixels.size * wave, device=dev,
-                  inputs=[prep.geometry, prep.materials, prep.textures, prep.lights, prep.camera.params, buf,
+                  inputs=[prep.geometry, prep.materials, prep.textures, prep.lights, prep.media.media,
+                          prep.camera.params, buf,
                           settings, launch])
         wp.launch(film.axis_weights_kernel, dim=pixels.size * wave, device=dev,
                   inputs=[buf, kind, float(film.FILTER_RADIUS[kind])])
@@ -347,18 +355,10 @@ def frame_channels(prep: PreparedScene, sums: dict[str, np.ndarray]) -> dict[str
     return ch
 
 
-def frame_shutter_time(scene: Scene) -> float:
-    """The frame's time code as normalised shutter time (clamped to the shutter)."""
-    span = scene.shutter_close - scene.shutter_open
-    if span <= 0:
-        return 0.0
-    return min(1.0, max(0.0, (scene.frame - scene.shutter_open) / span))
-
-
 def frame_attributes(prep: PreparedScene) -> dict:
     """EXR header attributes: camera matrices at the frame time, frame rate, time code, render settings."""
     scene, o = prep.scene, prep.options
-    w2c = np.linalg.inv(matrix_at(scene.camera.transform, frame_shutter_time(scene)))
+    w2c = np.linalg.inv(matrix_at(scene.camera.transform, scene.shutter.frame_s))
     return {
         "worldToCamera": w2c,
         "worldToNDC": ndc_matrix(scene.camera, prep.camera) @ w2c,
@@ -376,9 +376,10 @@ def frame_attributes(prep: PreparedScene) -> dict:
         "drt/seed": int(o.seed),
         "drt/filter": o.filter,
         "drt/timeFilter": o.time_filter,
-        "drt/shutter": (float(scene.shutter_open - scene.frame), float(scene.shutter_close - scene.frame)),
+        "drt/shutter": scene.shutter.offsets,
         "drt/depthOfField": int(prep.camera.lens_radius > 0),
         "drt/metersPerUnit": float(scene.meters_per_unit),
+        **(scene.colors or ColorSpaces()).describe(),
     }
 
 

@@ -63,6 +63,7 @@ class RenderRequest:
     lens: LensOverrides = field(default_factory=LensOverrides)
     options: RenderOptions = field(default_factory=RenderOptions)
     half: bool = default_of("half")  # store colour and AOVs as HALF in the EXR (does not change the pixels)
+    ocio_config: str | None = default_of("ocio_config")  # None: $OCIO, else OpenColorIO's built-in config
 
     @classmethod
     def from_settings(cls, scene_path: str, frame: float | None, given: dict) -> "RenderRequest":
@@ -84,7 +85,8 @@ class RenderRequest:
 
     def settings(self) -> dict:
         """The request's values of every setting it carries, by the table's names."""
-        out = {"camera": self.camera, "shutter": self.shutter, "motion_blur": self.motion_blur, "half": self.half}
+        out = {"camera": self.camera, "shutter": self.shutter, "motion_blur": self.motion_blur, "half": self.half,
+               "ocio_config": self.ocio_config}
         out.update((f.name, getattr(self.lens, f.name)) for f in dataclasses.fields(LensOverrides))
         out.update((f.name, getattr(self.options, f.name)) for f in dataclasses.fields(RenderOptions)
                    if f.name in SETTINGS)
@@ -106,7 +108,8 @@ class RenderRequest:
     def load(self) -> Scene:
         """The frame as the renderer's Scene, lens overrides applied."""
         scene = load_scene(os.fspath(self.scene_path), self.frame, camera_path=self.camera, shutter=self.shutter,
-                           motion_blur=self.motion_blur_keys, image_width=self.options.width)
+                           motion_blur=self.motion_blur_keys, image_width=self.options.width,
+                           ocio_config=self.ocio_config)
         return self.lens.apply(scene)
 
     def prepare(self, device: str = "cpu") -> PreparedScene:

@@ -1,7 +1,10 @@
 """Preview PNGs: the frame so far (finished tiles; the rest black), tone-mapped for a screen.
 
-Tone mapping is deliberately plain: the EXR's linear, premultiplied colour (over black), clamped to [0, 1] and
-encoded with the sRGB transfer curve; large frames are shrunk to ``MAX_SIDE`` pixels on their long side.
+Tone mapping is deliberately plain: the EXR's linear, premultiplied colour (over black), from its rendering colour
+space through OpenColorIO's sRGB display with its un-tone-mapped view (``renderer.color.to_display``: Rec.709
+primaries, the sRGB transfer curve), clamped to [0, 1]; large frames are shrunk to ``MAX_SIDE`` pixels on their
+long side. A frame still rendering (its tiles) is shown as linear Rec.709: the rendering space is in the EXR's
+header, written when the frame is done.
 """
 from __future__ import annotations
 
@@ -10,21 +13,26 @@ from pathlib import Path
 
 import numpy as np
 
+from renderer.errors import SettingsError
+
 from .checkpoints import TileBox, load_tile
 
 MAX_SIDE = 1024
 
 
-def srgb8(rgb: np.ndarray) -> np.ndarray:
-    x = np.clip(np.nan_to_num(rgb, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
-    x = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+def srgb8(rgb: np.ndarray, rendering: str | None = None, config: str | None = None) -> np.ndarray:
+    """Linear ``rgb`` in the rendering colour space ``rendering`` (default linear Rec.709) as 8-bit sRGB."""
+    from renderer.color import to_display
+
+    x = np.nan_to_num(np.asarray(rgb, np.float32), nan=0.0, posinf=1.0, neginf=0.0)
+    x = np.clip(to_display(x, rendering, config), 0.0, 1.0)
     return np.round(x * 255.0).astype(np.uint8)
 
 
-def png(rgb: np.ndarray) -> bytes:
+def png(rgb: np.ndarray, rendering: str | None = None, config: str | None = None) -> bytes:
     from PIL import Image
 
-    img = Image.fromarray(srgb8(rgb))  # (H, W, 3) uint8: RGB
+    img = Image.fromarray(srgb8(rgb, rendering, config))  # (H, W, 3) uint8: RGB
     if max(img.size) > MAX_SIDE:
         img.thumbnail((MAX_SIDE, MAX_SIDE))
     buf = io.BytesIO()
@@ -35,8 +43,12 @@ def png(rgb: np.ndarray) -> bytes:
 def from_exr(path: Path) -> bytes:
     from renderer.film.exr import read_exr
 
-    channels, _ = read_exr(path)
-    return png(np.stack([channels["R"], channels["G"], channels["B"]], axis=-1))
+    channels, header = read_exr(path)
+    rgb = np.stack([channels["R"], channels["G"], channels["B"]], axis=-1)
+    try:
+        return png(rgb, header.get("drt/renderingColorSpace"), header.get("drt/ocioConfig"))
+    except SettingsError:  # a config only the render host has: shown as linear Rec.709
+        return png(rgb)
 
 
 def from_tiles(tiles: list[tuple[Path, TileBox]], width: int, height: int, exposure_scale: float) -> bytes:

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 import warp as wp
 
+from renderer.motion.shutter import Shutter
 from renderer.accel.intersect import (Geometry, instance_object_to_world, instance_world_to_object, intersect_closest,
                                       leaf_closest, leaf_four, triangle_hit_edges)
 from renderer.motion.kernels import find_segment, keys_matrix
@@ -62,7 +63,7 @@ def make_scene(rng):
                                                   rot_y(30, (1.5, 2, 0.5))])),
     ]
     cam = Camera("cam", MotionTransform.static(np.eye(4)))
-    return Scene(meshes, instances, [Material("m", opacity=0.5)], [], cam, 0, 0, 1)
+    return Scene(meshes, instances, [Material("m", opacity=0.5)], [], cam, Shutter(0, 0, 1))
 
 
 def ray_triangles(v, o, d):
@@ -227,7 +228,7 @@ def test_only_meshes_with_uvs_or_normals_hold_them_and_each_finds_its_own():
     meshes[2].uvs = rng.random((3, 3, 2)).astype(np.float32)
     meshes[2].normals = rng.normal(size=(3, 3, 3)).astype(np.float32)
     scene = Scene(meshes, [Instance(i, MotionTransform.static(np.eye(4))) for i in range(3)], [Material("m")], [],
-                  Camera("cam", MotionTransform.static(np.eye(4))), 0, 0, 1)
+                  Camera("cam", MotionTransform.static(np.eye(4))), Shutter(0, 0, 1))
     geo, _ = upload_geometry(scene)
     assert geo.mesh_uv_off.numpy().tolist() == [-1, 0, 12] and geo.uvs.shape[0] == 21
     assert geo.mesh_normal_off.numpy().tolist() == [-1, -1, 0] and geo.normals.shape[0] == 9
@@ -315,7 +316,7 @@ def test_no_instance_is_walked_directly_when_none_dominates_the_only_one_moves_o
     rng = np.random.default_rng(3)
     scene = make_scene(rng)
     assert upload_geometry(scene)[0].direct_inst == -1  # five of similar size
-    alone = Scene(scene.meshes, [scene.instances[0]], scene.materials, [], scene.camera, 0, 0, 1)
+    alone = Scene(scene.meshes, [scene.instances[0]], scene.materials, [], scene.camera, Shutter(0, 0, 1))
     assert upload_geometry(alone)[0].direct_inst == 0
     from renderer.scene.model import LIGHT_SPHERE, Light
     linked = Light(LIGHT_SPHERE, "key", (1.0, 1.0, 1.0), MotionTransform.static(np.eye(4)),

@@ -7,6 +7,7 @@ import warp as wp
 from pxr import Sdf, Usd, UsdGeom, UsdShade
 
 import stages
+from renderer.motion.shutter import Shutter
 from renderer.accel.analytic import BIG, shape_hits, shape_normal, sphere_roots
 from renderer.accel.upload import upload_geometry
 from renderer.motion.transform import make_transform
@@ -83,7 +84,7 @@ def _sphere_mesh(radius, name="ball"):
 
 def _scene(meshes, instances, opacity=1.0):
     cam = Camera("cam", MotionTransform.static(np.eye(4)))
-    return Scene(meshes, instances, [Material("m", opacity=opacity)], [], cam, 0, 0, 1)
+    return Scene(meshes, instances, [Material("m", opacity=opacity)], [], cam, Shutter(0, 0, 1))
 
 
 def _ellipsoid_hit(o, d, w2o, r):

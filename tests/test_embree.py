@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import warp as wp
 
+from renderer.motion.shutter import Shutter
 from renderer.accel import embree
 from renderer.accel.upload import upload_geometry
 from renderer.scene.model import Camera, Instance, Material, Mesh, MotionTransform, Scene
@@ -18,7 +19,7 @@ pytestmark = pytest.mark.skipif(embree.library() is None, reason="Embree (embree
 
 def _scene(meshes, materials):
     insts = [Instance(i, MotionTransform.static(np.eye(4))) for i in range(len(meshes))]
-    return Scene(meshes, insts, materials, [], Camera("cam", MotionTransform.static(np.eye(4))), 0, 0, 1)
+    return Scene(meshes, insts, materials, [], Camera("cam", MotionTransform.static(np.eye(4))), Shutter(0, 0, 1))
 
 
 def _without_embree(monkeypatch, scene):
@@ -200,7 +201,7 @@ def test_embrees_normal_of_the_hit_is_the_one_from_the_corners(monkeypatch):
     scale = np.diag([1.5, 0.7, 1.0, 1.0]) @ rot_y(35, (0.2, 0, 0))
     scene = Scene([still, deforming], [Instance(0, MotionTransform.static(scale)),
                                        Instance(1, MotionTransform.static(np.eye(4)))],
-                  [Material("m")], [], Camera("cam", MotionTransform.static(np.eye(4))), 0, 0, 1)
+                  [Material("m")], [], Camera("cam", MotionTransform.static(np.eye(4))), Shutter(0, 0, 1))
     geo, _ = upload_geometry(scene)
     assert list(geo.mesh_embree.numpy() != 0) == [True, False]
     n = 3000

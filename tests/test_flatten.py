@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from renderer.motion.shutter import Shutter
 from renderer.scene.flatten import flatten_still_instances
 from renderer.motion.transform import make_transform
 from renderer.scene.model import LIGHT_MESH, Camera, Instance, Light, Material, Mesh, MotionTransform, Scene
@@ -33,7 +34,7 @@ def test_merged_mesh_keeps_per_triangle_solidity_lights_and_positions():
                  Instance(2, make_transform([0, 1], [translate(0), translate(1)]))]  # moving: stays instanced
     lights = [Light(LIGHT_MESH, "card", (1, 1, 1), instances[1].transform, instance=1)]
     scene = Scene(meshes, instances, [Material("m"), Material("e", emissive_color=(1, 1, 1))], lights,
-                  Camera("c", MotionTransform.static(np.eye(4))), 0, 0, 1)
+                  Camera("c", MotionTransform.static(np.eye(4))), Shutter(0, 0, 1))
     flat = flatten_still_instances(scene)
     assert len(flat.instances) == 2  # the merged still geometry, and the mover
     merged = flat.meshes[flat.instances[0].mesh]
@@ -54,7 +55,7 @@ def test_shared_meshes_stay_instanced():
     instances = [Instance(0, MotionTransform.static(translate(x))) for x in (0, 3, 6)]  # three of one mesh
     instances += [Instance(m, MotionTransform.static(translate(x))) for m, x in ((1, -3), (2, -6))]
     scene = Scene(meshes, instances, [Material("a"), Material("b")], [],
-                  Camera("c", MotionTransform.static(np.eye(4))), 0, 0, 1)
+                  Camera("c", MotionTransform.static(np.eye(4))), Shutter(0, 0, 1))
     flat = flatten_still_instances(scene)
     assert len(flat.instances) == 4  # the two used-once quads merged, the three tetrahedra as they were
     merged = flat.meshes[flat.instances[0].mesh]

@@ -6,6 +6,7 @@ import math
 import numpy as np
 import warp as wp
 
+from renderer.motion.shutter import Shutter
 from renderer.lights.select import Selection, select_light
 from renderer.lights.select import select_pdf as light_select_pdf
 from renderer.lights.table import delivered_irradiance, upload_lights
@@ -24,7 +25,7 @@ def unit_scene(lights):
     mesh = Mesh("floor", np.zeros(1, np.float32), pts, np.array([[0, 2, 1], [0, 3, 2]], np.int32),
                 np.zeros(2, np.int32))
     return Scene([mesh], [Instance(0, MotionTransform.static(np.eye(4)))], [Material("m")], lights,
-                 Camera("c", MotionTransform.static(translate(0, 1, 5))), 0, 0, 1)
+                 Camera("c", MotionTransform.static(translate(0, 1, 5))), Shutter(0, 0, 1))
 
 
 def test_delivered_irradiance_falls_off_with_distance_and_is_capped_by_radiance():

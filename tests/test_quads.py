@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import warp as wp
 
+from renderer.motion.shutter import Shutter
 from renderer.accel import embree
 from renderer.accel.intersect import Geometry, intersect_closest
 from renderer.accel.quads import embree_triangle, order_for_quads, quad_order, quad_runs, reorder_mesh
@@ -154,7 +155,7 @@ def test_mesh_lights_keep_their_triangles():
                     triangles=(37, 121))]
     scene = Scene([still, moving], [Instance(0, MotionTransform.static(np.eye(4))),
                                     Instance(1, MotionTransform.static(np.eye(4)))],
-                  [Material("m")], lights, Camera("cam", MotionTransform.static(np.eye(4))), 0, 0, 1)
+                  [Material("m")], lights, Camera("cam", MotionTransform.static(np.eye(4))), Shutter(0, 0, 1))
     out = order_for_quads(scene, min_triangles=2)
     assert scene.meshes[0] is still and out.meshes[1] is moving
     assert order_for_quads(scene).meshes[0] is still  # below the size where quads pay
@@ -259,7 +260,7 @@ def test_embree_holding_quads_finds_the_triangle_point_and_side_our_walk_finds(m
     place = np.diag([1.5, 0.7, 1.0, 1.0]) @ rot_y(35, (0.2, 0, 0))
     unordered = Scene([mesh], [Instance(0, MotionTransform.static(place)),
                                Instance(0, MotionTransform.static(rot_y(0, (0.5, 0.3, -1.0))))],
-                      [Material("m")], [], Camera("cam", MotionTransform.static(np.eye(4))), 0, 0, 1)
+                      [Material("m")], [], Camera("cam", MotionTransform.static(np.eye(4))), Shutter(0, 0, 1))
     scene = order_for_quads(unordered, min_triangles=2)
     geo, stats = upload_geometry(scene)
     assert geo.mesh_embree.numpy()[0] != 0

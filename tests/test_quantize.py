@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import warp as wp
 
+from renderer.motion.shutter import Shutter
 from renderer.accel.build import build_bvh
 from renderer.accel.quantize import LIMIT, STEPS, QNode, decode, q_entries, quantize
 from renderer.accel.wide import WideBoxes, WideBvh, box_records, collapse, entries
@@ -140,6 +141,6 @@ def test_uploaded_records_are_cache_lines():
     mesh = Mesh(name="/m", point_times=np.zeros(1, np.float32), points=pts, triangles=tris,
                 material_ids=np.zeros(5000, np.int32))
     still = MotionTransform.static(np.eye(4))
-    scene = Scene([mesh], [Instance(0, still)], [Material("m")], [], Camera("cam", still), 0, 0, 1)
+    scene = Scene([mesh], [Instance(0, still)], [Material("m")], [], Camera("cam", still), Shutter(0, 0, 1))
     g, _ = upload_geometry(scene)
     assert g.blas_node.ptr % 64 == 0 and g.blas_node.strides == (64,)

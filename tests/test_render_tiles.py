@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 import warp as wp
 
+from renderer.motion.shutter import Shutter
 from renderer.film import film
 from renderer.motion.transform import make_transform
 from renderer.render import (RenderOptions, Tile, assemble, auto_tile_size, prepare, render_frame, render_tile,
@@ -39,7 +40,7 @@ def make_scene():
     cam = Camera("cam", MotionTransform.static(translate(0, 1.5, 8)), focal_length=3.5, horizontal_aperture=3.6,
                  vertical_aperture=2.4, f_stop=2.0, focus_distance=8.0)
     mats = [Material("floor", (0.8, 0.8, 0.8)), Material("card", (0.8, 0.2, 0.1), opacity=0.7)]
-    return Scene(meshes, instances, mats, lights, cam, 0.0, 0.0, 1.0)
+    return Scene(meshes, instances, mats, lights, cam, Shutter(0.0, 0.0, 1.0))
 
 
 @pytest.fixture(scope="module")

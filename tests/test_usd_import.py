@@ -455,13 +455,13 @@ def test_camera_units_and_stage_metrics(tmp_path):
     assert (c.f_stop, c.focus_distance, c.exposure) == pytest.approx((2.8, 250.0, 1.5))
     np.testing.assert_allclose(matrix_at(c.transform, 0.5)[:3, 3], [1, 2, 3])
     assert scene.frame == 12.0, "frame defaults to startTimeCode"
-    assert (scene.shutter_open, scene.shutter_close) == (11.75, 12.25)
+    assert (scene.shutter.open, scene.shutter.close) == (11.75, 12.25)
     assert (scene.meters_per_unit, scene.up_axis, scene.time_codes_per_second) == (0.01, "Z", 30.0)
 
     scene = load_scene(path, frame=3, shutter=(0.0, 0.5))
-    assert (scene.frame, scene.shutter_open, scene.shutter_close) == (3.0, 3.0, 3.5)
+    assert (scene.frame, scene.shutter.open, scene.shutter.close) == (3.0, 3.0, 3.5)
     scene = load_scene(path, frame=3, motion_blur=False)
-    assert scene.shutter_open == scene.shutter_close == 3.0
+    assert scene.shutter.open == scene.shutter.close == 3.0
 
 
 def test_orthographic_camera(tmp_path):
@@ -490,7 +490,7 @@ def test_render_settings_pick_camera_resolution_and_disable_blur(tmp_path):
     assert info.resolution == (640, 360) and info.camera_path == "/World/Second"
     assert info.pixel_aspect_ratio == 2.0 and info.disable_motion_blur and info.disable_depth_of_field
     assert scene.camera.name == "/World/Second"
-    assert scene.shutter_open == scene.shutter_close == scene.frame
+    assert scene.shutter.open == scene.shutter.close == scene.frame
     # an explicit camera wins over the settings
     assert load_scene(path, camera_path="/World/First").camera.name == "/World/First"
 

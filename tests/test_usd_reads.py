@@ -14,13 +14,14 @@ import stages
 from renderer.usd import reads
 from renderer.usd.importer import WarningLog, load_scene
 
-# one attribute no reader consumes, per claimed schema library: (prim type in the warning, attribute)
+# one attribute no reader consumes, per claimed schema library: (prim type in the warning, attribute). UsdShade
+# has none left (``test_every_usdshade_attribute_is_read``).
 IGNORED = {
     "UsdGeom": ("Camera", "stereoRole"),
     "UsdLux": ("CylinderLight", "treatAsLine"),
-    "UsdShade": ("Material", "outputs:volume"),
     "UsdSkel": ("Skeleton", "jointNames"),
     "UsdRender": ("RenderProduct", "productName"),
+    "UsdVol": ("OpenVDBAsset", "vectorDataRoleHint"),
     "UsdGeom API": ("Xform", "motion:blurScale"),
 }
 
@@ -51,7 +52,13 @@ def authored_stage(path):
     mesh.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(-1, -1, 0), Gf.Vec3f(1, 1, 0)]))
     UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("userColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(1, 0, 0))
     mesh.GetPrim().CreateAttribute("arnold:subdiv_iterations", Sdf.ValueTypeNames.Int).Set(2)  # custom
-    stage.GetPrimAtPath("/World/Looks/Grey").CreateAttribute("outputs:volume", Sdf.ValueTypeNames.Token)
+    look = UsdShade.Material(stage.GetPrimAtPath("/World/Looks/Grey"))
+    look.CreateDisplacementOutput().ConnectToSource(UsdShade.Shader.Get(stage, "/World/Looks/Grey/Surface")
+                                                    .ConnectableAPI(), "displacement")  # read: nothing displaces
+    UsdShade.Shader.Get(stage, "/World/Looks/Grey/Surface").CreateImplementationSourceAttr("id")
+    field = UsdVol.OpenVDBAsset.Define(stage, "/World/Fields/temperature")
+    field.CreateFieldNameAttr("temperature")
+    field.CreateVectorDataRoleHintAttr("Point")
     light = UsdLux.CylinderLight.Define(stage, "/World/Tube")
     light.CreateIntensityAttr(3.0)
     light.CreateTreatAsLineAttr(True)
@@ -90,21 +97,30 @@ def test_a_reader_declaring_an_attribute_silences_its_warning(tmp_path, monkeypa
     assert ("Camera", "stereoRole") not in found and ("CylinderLight", "treatAsLine") in found
 
 
-def test_volumes_are_named_as_prims_the_importer_does_not_read(tmp_path):
-    """UsdVol: a Volume is skipped with the importer's own warning (its attributes not listed again); a field
-    asset on its own is named as a prim of a type no reader handles."""
+def test_every_usdshade_attribute_is_read():
+    """UsdShade's schema attributes (Material outputs, the shader id) are all declared by readers."""
+    reg = Usd.SchemaRegistry()
+    for schema in ("Material", "Shader", "NodeGraph"):
+        d = reg.FindConcretePrimDefinition(schema)
+        names = {n for n in d.GetPropertyNames() if d.GetAttributeDefinition(n)}
+        assert names <= reads.consumed(schema), (schema, names - reads.consumed(schema))
+
+
+def test_field3d_volumes_are_named_once(tmp_path):
+    """A Field3D field of a Volume is named by the volume reader (and not again as unread); one no Volume uses is
+    named as a prim of a type no reader handles."""
     stage = stages.new_stage(tmp_path / "v.usda")
     vol = UsdVol.Volume.Define(stage, "/World/Smoke")
-    UsdGeom.Gprim(vol).CreateDoubleSidedAttr(True)
-    field = UsdVol.OpenVDBAsset.Define(stage, "/World/Smoke/density")
-    field.CreateFilePathAttr(Sdf.AssetPath("smoke.vdb"))
-    loose = UsdVol.OpenVDBAsset.Define(stage, "/World/Fields/temperature")
-    loose.CreateFieldNameAttr("temperature")
+    field = UsdVol.Field3DAsset.Define(stage, "/World/Smoke/density")
+    field.CreateFilePathAttr(Sdf.AssetPath("smoke.f3d"))
+    field.CreateFieldPurposeAttr("sim")
+    vol.CreateFieldRelationship("density", field.GetPath())
+    UsdVol.Field3DAsset.Define(stage, "/World/Loose").CreateFieldPurposeAttr("sim")
     stage.Save()
     scene = load_scene(tmp_path / "v.usda", 0.0)
     text = "\n".join(scene.warnings)
-    assert "unsupported geometry types skipped (1): /World/Smoke (Volume)" in text
-    assert "prims of types the importer does not read ignored (1): /World/Fields/temperature (OpenVDBAsset)" in text
+    assert "Field3D volume fields skipped (no reader for the format) (1): /World/Smoke/density" in text
+    assert "prims of types the importer does not read ignored (1): /World/Loose (Field3DAsset)" in text
     assert not unread(scene), text
 
 

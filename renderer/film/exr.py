@@ -273,6 +273,8 @@ def _attribute_value(name: str, value: object) -> object:
         return _int32(name, value)
     if isinstance(value, (float, np.floating)):
         return _finite(name, value)
+    if name == "chromaticities":  # the standard attribute: (red, green, blue, white) x, y
+        return tuple(_finite(name, v) for v in value)
     if isinstance(value, (Sequence, np.ndarray)):
         if len(value) == 0:
             raise ValueError(f"attribute {name!r} is an empty sequence: its type cannot be told")

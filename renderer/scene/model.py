@@ -3,7 +3,7 @@
 This is the contract between the USD importer (``usd_scene``) and everything that renders. Nothing here
 knows about pxr, Warp or HTTP. All positions are in scene units (the stage's units; ``meters_per_unit``
 converts), times are **normalised shutter time** ``s`` in [0, 1] over the frame's shutter interval
-``[shutter_open, shutter_close]`` (absolute time codes), and colours are linear Rec.709 RGB.
+``[shutter.open, shutter.close]`` (absolute time codes; ``renderer.motion.shutter``), and colours are linear Rec.709 RGB.
 
 Motion (the paper's time dimension) is described by *keys*:
 
@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from renderer.motion.shutter import Shutter
 from renderer.motion.transform import MotionTransform  # noqa: F401  (part of the scene contract)
 
 # Light kinds (the integer ``kind`` the kernels dispatch on).
@@ -218,9 +219,86 @@ class Material:
     # diffuseColor is the prim's displayColor times this (a fallback material, or a UsdPrimvarReader of
     # displayColor): where a mesh has per-corner ``colors`` they replace ``diffuse_color`` (its mean); None: no
     display_scale: tuple[float, float, float] | None = None
+    # A scattering medium inside closed solids (extension inputs, see ``usd_materials``): scattering coefficient
+    # sigma_s = scatter_color / scatter_distance per scene unit (black: none, the interior only absorbs) and the
+    # Henyey-Greenstein anisotropy g of its phase function, in (-1, 1).
+    scatter_color: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    scatter_distance: float = 1.0
+    scatter_anisotropy: float = 0.0
     # Inputs driven by textures, by UsdPreviewSurface input name ("diffuseColor", "roughness", "normal", ...).
     # The constant field of a textured input holds the texture's mean value (what constant-only code uses).
     textures: dict[str, TextureInput] = field(default_factory=dict)
+
+
+@dataclass
+class VolumeField:
+    """A sparse grid of a ``Volume``: one value per active voxel, in the grid's index space.
+
+    Voxel (i, j, k) has its centre at ``index_to_object @ (i, j, k, 1)`` in the volume's object space (OpenVDB's
+    convention: voxel centres on integer index coordinates); between centres values are trilinear, and outside
+    the active voxels they are ``background``. Sparse grids stay sparse: only active voxels are stored.
+    """
+
+    name: str  # the field's name (OpenVDB grid name), for messages
+    coords: np.ndarray  # (N, 3) int32 index coordinates of the active voxels
+    values: np.ndarray  # (N,) float32 scalars, or (N, 3) float32 vectors (a velocity field)
+    index_to_object: np.ndarray  # (4, 4) float64, column vectors: index space to the volume's object space
+    background: float = 0.0
+
+    @property
+    def vector(self) -> bool:
+        return self.values.ndim == 2
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.coords.nbytes + self.values.nbytes)
+
+
+@dataclass
+class VolumeMedium:
+    """What a Volume's fields mean to light (coefficients per scene unit, see docs/rendering.md "Volumes").
+
+    At an object-space point with density field value d (times ``density_scale``): absorption sigma_a = d *
+    ``absorption``, scattering sigma_s = d * ``scattering`` (RGB: chromatic extinction when they differ by channel),
+    a Henyey-Greenstein phase of anisotropy ``anisotropy``; emitted radiance per scene unit = ``emission`` x the
+    emission field's value (or x d when there is no emission field and ``emission_from_density``) plus
+    ``blackbody_intensity`` x the blackbody colour of temperature field value x ``temperature_scale`` kelvin.
+    The default is the fog of a Volume without a material: extinction = the density field per scene unit, white
+    scattering (albedo 1), isotropic.
+    """
+
+    density_scale: float = 1.0
+    absorption: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    scattering: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    anisotropy: float = 0.0
+    emission: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    emission_from_density: bool = False
+    temperature_scale: float = 1.0  # kelvin per unit of the temperature field
+    blackbody_intensity: float = 0.0  # 0: no blackbody emission
+    velocity_scale: float = 1.0  # the velocity field's units are scene units per second times this
+    name: str = "fog"  # the material it comes from, for messages
+
+
+@dataclass
+class Volume:
+    """A participating medium placed in the world: a UsdVol ``Volume`` prim and its fields.
+
+    ``density`` drives extinction and scattering; ``temperature`` and ``emission`` emission; ``velocity`` (scene
+    units per second in object space) advects the density lookups over the shutter, as a moving fluid blurs.
+    Every field lives in the volume's object space, which ``transform`` places in the world over the shutter.
+    """
+
+    name: str  # prim path
+    transform: MotionTransform  # object to world
+    medium: VolumeMedium
+    density: VolumeField | None = None
+    temperature: VolumeField | None = None
+    emission: VolumeField | None = None
+    velocity: VolumeField | None = None
+
+    @property
+    def fields(self) -> list[VolumeField]:
+        return [f for f in (self.density, self.temperature, self.emission, self.velocity) if f is not None]
 
 
 @dataclass
@@ -341,6 +419,8 @@ class RenderSettingsInfo:
     # the material binding purpose asked for first by materialBindingPurposes ("full", "preview", or "" for
     # all-purpose bindings only); a purpose falls back to all-purpose bindings, as UsdShade computes them
     material_binding_purpose: str = "full"
+    # UsdRender's renderingColorSpace: the linear space the render works in (None: linear Rec.709)
+    rendering_color_space: str | None = None
 
 
 @dataclass
@@ -352,18 +432,27 @@ class Scene:
     materials: list[Material]
     lights: list[Light]
     camera: Camera
-    frame: float  # time code of the frame
-    shutter_open: float  # absolute time code of s = 0
-    shutter_close: float  # absolute time code of s = 1
+    shutter: Shutter  # the frame's time code, its shutter interval and the stage's time codes per second
     meters_per_unit: float = 0.01
     up_axis: str = "Y"
-    time_codes_per_second: float = 24.0
     render_settings: RenderSettingsInfo = field(default_factory=RenderSettingsInfo)
+    volumes: list[Volume] = field(default_factory=list)  # participating media (UsdVol), see ``renderer.media``
+    # the colour spaces every colour was converted with (renderer.color.ColorSpaces); None: linear Rec.709
+    colors: object | None = None
     # CSG groups: the operation of each ("union", "intersection", "difference"); members name it on Instance
     csg_operations: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     source: str = ""  # file it came from, for messages
 
+    @property
+    def frame(self) -> float:
+        """Time code of the frame."""
+        return self.shutter.frame
+
+    @property
+    def time_codes_per_second(self) -> float:
+        return self.shutter.time_codes_per_second
+
     def time_code(self, s: float) -> float:
         """Absolute time code of normalised shutter time s."""
-        return self.shutter_open + s * (self.shutter_close - self.shutter_open)
+        return self.shutter.time_code(s)

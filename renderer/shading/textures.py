@@ -8,8 +8,9 @@ reads) as float32 and decodes sRGB to linear at load time, so every lookup is li
   says it is linear, and keeps everything else (float, 16-bit, 1- and 2-channel images), as the
   UsdPreviewSurface spec describes.
 * "auto8" (MaterialX image nodes, Arnold's "auto") decodes every 8-bit image, grey ones too, and keeps float;
-  "ACES2065-1" / "ACEScg" (also "lin_ap0" / "lin_ap1") are linear with other primaries: converted to linear
-  Rec.709 when read.
+  any other name (a colour space of the OpenColorIO config: "ACEScg", "lin_p3d65_scene", "g22_rec709"...) keeps
+  the stored values and names the space in ``LoadedImage.colorspace``: the importer converts them into the
+  rendering colour space (``renderer.color``), as it converts sRGB-decoded texels from linear Rec.709.
 * Images are stored **bottom row first**: texel (i, j) has its centre at st = ((i + 0.5) / W, (j + 0.5) / H),
   the UsdUVTexture convention of ``st`` with its origin at the bottom-left (the top-left pixel of a PNG is at
   st ~ (0, 1)).
@@ -91,7 +92,7 @@ def linear_to_srgb(x: np.ndarray) -> np.ndarray:
 @dataclass
 class LoadedImage:
     texels: np.ndarray  # (H, W, C) float32 linear, row 0 = bottom
-    colorspace: str  # "sRGB" (decoded) or "raw"
+    colorspace: str  # "sRGB" (decoded: linear Rec.709 now), "raw" (as stored), or the colour space stored in
     wrap_metadata: tuple[str, str] | None  # (s, t) wrap modes named by the file, or None
     original_size: tuple[int, int]  # (width, height) in the file
     top_down: np.ndarray | None = None  # (H, W, C) the same texels with row 0 = top (``keep_top_down``)
@@ -100,18 +101,6 @@ class LoadedImage:
     @property
     def downsampled(self) -> bool:
         return self.texels.shape[1] != self.original_size[0] or self.texels.shape[0] != self.original_size[1]
-
-
-# Linear colour spaces with other primaries than Rec.709, converted to linear Rec.709 when read (row-major 3x3,
-# Bradford-adapted from the ACES white point to D65, as OpenColorIO's ACES configs do).
-_AP0_TO_709 = np.array([[2.52169, -1.13413, -0.38756], [-0.27648, 1.37272, -0.09624], [-0.01538, -0.15298, 1.16835]])
-_AP1_TO_709 = np.array([[1.70505, -0.62179, -0.08326], [-0.13026, 1.14080, -0.01055], [-0.02400, -0.12897, 1.15297]])
-_PRIMARIES = {
-    "aces2065-1": _AP0_TO_709,
-    "lin_ap0": _AP0_TO_709,
-    "acescg": _AP1_TO_709,
-    "lin_ap1": _AP1_TO_709,
-}
 
 
 def _is_linear_tag(tag: str) -> bool:
@@ -163,7 +152,6 @@ def read_image(path: str, colorspace: str = "auto", max_size: int = MAX_TEXTURE_
         buf = oiio.ImageBufAlgo.resize(buf, roi=oiio.ROI(0, w, 0, h, 0, 1, 0, nch))
         if buf.has_error:
             raise ImageError(f"cannot downsample {path}: {' '.join(buf.geterror().split())}")
-    primaries = _PRIMARIES.get(colorspace.lower())
     if colorspace == "auto":
         srgb = eight_bit and nch in (3, 4) and not (tag and _is_linear_tag(tag))
     elif colorspace == "auto8":
@@ -189,13 +177,11 @@ def read_image(path: str, colorspace: str = "auto", max_size: int = MAX_TEXTURE_
             px[..., :ncolor] = srgb_to_linear(px[..., :ncolor])
         if not np.all(np.isfinite(px)):
             px = np.nan_to_num(px, nan=0.0, posinf=0.0, neginf=0.0)
-    if primaries is not None and nch >= 3:
-        px = px.copy()
-        px[..., :3] = px[..., :3] @ primaries.T.astype(np.float32)
+    named = colorspace not in ("auto", "auto8", "raw") and colorspace.lower() != "srgb"
     return LoadedImage(
         level=level,
         texels=np.ascontiguousarray(px[::-1]),
-        colorspace="sRGB" if srgb else "raw",
+        colorspace="sRGB" if srgb else (colorspace if named else "raw"),
         wrap_metadata=wrap,
         original_size=original,
         top_down=px if keep_top_down else None,

@@ -147,8 +147,12 @@ def _image(net: Network, prim, output: str):
         a, t = np.diag([1.0, -1.0]) @ a, np.array([t[0], 1.0 - t[1]])
     m = a @ uv.matrix
     tr = a @ uv.translation + t
-    cs = str(net.value(prim, "color_space", "auto") or "auto").lower()  # the colour-space names MaterialX's are
+    authored = str(net.value(prim, "color_space", "auto") or "auto")
+    cs = authored.lower()  # the colour-space names MaterialX's are
     colorspace = "sRGB" if cs in SRGB_NAMES else ("raw" if cs in RAW_NAMES or cs.startswith("lin") else "auto8")
+    if colorspace != "sRGB" and cs != "auto" and net.colors is not None and net.colors.spaces.known(authored) \
+            and not net.colors.spaces.is_data(authored):
+        colorspace = authored  # a colour space of the config (ACEScg, lin_rec709...): converted when loaded
     name, tiles = resolve_asset(attr, value)
     texture, _ = net.files.load(name, tiles, colorspace, where)
     wraps = []

@@ -28,7 +28,7 @@ def _get(prim, name: str, frame: float, default):
 
 
 @reads("RenderSettings", "disableMotionBlur", "instantaneousShutter", "disableDepthOfField", "includedPurposes",
-       "materialBindingPurposes")
+       "materialBindingPurposes", "renderingColorSpace")
 @reads("RenderProduct")
 def render_settings(stage: Usd.Stage, frame: float, warn) -> tuple[RenderSettingsInfo, object]:
     """(RenderSettingsInfo, settings prim or None) from ``renderSettingsPrimPath`` or the only RenderSettings prim."""
@@ -55,6 +55,8 @@ def render_settings(stage: Usd.Stage, frame: float, warn) -> tuple[RenderSetting
         _get(prim, "instantaneousShutter", frame, False))
     info.disable_depth_of_field = bool(_get(prim, "disableDepthOfField", frame, False))
     _read_purposes(info, rs, frame, warn)
+    space = _get(prim, "renderingColorSpace", frame, None)
+    info.rendering_color_space = str(space) if space else None
     # the first RenderProduct's authored values override the settings' (UsdRenderSettingsBase is shared)
     products = [stage.GetPrimAtPath(t) for t in rs.GetProductsRel().GetForwardedTargets()]
     products = [p for p in products if p and p.IsA(UsdRender.Product)]

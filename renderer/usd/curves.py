@@ -39,7 +39,8 @@ from renderer.scene import tessellate_curves as tc
 from renderer.scene import tessellate_points as tp
 from renderer.scene.model import AnalyticShape
 from renderer.usd.mesh import GeomData
-from renderer.usd.motion import Shutter, point_keys
+from renderer.motion.shutter import Shutter
+from renderer.usd.motion import point_keys
 from renderer.usd.primvars import varying_colors
 from renderer.usd.reads import reads
 

@@ -19,7 +19,7 @@ Policies worth knowing:
 * **Instancing**: instance proxies of the same prototype prim with the same material assignment share one Mesh;
   PointInstancer instances share the prototypes' meshes; identical static implicit primitives share one Mesh.
 * **Static frames**: with motion blur off (argument, RenderSettings ``disableMotionBlur``) or an empty shutter,
-  ``shutter_open == shutter_close == frame`` and every key is a single key at the frame.
+  ``shutter.open == shutter.close == frame`` and every key is a single key at the frame.
 """
 from __future__ import annotations
 
@@ -29,6 +29,7 @@ import re
 import numpy as np
 from pxr import Gf, Tf, Usd, UsdGeom, UsdLux, UsdRender, UsdShade
 
+from renderer.color import ColorSpaces
 from renderer.errors import SceneError, SettingsError
 from renderer.scene import model as sc
 from renderer.scene.analytic import object_box, realize_tessellations
@@ -37,17 +38,21 @@ from renderer.usd import camera as usd_camera
 from renderer.usd import csg as usd_csg
 from renderer.usd import curves as usd_curves
 from renderer.usd import lights as usd_lights
+from renderer.usd.color import AttributeColors
 from renderer.usd.linking import apply_linking
 from renderer.usd.materials import MaterialTable
 from renderer.usd.mesh import read_mesh
 from renderer.usd.mesh_lights import apply_mesh_light
 from renderer.usd.mtlx import compose_mtlx
-from renderer.usd.motion import Shutter, TransformSampler, collapse_keys, motion_transforms, refine_keys
+from renderer.motion.shutter import Shutter
+from renderer.usd.motion import (TransformSampler, collapse_keys, motion_transform, motion_transforms,
+                                 refine_keys, samples_in_shutter, shutter_interval)
 from renderer.usd.primitives import PRIMITIVE_TYPES, primitive_signature, read_primitive
 from renderer.usd.primvars import default_uv_name, read_display_colors, read_named_uvs
 from renderer.usd.reads import reads, report_unread
 from renderer.usd.skel import Skinning
 from renderer.usd.subdiv import SubdivisionDetail
+from renderer.usd import volumes as usd_volumes  # noqa: I100
 
 # What reading a prim's data can raise (pxr's errors and Boost.Python's ArgumentError, a TypeError): the prim,
 # or the optional step that read it, is skipped with a warning naming the error.
@@ -89,14 +94,17 @@ class WarningLog:
 
 def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_path: str | None = None,
                shutter: tuple[float, float] | None = None, motion_blur: bool = True,
-               subdivision_level: int | None = None, image_width: int | None = None) -> sc.Scene:
+               subdivision_level: int | None = None, image_width: int | None = None,
+               ocio_config: str | None = None) -> sc.Scene:
     """Load one frame of a USD stage as a ``Scene``.
 
     ``frame`` defaults to the stage's startTimeCode (0 if no range is authored). The shutter is ``frame +``
     the camera's (shutter:open, shutter:close), or ``frame + shutter`` when given. Subdivision surfaces are
     refined to ``subdivision_level`` (0..6), or by default to a level chosen from the camera for an image
-    ``image_width`` pixels wide (default: the render settings' width, else 640). Raises SceneError (one-line
-    message) for a missing or malformed file or a bad camera path.
+    ``image_width`` pixels wide (default: the render settings' width, else 640). Colours are converted into the
+    render settings' ``renderingColorSpace`` (default linear Rec.709) through the OpenColorIO config
+    ``ocio_config`` (default ``$OCIO``, else OpenColorIO's built-in one; ``renderer.color``). Raises SceneError
+    (one-line message) for a missing or malformed file or a bad camera path.
     """
     path = os.fspath(path)
     if not os.path.isfile(path):
@@ -111,7 +119,7 @@ def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_pa
     stage = _open_stage(path)
     try:
         return _Importer(stage, path, frame, camera_path, shutter, motion_blur, subdivision_level,
-                         image_width).run()
+                         image_width, ocio_config).run()
     except Tf.ErrorException as e:
         raise SceneError(f"cannot read {os.path.basename(path)}: {_pxr_message(e)}") from None
 
@@ -160,8 +168,9 @@ def _open_stage(path: str) -> Usd.Stage:
 
 class _Importer:
     def __init__(self, stage, source, frame, camera_path, shutter_override, motion_blur, subdivision_level=None,
-                 image_width=None):
+                 image_width=None, ocio_config=None):
         self.stage = stage
+        self.ocio_config = ocio_config
         self.source = source
         self.warn = WarningLog()
         if frame is None:
@@ -175,6 +184,7 @@ class _Importer:
         self.meshes: list[sc.Mesh] = []
         self.instances: list[sc.Instance] = []
         self.lights: list[sc.Light] = []
+        self.volumes: list[sc.Volume] = []
         self._mesh_cache: dict[tuple, int | None] = {}
         self._mesh_bounds: list[np.ndarray] = []
         self._lo = np.full(3, np.inf)  # world bounds of the geometry, for the automatic camera only
@@ -206,12 +216,15 @@ class _Importer:
             warn(f"{len(errors)} composition error(s) (missing references/payloads?); the rest was loaded",
                  str(errors[0]).splitlines()[0] if str(errors[0]) else None)
         settings, _ = usd_camera.render_settings(stage, self.frame, warn)
+        self.color_spaces = ColorSpaces(settings.rendering_color_space, self.ocio_config)
+        self.colors = AttributeColors(self.color_spaces, warn)
         cam_prim = usd_camera.find_camera(stage, self.camera_path, settings, warn)
         self._frame_bounds = cam_prim is None
         self.shutter = self._shutter(cam_prim, settings)
         self.xf = TransformSampler(self.shutter)
-        self.materials = MaterialTable(self.frame, warn, self.shutter, settings.material_binding_purpose)
+        self.materials = MaterialTable(self.frame, warn, self.shutter, self.colors, settings.material_binding_purpose)
         self._included = settings.included_purposes  # None: default and render, proxy where no render
+        self.volume_reader = usd_volumes.VolumeReader(self.frame, warn, self._skipped)
         self.detail = self._subdivision_detail(cam_prim, settings)
         self.skinning = Skinning(self.shutter, warn)
         if cam_prim is not None:
@@ -223,7 +236,7 @@ class _Importer:
             for prim, interval in self._proxies:
                 self._guarded(self._gprim, prim, interval)
         self._place_instances()
-        if not self.instances:
+        if not self.instances and not self.volumes:
             warn("no renderable geometry in stage")
 
         if cam_prim is not None:
@@ -240,7 +253,7 @@ class _Importer:
         for prim, insts in self._mesh_lights:
             for light in apply_mesh_light(prim, insts, self.meshes, self.instances, self.materials.materials,
                                           float(self.shutter.normalise([self.frame])[0]), self.frame, self.warn,
-                                          self.shutter):
+                                          self.shutter, self.colors):
                 self.lights.append(light)
                 self._light_prims.append((light, prim))
             self._mesh_light_instances.update({i: prim for i in insts})
@@ -258,14 +271,13 @@ class _Importer:
             materials=self.materials.materials or [sc.Material(name="default grey")],
             lights=self.lights,
             camera=camera,
-            frame=self.frame,
-            shutter_open=self.shutter.open,
-            shutter_close=self.shutter.close,
+            shutter=self.shutter,
             meters_per_unit=float(UsdGeom.GetStageMetersPerUnit(stage)),
             up_axis=self._up_axis(),
-            time_codes_per_second=float(stage.GetTimeCodesPerSecond()),
             render_settings=settings,
+            colors=self.color_spaces,
             csg_operations=self.csg.finish(self.instances, self.meshes),
+            volumes=self.volumes,
             warnings=warn.lines(),
             source=self.source,
         ))
@@ -297,9 +309,8 @@ class _Importer:
             if o > c:
                 self.warn(f"camera shutter:open {o} is after shutter:close {c}; motion blur disabled")
                 o = c = 0.0
-        if not self.motion_blur or settings.disable_motion_blur or o == c:
-            return Shutter(self.frame, self.frame, self.frame, tcps)
-        return Shutter(self.frame, self.frame + o, self.frame + c, tcps)
+        still = not self.motion_blur or settings.disable_motion_blur or o == c
+        return Shutter.around(self.frame, None if still else (o, c), tcps)
 
     # -- traversal ------------------------------------------------------------------------------------------------
     @reads("Imageable", "visibility", "purpose")
@@ -348,6 +359,10 @@ class _Importer:
             elif prim.IsA(UsdLux.LightFilter):
                 self.warn("light filters ignored (not modelled)", f"{prim.GetPath()} ({prim.GetTypeName()})")
                 self._skipped.add(str(prim.GetPath()))
+            elif usd_volumes.is_volume(prim):
+                it.PruneChildren()
+                if self._may_draw(purpose):
+                    self._guarded(self._volume, prim)
             elif prim.IsA(UsdGeom.Gprim):
                 it.PruneChildren()
                 self._skipped.add(str(prim.GetPath()))  # what is not drawn is not read, whatever its type
@@ -460,7 +475,7 @@ class _Importer:
             attr = img.GetVisibilityAttr() if img else None
             if attr and attr.HasAuthoredValue() and attr.ValueMightBeTimeVarying():
                 varying = True
-                samples = tuple(sorted(set(samples) | set(self.shutter.samples_of(attr))))
+                samples = tuple(sorted(set(samples) | set(samples_in_shutter(self.shutter, attr))))
             hit = self._vis_chain[key] = (varying, samples)
         return hit
 
@@ -525,6 +540,9 @@ class _Importer:
                     colors = getattr(geom, "colors", None)
                 if colors is not None and len(colors) != len(geom.triangles):
                     colors = None
+                if colors is not None:  # into the rendering colour space, from the primvar's
+                    pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar("displayColor")
+                    colors = np.asarray(self.colors.value(pv.GetAttr(), colors), np.float32) if pv else colors
             index = len(self.meshes)
             self.meshes.append(sc.Mesh(
                 name=str(prim.GetPath()),
@@ -629,7 +647,7 @@ class _Importer:
         self._proto_light_prims = [p for _, p in sorted(self._proto_lights.values(), key=lambda ip: ip[0])]
         for j in np.nonzero(is_light)[0]:  # one light per instance of a light in a prototype
             light = usd_lights.read_light(self._proto_light_prims[-meshes[j] - 1], self.xf, self.warn,
-                                          placement=(times, rows[j]), name=names[j])
+                                          placement=(times, rows[j]), name=names[j], colors=self.colors)
             if light is not None:
                 self.lights.append(light)
                 self._light_prims.append((light, self._proto_light_prims[-meshes[j] - 1]))
@@ -660,7 +678,7 @@ class _Importer:
                 curved = curved or name != "velocities"
             if a.ValueMightBeTimeVarying():
                 moving = True
-                samples += sh.samples_of(a)
+                samples += samples_in_shutter(sh, a)
         for target in UsdGeom.PointInstancer(prim).GetPrototypesRel().GetForwardedTargets():
             proto = self.stage.GetPrimAtPath(target)
             if not proto:
@@ -669,7 +687,7 @@ class _Importer:
                 xf = UsdGeom.Xformable(p)
                 if xf and xf.TransformMightBeTimeVarying():
                     moving = True
-                    samples += sh.inner(xf.GetTimeSamplesInInterval(sh.interval()))
+                    samples += sh.inner(xf.GetTimeSamplesInInterval(shutter_interval(sh)))
         if not moving:
             return np.array([self.frame])
         keys = sh.keys(samples)
@@ -780,6 +798,9 @@ class _Importer:
                     meshes.append(mesh)
                     names.append(str(prim.GetPath()))
                     rows.append(self.xf.world(prim, times)[None])
+            elif usd_volumes.is_volume(prim):
+                it.PruneChildren()
+                self.warn("volumes inside PointInstancer prototypes skipped", str(prim.GetPath()))
             elif usd_lights.is_light(prim):  # placed like geometry, told apart by a negative index
                 key = str(prim.GetPath())
                 if key not in self._proto_lights:
@@ -791,13 +812,22 @@ class _Importer:
             return [], [], np.zeros((0, len(times), 4, 4))
         return meshes, names, np.concatenate(rows)
 
+    # -- volumes --------------------------------------------------------------------------------------------------
+    def _volume(self, prim) -> None:
+        if self._visible_interval(prim) is None:
+            return
+        times, rows = self.xf.motion(prim)
+        vol = self.volume_reader.volume(prim, motion_transform(self.shutter.normalise(times), rows))
+        if vol is not None:
+            self.volumes.append(vol)
+
     # -- lights ---------------------------------------------------------------------------------------------------
     def _light(self, prim) -> None:
         if prim.GetTypeName() not in usd_lights.LIGHT_TYPES:  # read_light names it among unsupported light types
             self._skipped.add(str(prim.GetPath()))
         if self._visible_interval(prim) is None:
             return
-        light = usd_lights.read_light(prim, self.xf, self.warn)
+        light = usd_lights.read_light(prim, self.xf, self.warn, colors=self.colors)
         if light is not None:
             self.lights.append(light)
             self._light_prims.append((light, prim))

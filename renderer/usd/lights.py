@@ -32,9 +32,11 @@ from __future__ import annotations
 import numpy as np
 from pxr import Ar, UsdGeom, UsdLux
 
+from renderer.color import LINEAR_REC709
 from renderer.lights import dome_formats, ies
 from renderer.scene import model as sc
 from renderer.shading.textures import ImageError, latlong_mean
+from renderer.usd.color import AttributeColors
 from renderer.usd.materials import read_asset_image, resolve_asset
 from renderer.usd.motion import TransformSampler, motion_transform
 from renderer.usd.reads import reads
@@ -85,15 +87,29 @@ def _axis_lengths(row_matrix: np.ndarray) -> np.ndarray:
     return np.linalg.norm(np.asarray(row_matrix)[:3, :3], axis=1)
 
 
+def _source_attr(prim, name: str):
+    """The attribute ``_value`` reads ``name`` from (inputs:<name> unless only the legacy one is authored)."""
+    new = prim.GetAttribute("inputs:" + name)
+    old = prim.GetAttribute(name)
+    return old if old and old.HasAuthoredValue() and not (new and new.HasAuthoredValue()) else new
+
+
 @reads("LightAPI", "inputs:intensity", "inputs:exposure", "inputs:color", "inputs:enableColorTemperature",
        "inputs:colorTemperature", "inputs:normalize")
-def base_emission(prim, frame: float) -> np.ndarray:
-    """intensity * 2^exposure * color * blackbody (if enabled): the radiance before sizeFactor, nits (RGB)."""
+def base_emission(prim, frame: float, colors: AttributeColors | None = None) -> np.ndarray:
+    """intensity * 2^exposure * color * blackbody (if enabled): the radiance before sizeFactor, nits (RGB).
+    ``colors``: color (from its authored colour space) and the blackbody (linear Rec.709, UsdLux's) converted
+    into the rendering colour space."""
     get = lambda n, d: _value(prim, n, frame, d)  # noqa: E731
     color = np.asarray(get("color", (1.0, 1.0, 1.0)), np.float64)[:3]
+    if colors is not None:
+        color = np.asarray(colors.value(_source_attr(prim, "color"), color), np.float64)
     radiance = float(get("intensity", 1.0)) * 2.0 ** float(get("exposure", 0.0)) * color
     if bool(get("enableColorTemperature", False)):
-        radiance = radiance * np.asarray(UsdLux.BlackbodyTemperatureAsRgb(float(get("colorTemperature", 6500.0))))
+        bb = np.asarray(UsdLux.BlackbodyTemperatureAsRgb(float(get("colorTemperature", 6500.0))))
+        if colors is not None:
+            bb = colors.spaces.colors(bb, LINEAR_REC709)
+        radiance = radiance * bb
     return radiance
 
 
@@ -127,10 +143,11 @@ def dome_seen_by_camera(prim, frame: float) -> bool:
 @reads("DistantLight", "inputs:angle")
 @reads("DomeLight", "inputs:texture:file", "inputs:texture:format")
 @reads("DomeLight_1", "inputs:texture:file", "inputs:texture:format", "poleAxis")
-def read_light(prim, sampler: TransformSampler, warn, placement=None, name: str | None = None) -> sc.Light | None:
+def read_light(prim, sampler: TransformSampler, warn, placement=None, name: str | None = None,
+               colors: AttributeColors | None = None) -> sc.Light | None:
     """A UsdLux light prim to a Light (None for unsupported kinds, with a warning). ``placement`` (absolute
     times (K,), row-vector world matrices (K, 4, 4)) places one instance of a light in a PointInstancer
-    prototype, ``name`` naming it."""
+    prototype, ``name`` naming it. ``colors``: its colours into the rendering colour space."""
     kind_name = prim.GetTypeName()
     path = str(prim.GetPath())
     kind = _KINDS.get(kind_name)
@@ -139,7 +156,7 @@ def read_light(prim, sampler: TransformSampler, warn, placement=None, name: str 
         return None
     frame = sampler.shutter.frame
     get = lambda n, d: _value(prim, n, frame, d)  # noqa: E731
-    radiance = base_emission(prim, frame)
+    radiance = base_emission(prim, frame, colors)
     scale = 1.0  # the final radiance is base_emission * scale (treatAsPoint, normalize); not for textured domes
     if placement is None:
         times, rows = sampler.motion(prim)
@@ -175,10 +192,10 @@ def read_light(prim, sampler: TransformSampler, warn, placement=None, name: str 
         light.angle = float(get("angle", 0.53))
         area = distant_size_factor(light.angle)
     elif kind == sc.LIGHT_DOME:
-        radiance = _dome_texture(prim, light, radiance, frame, warn)
+        radiance = _dome_texture(prim, light, radiance, frame, warn, colors)
         light.visible_to_camera = dome_seen_by_camera(prim, frame)
     if kind == sc.LIGHT_RECT:
-        image = _light_image(prim, frame, warn)
+        image = _light_image(prim, frame, warn, colors=colors)
         if image is not None:
             light.texture, light.texture_name = image
     if kind not in (sc.LIGHT_DISTANT, sc.LIGHT_DOME):
@@ -197,7 +214,7 @@ def read_light(prim, sampler: TransformSampler, warn, placement=None, name: str 
         return None
     light.radiance = tuple(float(x) for x in radiance)
     if not (kind == sc.LIGHT_DOME and light.texture is not None):
-        light.radiance_keys = emission_keys(prim, sampler.shutter, scale)
+        light.radiance_keys = emission_keys(prim, sampler.shutter, scale, colors)
     return light
 
 
@@ -207,7 +224,7 @@ _EMISSION_NAMES = ("intensity", "exposure", "color", "colorTemperature", "enable
 EMISSION_KEYS = 5
 
 
-def emission_keys(prim, shutter, scale: float) -> tuple | None:
+def emission_keys(prim, shutter, scale: float, colors: AttributeColors | None = None) -> tuple | None:
     """Radiance (RGB, nits) at EMISSION_KEYS times evenly over the shutter when the emission is animated within
     it, else None. ``scale``: what turns ``base_emission`` into the light's radiance (normalize, treatAsPoint)."""
     if shutter.static:
@@ -219,7 +236,7 @@ def emission_keys(prim, shutter, scale: float) -> tuple | None:
                 animated = True
     if not animated:
         return None
-    keys = np.array([base_emission(prim, float(t)) * scale for t in shutter.uniform(EMISSION_KEYS)], np.float64)
+    keys = np.array([base_emission(prim, float(t), colors) * scale for t in shutter.uniform(EMISSION_KEYS)], np.float64)
     if not np.all(np.isfinite(keys)) or np.allclose(keys, keys[0], rtol=0.0, atol=0.0):
         return None
     return tuple(tuple(float(x) for x in k) for k in np.maximum(keys, 0.0))
@@ -309,9 +326,12 @@ def dome_pole_is_z(prim) -> bool:
     return pole == "Z"
 
 
-def _light_image(prim, frame: float, warn, kind: str = "light") -> tuple[np.ndarray, str] | None:
+def _light_image(prim, frame: float, warn, kind: str = "light",
+                 colors: AttributeColors | None = None) -> tuple[np.ndarray, str] | None:
     """A light's ``texture:file`` (RectLight, DomeLight) as (H, W, 3) float32 linear RGB, rows top to bottom, and
-    its resolved path; None (with one warning naming ``kind``) when it is absent, a UDIM set or unreadable."""
+    its resolved path; None (with one warning naming ``kind``) when it is absent, a UDIM set or unreadable.
+    ``colors``: in the rendering colour space, from the file attribute's colorSpace (else what the file says:
+    8-bit sRGB, float linear Rec.709)."""
     path = str(prim.GetPath())
     attr = None
     for name in ("inputs:texture:file", "texture:file"):
@@ -327,8 +347,12 @@ def _light_image(prim, frame: float, warn, kind: str = "light") -> tuple[np.ndar
     if tiles is not None:
         warn(f"UDIM {kind} textures ignored: those {kind}s use their constant color", path)
         return None
+    space = str(attr.GetColorSpace()) if colors is not None and attr.HasColorSpace() else ""
+    if space and not colors.spaces.known(space):
+        warn("unknown colour spaces read as linear Rec.709", f"{path} ({space})")
+        space = ""
     try:
-        loaded = read_asset_image(resolved, "auto", keep_top_down=True)
+        loaded = read_asset_image(resolved, space or "auto", keep_top_down=True)
     except (ImageError, OSError, RuntimeError) as e:
         warn(f"{noun} textures missing or unreadable: those {kind}s use their constant color",
              f"{resolved} ({' '.join(str(e).split())[:160]}; {path})")
@@ -337,14 +361,18 @@ def _light_image(prim, frame: float, warn, kind: str = "light") -> tuple[np.ndar
         warn("large textures downsampled to at most 4096 texels a side", f"{resolved} {loaded.original_size}")
     img = loaded.top_down
     rgb = np.repeat(img[..., :1], 3, -1) if img.shape[-1] < 3 else img[..., :3]
+    if colors is not None and not colors.spaces.is_data(loaded.colorspace):
+        source = loaded.colorspace if loaded.colorspace not in ("sRGB", "raw") else LINEAR_REC709
+        rgb = colors.spaces.texels(rgb, source)
     return np.ascontiguousarray(rgb, np.float32), resolved
 
 
-def _dome_texture(prim, light: sc.Light, radiance: np.ndarray, frame: float, warn) -> np.ndarray:
+def _dome_texture(prim, light: sc.Light, radiance: np.ndarray, frame: float, warn,
+                  colors: AttributeColors | None = None) -> np.ndarray:
     """Load a dome's lat-long texture into ``light.texture`` (scaled by ``radiance``); returns the radiance the
     light reports (the texture's mean, or ``radiance`` unchanged without a usable texture)."""
     path = str(prim.GetPath())
-    image = _light_image(prim, frame, warn, kind="dome")
+    image = _light_image(prim, frame, warn, kind="dome", colors=colors)
     if image is None:
         return radiance
     rgb, resolved = image

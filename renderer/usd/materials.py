@@ -50,6 +50,16 @@ Light travelling a distance d inside a closed mesh keeps absorptionColor^(d / ab
 (per channel), i.e. exp(-sigma_a d) with sigma_a = -ln(absorptionColor) / absorptionDistance. Default: white (no
 absorption). They become ``Material.absorption_color`` and ``Material.absorption_distance``.
 
+**Interior medium extension.** Three more inputs fill a closed mesh with a homogeneous scattering medium (smoke in a
+bottle, milky glass, a fog bank given as a mesh)::
+
+    color3f inputs:drt:scatterColor = (0.5, 0.5, 0.5)   # scattering coefficient x scatterDistance (default black)
+    float inputs:drt:scatterDistance = 1.0              # scene units
+    float inputs:drt:scatterAnisotropy = 0.0            # Henyey-Greenstein g in (-1, 1)
+
+sigma_s = scatterColor / scatterDistance per scene unit, with the absorption above as sigma_a. Paths that enter the
+solid through its surface (opacity < 1; ior 1 for an invisible boundary) scatter inside it (``renderer.media``).
+
 Materials are deduplicated: one ``Material`` per (material prim, displayColor when it matters).
 """
 from __future__ import annotations
@@ -63,12 +73,16 @@ from renderer.usd.shading_network import (Const, Display, Geo, Network, Tex, UV,
                                           select_post, shader_id, tex_mean)
 from renderer.usd import arnold_nodes
 from renderer.usd.surfaces import PREVIEW, PREVIEW_DEFAULTS, surface_inputs, surface_model
+from renderer.usd.color import AttributeColors, attribute_colors
 from renderer.usd.texture_files import (TextureFiles, authoring_layer, read_asset_image,  # noqa: F401 - re-exported
                                         resolve_asset)
 
 GREY = (0.18, 0.18, 0.18)
 ABSORPTION_COLOR = "drt:absorptionColor"
 ABSORPTION_DISTANCE = "drt:absorptionDistance"
+SCATTER_COLOR = "drt:scatterColor"
+SCATTER_DISTANCE = "drt:scatterDistance"
+SCATTER_ANISOTROPY = "drt:scatterAnisotropy"
 # Render contexts of a Material's surface output, in preference order (the contextVector of
 # UsdShadeMaterial.ComputeSurfaceSource); the universal output is the fallback of them all.
 SURFACE_CONTEXTS = ("mtlx", "arnold")
@@ -93,15 +107,16 @@ def _output_source(output):
 
 
 @reads("Gprim", "primvars:displayColor")
-def display_color(prim, frame: float) -> tuple[float, float, float] | None:
-    """The prim's displayColor: the constant value, or the average of a varying one; None if not authored."""
+def display_color(prim, frame: float, colors: AttributeColors | None = None) -> tuple[float, float, float] | None:
+    """The prim's displayColor: the constant value, or the average of a varying one; None if not authored.
+    ``colors``: converted into the rendering space."""
     pv = UsdGeom.PrimvarsAPI(prim).GetPrimvar("displayColor")
     if not pv or not pv.HasAuthoredValue():
         return None
     v = pv.ComputeFlattened(frame)
     if v is None or len(v) == 0:
         return None
-    a = np.asarray(v, np.float64).reshape(-1, 3)
+    a = np.asarray(attribute_colors(colors, pv.GetAttr(), np.asarray(v, np.float64).reshape(-1, 3)), np.float64)
     if not np.all(np.isfinite(a)):
         return None
     m = a.mean(axis=0)
@@ -161,17 +176,18 @@ def _vec(value, n: int, default) -> tuple:
 class MaterialTable:
     """Deduplicated materials of one scene; ``assign`` returns material ids for a prim."""
 
-    def __init__(self, frame: float, warn, shutter=None, purpose: str = "full"):
+    def __init__(self, frame: float, warn, shutter=None, colors: AttributeColors | None = None, purpose: str = "full"):
         self.frame = frame
+        self.colors = colors  # colours into the rendering space (None: as authored)
         self.purpose = purpose  # the binding purpose ("" all-purpose), falling back to all-purpose bindings
         self.shutter = shutter  # usd_motion.Shutter: constant inputs varying inside it get keys (opacity)
         self.warn = warn
         self.materials: list[Material] = []
-        self.files = TextureFiles(warn)
+        self.files = TextureFiles(warn, colors=None if colors is None else colors.spaces)
         self._ids: dict[tuple, int] = {}
         self._surfaces: dict[str, tuple] = {}
         self._uv_sets: dict[str, tuple[str, ...]] = {}
-        self.net = Network(frame, warn, self.files, nodes=arnold_nodes.PATTERNS)
+        self.net = Network(frame, warn, self.files, nodes=arnold_nodes.PATTERNS, colors=colors)
 
     # -- public ---------------------------------------------------------------------------------------------------
     @property
@@ -244,7 +260,7 @@ class MaterialTable:
 
     def _material_id(self, mat: UsdShade.Material | None, prim) -> int:
         if mat is None:
-            color = display_color(prim, self.frame)
+            color = display_color(prim, self.frame, self.colors)
             if color is None:
                 return self._add(("grey",), Material(name="default grey", diffuse_color=GREY))
             return self._add(("display", color), Material(name=f"displayColor {color}", diffuse_color=color,
@@ -256,7 +272,7 @@ class MaterialTable:
         if kind == "preview":
             if not uses_display:
                 return self._add(("usd", path), Material(name=path, **fields))
-            color = display_color(prim, self.frame)
+            color = display_color(prim, self.frame, self.colors)
             f = dict(fields)
             for name, fallback, scale in uses_display:  # displayColor (or the reader's fallback) x network scale
                 c = color if color is not None else fallback
@@ -265,7 +281,7 @@ class MaterialTable:
                 if name == "diffuse_color" and color is not None:
                     f["display_scale"] = tuple(float(k) for k in np.resize(scale, 3))
             return self._add(("usd", path, color), Material(name=path, **f))
-        color = display_color(prim, self.frame)
+        color = display_color(prim, self.frame, self.colors)
         return self._add(("fallback", path, color), Material(name=path, diffuse_color=color or GREY,
                                                              display_scale=None if color is None else (1.0, 1.0, 1.0)))
 
@@ -353,6 +369,7 @@ class MaterialTable:
         if ti is not None and fields["opacity_threshold"] > 0 and "opacityThreshold" not in textures:
             fields["opacity"] = _texture_coverage(ti, fields["opacity_threshold"])
         fields["absorption_color"], fields["absorption_distance"] = self._absorption(mat, shader, path)
+        fields.update(self._scattering(mat, shader))
         fields["textures"] = textures
         nm = textures.get("normal")
         if nm is not None and nm.texture is not None:
@@ -408,6 +425,17 @@ class MaterialTable:
             self.warn(f"{ABSORPTION_DISTANCE} must be positive: 1 used", path)
             distance = 1.0
         return color, distance
+
+    def _scattering(self, mat: UsdShade.Material, shader: UsdShade.Shader) -> dict:
+        """The interior medium's extension inputs (``SCATTER_*``), the shader's opinion over the Material's."""
+        out = {}
+        for node in (mat, shader):
+            for name, key, n in ((SCATTER_COLOR, "scatter_color", 3), (SCATTER_DISTANCE, "scatter_distance", 1),
+                                 (SCATTER_ANISOTROPY, "scatter_anisotropy", 1)):
+                v = self._resolved(node, name)[1]
+                if v is not None:
+                    out[key] = _vec(v, 3, (0.0, 0.0, 0.0)) if n == 3 else float(v)
+        return out
 
     @reads("Material", "outputs:displacement")
     def _displacement(self, mat: UsdShade.Material, shader, path: str) -> None:

@@ -14,7 +14,8 @@ from pxr import UsdGeom
 
 from renderer.scene.model import AnalyticShape
 from renderer.usd import subdiv as usd_subdiv
-from renderer.usd.motion import Shutter, point_keys
+from renderer.motion.shutter import Shutter
+from renderer.usd.motion import point_keys
 from renderer.usd.primvars import expand_primvar, read_primvar, read_uv_primvar, read_uv_primvar_raw
 from renderer.usd.reads import reads
 from renderer.usd.subdiv import SubdivisionDetail

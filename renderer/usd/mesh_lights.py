@@ -59,12 +59,14 @@ def light_material(base: sc.Material) -> sc.Material:
 
 
 def apply_mesh_light(prim, instances: list[int], scene_meshes: list[sc.Mesh], scene_instances: list[sc.Instance],
-                     materials: list[sc.Material], frame_s: float, frame: float, warn, shutter) -> list[sc.Light]:
+                     materials: list[sc.Material], frame_s: float, frame: float, warn, shutter,
+                     colors=None) -> list[sc.Light]:
     """The lights of a MeshLightAPI prim's instances (one LIGHT_MESH each, emitting L uniformly over its area,
     shaped by its ShapingAPI). With noMaterialResponse, each instance gets a copy of its mesh whose triangles
-    reflect nothing. ``shutter``: the importer's (shaping is keyed at its open and close)."""
+    reflect nothing. ``shutter``: the importer's (shaping is keyed at its open and close); ``colors``
+    (``usd.color.AttributeColors``): its colour into the rendering colour space."""
     mode = sync_mode(prim, warn)
-    emission = base_emission(prim, frame)
+    emission = base_emission(prim, frame, colors)
     norm = normalized(prim, frame)
     shaping = read_shaping(prim, shutter, warn)
     lights = []

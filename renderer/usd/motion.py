@@ -14,11 +14,10 @@ lerp/slerp between the keys would give (curved or long-way-round motion).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from pxr import Gf, Usd, UsdGeom
 
+from renderer.motion.shutter import Shutter
 from renderer.scene.model import MotionTransform
 from renderer.usd.reads import reads
 
@@ -26,52 +25,15 @@ MAX_SEGMENT_DEGREES = 10.0  # largest rotation between two consecutive keys
 _MAX_REFINE_ROUNDS = 6  # at most 2^6 sub-segments per authored segment
 
 
-@dataclass(frozen=True)
-class Shutter:
-    """The frame's shutter interval in absolute time codes. ``open == close`` means no motion blur."""
+def shutter_interval(shutter: Shutter) -> Gf.Interval:
+    return Gf.Interval(shutter.open, shutter.close)
 
-    frame: float
-    open: float
-    close: float
-    time_codes_per_second: float = 24.0
 
-    @property
-    def static(self) -> bool:
-        return not self.close > self.open
-
-    def normalise(self, times) -> np.ndarray:
-        """Absolute time codes to normalised shutter time s in [0, 1] (float32)."""
-        times = np.asarray(times, np.float64)
-        if self.static:
-            return np.zeros(times.shape, np.float32)
-        return np.clip((times - self.open) / (self.close - self.open), 0.0, 1.0).astype(np.float32)
-
-    def inner(self, samples) -> list[float]:
-        """The samples strictly inside the shutter."""
-        if self.static:
-            return []
-        return [float(t) for t in samples if self.open < t < self.close]
-
-    def keys(self, samples=()) -> np.ndarray:
-        """Key times: the shutter ends plus the given samples that fall strictly inside (or the frame if static)."""
-        if self.static:
-            return np.array([self.frame], np.float64)
-        return np.unique(np.array([self.open, self.close, *self.inner(samples)], np.float64))
-
-    def uniform(self, n: int) -> np.ndarray:
-        """n evenly spaced key times over the shutter (curved motion such as accelerations)."""
-        if self.static:
-            return np.array([self.frame], np.float64)
-        return np.linspace(self.open, self.close, max(int(n), 2))
-
-    def interval(self) -> Gf.Interval:
-        return Gf.Interval(self.open, self.close)
-
-    def samples_of(self, attr) -> list[float]:
-        """Authored time samples of an attribute strictly inside the shutter."""
-        if self.static or not attr or not attr.HasAuthoredValue():
-            return []
-        return self.inner(attr.GetTimeSamplesInInterval(self.interval()))
+def samples_in_shutter(shutter: Shutter, attr) -> list[float]:
+    """Authored time samples of an attribute strictly inside the shutter."""
+    if shutter.static or not attr or not attr.HasAuthoredValue():
+        return []
+    return shutter.inner(attr.GetTimeSamplesInInterval(shutter_interval(shutter)))
 
 
 class TransformSampler:
@@ -108,7 +70,7 @@ class TransformSampler:
         if xf:
             if xf.TransformMightBeTimeVarying():
                 moving = True
-                samples = tuple(self.shutter.inner(xf.GetTimeSamplesInInterval(self.shutter.interval())))
+                samples = tuple(self.shutter.inner(xf.GetTimeSamplesInInterval(shutter_interval(self.shutter))))
             reset = xf.GetResetXformStack()
         if not reset:
             p_moving, p_samples = self.chain(prim.GetParent())
@@ -339,7 +301,7 @@ def point_keys(pb: UsdGeom.PointBased, shutter: Shutter, count: int, warn) -> tu
                  path)
     if not attr.ValueMightBeTimeVarying():
         return single
-    times = shutter.keys(attr.GetTimeSamplesInInterval(shutter.interval()))
+    times = shutter.keys(attr.GetTimeSamplesInInterval(shutter_interval(shutter)))
     keys, kept = [], []
     for t in times:
         a = attr.Get(float(t))

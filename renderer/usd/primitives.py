@@ -13,7 +13,8 @@ import numpy as np
 from renderer.scene.analytic import shape_bounds
 from renderer.scene.model import AnalyticShape
 from renderer.usd.mesh import GeomData
-from renderer.usd.motion import Shutter, collapse_keys
+from renderer.motion.shutter import Shutter
+from renderer.usd.motion import collapse_keys, samples_in_shutter
 from renderer.usd.primvars import CUBE_COUNTS, CUBE_INDICES, CUBE_POINTS, expand_primvar, read_uv_primvar
 from renderer.usd.reads import reads
 from renderer.usd.triangulation import triangulate
@@ -225,7 +226,7 @@ def read_primitive(prim, shutter: Shutter, warn) -> GeomData | None:
     for name in _PRIMITIVE_ATTRS:
         a = prim.GetAttribute(name)
         if a and a.ValueMightBeTimeVarying():
-            samples += shutter.samples_of(a) + [shutter.open, shutter.close]
+            samples += samples_in_shutter(shutter, a) + [shutter.open, shutter.close]
     times = shutter.keys(samples) if samples else np.array([frame])
     perm = _AXIS_PERM.get(str(_get(prim, "axis", frame, "Z")), _AXIS_PERM["Z"])
     if len(times) == 1 and kind != "Cube":

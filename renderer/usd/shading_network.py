@@ -41,6 +41,7 @@ from pxr import Sdf, UsdShade
 
 from renderer.scene.model import Texture, TextureInput
 from renderer.shading.textures import image_bilinear_np
+from renderer.usd.color import AttributeColors, attribute_colors
 from renderer.usd.texture_files import TextureFiles, resolve_asset
 
 BAKE_MAX = 1024  # texels on the longest side of a baked texture
@@ -54,7 +55,6 @@ SRGB_NAMES = ("srgb", "srgb_texture", "srgb_rec709_scene", "srgb_rec709_display"
                "srgb_tx", "utility - srgb - texture", "g22_rec709")
 RAW_NAMES = ("raw", "linear", "lin_rec709", "lin_rec709_scene", "lin_srgb", "scene_linear", "data",
               "lin_rec709_display", "utility - raw", "non-color", "identity")
-_OTHER_PRIMARIES = ("aces2065-1", "acescg", "lin_ap0", "lin_ap1")
 LUMA = np.array([0.2126, 0.7152, 0.0722])  # Rec.709 luminance coefficients (MaterialX lumacoeffs default)
 
 
@@ -371,10 +371,12 @@ def _fold(tex: Tex, a: np.ndarray, b: np.ndarray) -> Tex:
 class Network:
     """Signals of node outputs for one import; textures through ``files``; ``warn(message, item)``."""
 
-    def __init__(self, frame: float, warn, files: TextureFiles, nodes: dict | None = None):
+    def __init__(self, frame: float, warn, files: TextureFiles, nodes: dict | None = None,
+                 colors: AttributeColors | None = None):
         self.frame = frame
         self.warn = warn
         self.files = files
+        self.colors = colors  # colour inputs into the rendering space (None: as authored)
         # further node kinds: shader id -> evaluate(network, prim, output name) -> Signal | None
         self.nodes = dict(nodes or {})
         self._outputs: dict[tuple[str, str], Signal | None] = {}
@@ -429,12 +431,10 @@ class Network:
                         return sig
                     break
                 if UsdShade.Input.IsInput(attr):
-                    v = attr.Get(self.frame)
-                    c = _numeric(v)
+                    c = _numeric(attribute_colors(self.colors, attr, attr.Get(self.frame)))
                     if c is not None:
                         return c
-        v = inp.Get(self.frame) if inp else None
-        c = _numeric(v)
+        c = _numeric(attribute_colors(self.colors, inp.GetAttr(), inp.Get(self.frame))) if inp else None
         if c is not None:
             return c
         return None if default is None else const(default)
@@ -734,25 +734,35 @@ class Network:
         return Tex(ti, n)
 
     def _colorspace(self, prim, file_attr, auto: str) -> str:
-        """"sRGB", "raw", an ACES space, or ``auto`` for a texture node's file."""
+        """How a texture node's file is read: "sRGB" (decoded), "raw" (as stored: data, or linear in the rendering
+        space), ``auto`` (decided by the file), or the name of the colour space its values are in (converted
+        into the rendering space when loaded). From ``sourceColorSpace`` (legacy ``isSRGB``), else the file
+        attribute's ``colorSpace`` metadata."""
         token = self.raw(prim, "sourceColorSpace")[1]
         if token is None:
             legacy = self.raw(prim, "isSRGB")[1]
             if legacy is not None and str(legacy) != "auto":
                 token = "sRGB" if str(legacy).lower() in ("true", "1", "yes", "srgb") else "raw"
         token = str(token) if token is not None else "auto"
+        named = token if token.lower() not in ("srgb", "raw", "auto", "") else None
         if token.lower() == "srgb":
             return "sRGB"
         if token == "raw":
             return "raw"
-        if file_attr is not None and file_attr.HasColorSpace():
-            cs = str(file_attr.GetColorSpace()).lower()
-            if cs in SRGB_NAMES:
-                return "sRGB"
-            if cs in _OTHER_PRIMARIES:
-                return {"aces2065-1": "ACES2065-1", "lin_ap0": "ACES2065-1"}.get(cs, "ACEScg")
-            if cs in RAW_NAMES or cs.startswith("lin"):
-                return "raw"
+        if named is None and file_attr is not None and file_attr.HasColorSpace():
+            named = str(file_attr.GetColorSpace())
+        if named is None:
+            return auto
+        cs = named.lower()
+        if cs in SRGB_NAMES:
+            return "sRGB"
+        if cs in ("raw", "data", "identity", "non-color", "utility - raw", "linear", "scene_linear"):
+            return "raw"  # data, or "linear": the rendering space (OpenColorIO's scene_linear role)
+        if self.colors is not None and self.colors.spaces.known(named):
+            return named
+        if cs in RAW_NAMES or cs.startswith("lin"):
+            return "raw"
+        self.warn("texture colour spaces unknown to the OpenColorIO config: read as the file says", f"{named}")
         return auto
 
     # -- math -----------------------------------------------------------------------------------------------

@@ -19,7 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 from pxr import Tf, Usd, UsdGeom, UsdSkel, Vt
 
-from renderer.usd.motion import Shutter
+from renderer.motion.shutter import Shutter
+from renderer.usd.motion import shutter_interval
 from renderer.usd.reads import reads
 
 CURVE_KEYS = 5
@@ -71,7 +72,7 @@ class Skinning:
         sh = self.shutter
         if sh.static:
             return np.array([sh.frame])
-        iv = sh.interval()
+        iv = shutter_interval(sh)
         samples: list[float] = []
         anim = b.skel_query.GetAnimQuery()
         if anim:

@@ -7,11 +7,15 @@ never held at full resolution (mip-mapped ``.tx`` / tiled EXR tiles are read at 
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import tempfile
 
+import numpy as np
+
 from pxr import Ar, Sdf, Usd, UsdShade
 
+from renderer.color import LINEAR_REC709, ColorSpaces
 from renderer.scene.model import Texture
 from renderer.shading.textures import (MAX_TEXTURE_SIZE, TEXTURE_BUDGET, ImageError, LoadedImage, image_texture,
                                        read_image)
@@ -82,8 +86,9 @@ def read_asset_image(resolved: str, colorspace: str = "auto", keep_top_down: boo
 class TextureFiles:
     """Images loaded once per (file, colour space) for one import; failures warn once per file."""
 
-    def __init__(self, warn, set_budget: int = UDIM_SET_BUDGET):
+    def __init__(self, warn, set_budget: int = UDIM_SET_BUDGET, colors: ColorSpaces | None = None):
         self.warn = warn
+        self.colors = colors  # texels into the rendering colour space (None: as decoded)
         self.set_budget = set_budget  # bytes one UDIM set may take when read (float RGBA, mips included)
         self._cache: dict[tuple, tuple[Texture | None, tuple | None]] = {}
         self.textures: list[Texture] = []
@@ -101,10 +106,10 @@ class TextureFiles:
                 if not tiles:
                     raise ImageError(f"no UDIM tiles found for {name}")
                 side = udim_tile_size(len(tiles), self.set_budget)
-                loaded = [read_asset_image(p, colorspace, max_size=side) for p, _ in tiles]
+                loaded = [self._to_rendering_space(read_asset_image(p, colorspace, max_size=side)) for p, _ in tiles]
                 texture = image_texture(name, loaded, [t for _, t in tiles])
             else:
-                loaded = [read_asset_image(name, colorspace)]
+                loaded = [self._to_rendering_space(read_asset_image(name, colorspace))]
                 texture = image_texture(name, loaded)
             wrap = loaded[0].wrap_metadata
             small = [im for im in loaded if im.downsampled]
@@ -120,3 +125,20 @@ class TextureFiles:
             self.textures.append(texture)
         self._cache[key] = (texture, wrap)
         return texture, wrap
+
+    def _to_rendering_space(self, im: LoadedImage) -> LoadedImage:
+        """A loaded image's colour channels in the rendering colour space: sRGB-decoded texels are linear Rec.709,
+        texels of a named colour space are converted from it, "raw" ones (data, and linear files that name no space:
+        the rendering space's) are kept."""
+        if self.colors is None or im.colorspace == "raw":
+            return im
+        source = LINEAR_REC709 if im.colorspace == "sRGB" else im.colorspace
+        if not self.colors.known(source):
+            self.warn("texture colour spaces unknown to the OpenColorIO config: values used as stored",
+                      im.colorspace)
+            return im
+        texels = self.colors.texels(im.texels, source)
+        if texels is im.texels:
+            return im
+        top = None if im.top_down is None else np.ascontiguousarray(texels[::-1])
+        return dataclasses.replace(im, texels=texels, top_down=top)
