@@ -17,6 +17,7 @@ from renderer.errors import SceneError
 from renderer.motion.transform import MotionTransform
 from renderer.scene.model import CONFORM_POLICIES, Camera, RenderSettingsInfo
 from renderer.usd.motion import TransformSampler, motion_transform
+from renderer.usd.reads import reads
 
 AUTO_FOCAL_35MM = 35.0  # the automatic camera's lens, in "mm" against a 36 mm wide aperture
 
@@ -27,6 +28,9 @@ def _get(prim, name: str, frame: float, default):
     return default if v is None else v
 
 
+@reads("RenderSettings", "disableMotionBlur", "instantaneousShutter", "disableDepthOfField", "includedPurposes",
+       "materialBindingPurposes", "renderingColorSpace")
+@reads("RenderProduct")
 def render_settings(stage: Usd.Stage, frame: float, warn) -> tuple[RenderSettingsInfo, object]:
     """(RenderSettingsInfo, settings prim or None) from ``renderSettingsPrimPath`` or the only RenderSettings prim."""
     prim = None
@@ -51,6 +55,7 @@ def render_settings(stage: Usd.Stage, frame: float, warn) -> tuple[RenderSetting
     info.disable_motion_blur = bool(_get(prim, "disableMotionBlur", frame, False)) or bool(
         _get(prim, "instantaneousShutter", frame, False))
     info.disable_depth_of_field = bool(_get(prim, "disableDepthOfField", frame, False))
+    _read_purposes(info, rs, frame, warn)
     space = _get(prim, "renderingColorSpace", frame, None)
     info.rendering_color_space = str(space) if space else None
     # the first RenderProduct's authored values override the settings' (UsdRenderSettingsBase is shared)
@@ -62,9 +67,26 @@ def render_settings(stage: Usd.Stage, frame: float, warn) -> tuple[RenderSetting
     return info, prim
 
 
+def _read_purposes(info: RenderSettingsInfo, rs, frame: float, warn) -> None:
+    """includedPurposes (the purposes drawn) and materialBindingPurposes (the binding purpose asked for first;
+    Houdini writes the all-purpose token as "allPurpose")."""
+    attr = rs.GetIncludedPurposesAttr()
+    if attr.HasAuthoredValue():
+        info.included_purposes = tuple(str(p) for p in attr.Get(frame) or ())
+    attr = rs.GetMaterialBindingPurposesAttr()
+    if attr.HasAuthoredValue():
+        purposes = ["" if str(p) in ("", "allPurpose") else str(p) for p in attr.Get(frame) or ()]
+        known = [p for p in purposes if p in ("full", "preview", "")]
+        if len(known) < len(purposes):
+            warn(f"{rs.GetPath()}: materialBindingPurposes other than full, preview and all-purpose ignored",
+                 ", ".join(p for p in purposes if p not in known))
+        info.material_binding_purpose = known[0] if known else "full"
+
+
 BEAUTY_SOURCES = {"color", "ci", "c", "rgba", "rgb", "beauty", "c.*", "c.*[<l.>o]", "c<.*>"}
 
 
+@reads("RenderVar", "sourceName", "sourceType")
 def _warn_unwritten_vars(stage: Usd.Stage, product, warn) -> None:
     """The EXR holds the beauty (R, G, B, A) and the AOVs asked for on the command line or in the job; a product's
     other render vars (light groups, LPEs, primvars) are named in one warning rather than dropped silently."""
@@ -80,6 +102,7 @@ def _warn_unwritten_vars(stage: Usd.Stage, product, warn) -> None:
                  f"{target} ({kind} {source})")
 
 
+@reads("RenderSettingsBase", "resolution", "pixelAspectRatio", "aspectRatioConformPolicy", "dataWindowNDC")
 def _read_settings_base(info: RenderSettingsInfo, base, frame: float, warn) -> None:
     """Fill ``info`` from a RenderSettingsBase (settings or product), taking only what is authored."""
     prim = base.GetPrim()
@@ -143,6 +166,7 @@ def shutter_offsets(prim, frame: float) -> tuple[float, float]:
     return float(cam.GetShutterOpenAttr().Get(frame) or 0.0), float(cam.GetShutterCloseAttr().Get(frame) or 0.0)
 
 
+@reads("Camera", "exposure", "exposure:time", "exposure:iso", "exposure:fStop", "exposure:responsivity")
 def _exposure_stops(cam: UsdGeom.Camera, frame: float) -> float:
     """Exposure in stops: log2 of UsdGeomCamera's linear exposure scale (``exposure`` and the ``exposure:*``
     time/iso/fStop/responsivity inputs), or the plain ``exposure`` attribute if that cannot be computed."""
@@ -155,6 +179,9 @@ def _exposure_stops(cam: UsdGeom.Camera, frame: float) -> float:
     return float(cam.GetExposureAttr().Get(frame) or 0.0)
 
 
+@reads("Camera", "clippingRange", "projection", "focalLength", "horizontalAperture", "verticalAperture",
+       "horizontalApertureOffset", "verticalApertureOffset", "fStop", "focusDistance", "shutter:open",
+       "shutter:close")
 def read_camera(prim, sampler: TransformSampler, settings: RenderSettingsInfo, warn) -> Camera:
     """A UsdGeomCamera with its lens in scene units and its camera-to-world motion over the shutter."""
     frame = sampler.shutter.frame
