@@ -89,6 +89,7 @@ from renderer.scene.model import LIGHT_DOME
 from renderer.lights.multipliers import diffuse_fraction, nee_bsdf, sampled_weight
 from renderer.shading.bsdf import SurfaceParams, bsdf_albedo_hint, bsdf_setup, lobes_eval, lobes_pdf, lobes_sample
 from renderer.shading.materials import (
+    HitGeometry,
     Materials,
     MaterialSample,
     apply_normal_map,
@@ -225,6 +226,40 @@ def surface_at(geo: Geometry, inst: int, tri: int, b1: float, b2: float, ng_hit:
     sp.ns = ns
     sp.material = geo.tri_material[tri]
     return sp
+
+
+@wp.func
+def perpendicular(n: wp.vec3):
+    """A unit vector perpendicular to unit n (the tangent of a hit without uvs)."""
+    a = wp.vec3(1.0, 0.0, 0.0)
+    if wp.abs(n[0]) > 0.9:
+        a = wp.vec3(0.0, 1.0, 0.0)
+    return wp.normalize(wp.cross(n, a))
+
+
+@wp.func
+def hit_geometry(geo: Geometry, inst: int, sp: SurfacePoint, s: float, width: float):
+    """The hit's position, front-side shading normal and tangent in object and world space (``HitGeometry``,
+    for inputs driven by them), ``width`` the ray cone's width there."""
+    hg = HitGeometry()
+    hg.valid = 1
+    hg.width = width
+    w2o = instance_world_to_object(geo, inst, s)
+    o2w = instance_object_to_world(geo, inst, s)
+    n = sp.ns
+    if sp.front == 0:
+        n = -n
+    t = wp.vec3(sp.tangent[0], sp.tangent[1], sp.tangent[2])
+    t = t - n * wp.dot(n, t)
+    if sp.tangent[3] == 0.0 or wp.length(t) < 1.0e-8:
+        t = perpendicular(n)
+    hg.p_world = sp.p
+    hg.n_world = n
+    hg.t_world = wp.normalize(t)
+    hg.p_object = wp.transform_point(w2o, sp.p)
+    hg.n_object = wp.normalize(wp.transform_vector(wp.transpose(o2w), n))
+    hg.t_object = wp.normalize(wp.transform_vector(w2o, hg.t_world))
+    return hg
 
 
 @wp.func(inline=True)  # once per hit: no copy of the big structs
@@ -631,8 +666,11 @@ def trace_wave_kernel(
                 beta = wp.cw_mul(beta, beer_lambert(sigma, hit.t))
             sp = surface_at(geo, hit.inst, hit.tri, hit.b1, hit.b2, hit.ng, origin, rd, hit.t, s)
             cone_w = cone_w + cone_spread * hit.t
+            hg = HitGeometry()
+            if mats.geo_driven[sp.material] != 0:
+                hg = hit_geometry(geo, hit.inst, sp, s, cone_w)
             ms = eval_material_cone(mats, tex, sp.material, sp.uv, s,
-                                    uv_footprint(cone_w, sp.uv_density, wp.dot(sp.ng, rd)))
+                                    uv_footprint(cone_w, sp.uv_density, wp.dot(sp.ng, rd)), hg)
             ms.diffuse_color = display_diffuse(geo, mats, sp.material, hit.inst, hit.tri, hit.b1, hit.b2,
                                                ms.diffuse_color)
             ns = shading_normal(sp, ms)

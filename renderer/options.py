@@ -132,9 +132,9 @@ SETTINGS_TABLE: tuple[Setting, ...] = (
             "rendered (default: the stage's renderSettingsPrimPath, else the only one, else the first in path order)",
             optional=True, max_length=1024, flag="--settings", aliases=("-s",), metavar="PRIM_PATH", scene=True,
             check=_absolute_settings_path),
-    Setting("purposes", str, (), "geometry purposes drawn, e.g. default,render or default,proxy (default: the "
-            "render settings' includedPurposes, else default and render, or proxy where no prim is render); "
-            "comma-separated or repeated", choices=PURPOSES, shape="many", flag="--purpose", metavar="LIST",
+    Setting("purposes", str, (), "geometry purposes drawn, e.g. default,proxy (default: the render settings' "
+            "includedPurposes, else default and render, or proxy where no prim is render); comma-separated or "
+            "repeated", choices=PURPOSES, shape="many", flag="--purpose", metavar="LIST",
             scene=True),
     Setting("width", int, None, "width of the image written (default: the render settings', else 640)",
             unit="pixels", optional=True, ge=1, le=16384, scene=True),

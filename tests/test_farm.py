@@ -192,12 +192,12 @@ def test_purposes_from_the_settings_and_from_the_command_line(tmp_path):
     stage.Save()
     names = lambda scene: sorted(i.name.rsplit("/", 1)[-1] for i in scene.instances)  # noqa: E731
     assert names(load_scene(tmp_path / "p.usda")) == ["Hero", "Plain"]
-    assert names(load_scene(tmp_path / "p.usda", purposes=("proxy",))) == ["Plain", "Stand"]
+    assert names(load_scene(tmp_path / "p.usda", purposes=("default", "proxy"))) == ["Plain", "Stand"]
     settings = UsdRender.Settings.Define(stage, "/Render/S")
     settings.CreateIncludedPurposesAttr(["default", "proxy", "guide"])
     stage.Save()
     assert names(load_scene(tmp_path / "p.usda")) == ["Guide", "Plain", "Stand"]
-    assert names(load_scene(tmp_path / "p.usda", purposes=("render",))) == ["Hero", "Plain"]
+    assert names(load_scene(tmp_path / "p.usda", purposes=("render",))) == ["Hero"]  # what is named, only
 
 
 def test_a_frame_reuses_the_hierarchy_of_the_one_before_while_the_geometry_is_still(tmp_path):

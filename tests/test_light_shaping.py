@@ -211,3 +211,102 @@ def test_an_animated_cone_is_keyed_at_the_shutter_ends(tmp_path):
     (lt,) = load_scene(tmp_path / "a.usda", 0.0).lights
     assert lt.shaping.cone_angle == pytest.approx((25.0, 35.0))
     assert lt.shaping.cone_softness == (0.0, 0.0) and lt.shaping.ies_grid is None
+
+
+# --------------------------------------------------------------------------- mesh lights
+A = 0.02  # side of the small mesh light (m): a point seen from the floor, H / A = 50
+
+
+def floor_under_mesh_light(path, configure):
+    """``floor_under_point_light`` with a small down-facing MeshLightAPI quad (normalized, intensity 1: radiance
+    1 / A^2, so an intensity of cos(theta) along theta off its normal) in place of the point light. The prim's
+    own -Z axis is horizontal: only the triangles' normals point down."""
+    def mesh_light(light, stage):
+        stage.RemovePrim("/World/Spot")
+        a = A / 2
+        m = stages.quad(stage, "/World/Panel", [(-a, H, -a), (a, H, -a), (a, H, a), (-a, H, a)])
+        UsdLux.MeshLightAPI.Apply(m.GetPrim())
+        lux = UsdLux.LightAPI(m.GetPrim())
+        lux.CreateIntensityAttr(1.0)
+        lux.CreateNormalizeAttr(True)
+        configure(m.GetPrim(), stage)
+    return floor_under_point_light(path, mesh_light)
+
+
+def focus_falloff(theta, focus, tint=0.0):
+    """schema.usda, shaping:focus: lerp(focusFactor = |cos theta|^focus, focusTint, white) (red channel)."""
+    return tint + (1 - tint) * np.abs(np.cos(theta)) ** focus if focus > 0 else np.ones_like(theta)
+
+
+@pytest.mark.parametrize("angle,softness,focus", [(90.0, 0.0, 0.0), (30.0, 0.0, 0.0), (40.0, 0.5, 2.0),
+                                                  (90.0, 0.0, 8.0)])
+def test_mesh_light_cone_and_focus_measured_from_its_triangles_normal(tmp_path, angle, softness, focus):
+    """Outside the cone (about the triangles' normal) the floor is dark; inside it is the unshaped mesh light's
+    cos(theta) intensity times the cone's smoothstep and the focus falloff."""
+    def configure(prim, _stage):
+        shaping = UsdLux.ShapingAPI.Apply(prim)
+        shaping.CreateShapingConeAngleAttr(angle)
+        shaping.CreateShapingConeSoftnessAttr(softness)
+        shaping.CreateShapingFocusAttr(focus)
+    measured = floor_under_mesh_light(tmp_path / "mesh_spot.usda", configure)
+    expected = floor_profile(lambda th: np.cos(th) * schema_cone(th, angle, softness) * focus_falloff(th, focus))
+    assert_profile(measured, expected)
+    if angle < 45.0:
+        assert measured[:W // 8].max() == 0.0 and measured[-W // 8:].max() == 0.0  # outside the cone: dark
+
+
+def test_mesh_light_focus_tint_colours_off_its_axis(tmp_path):
+    def configure(prim, _stage):
+        shaping = UsdLux.ShapingAPI.Apply(prim)
+        shaping.CreateShapingFocusAttr(4.0)
+        shaping.CreateShapingFocusTintAttr(Gf.Vec3f(0.5, 0.0, 0.0))
+    measured = floor_under_mesh_light(tmp_path / "mesh_tint.usda", configure)
+    expected = floor_profile(lambda th: np.cos(th) * focus_falloff(th, 4.0, tint=0.5))
+    assert_profile(measured, expected)
+
+
+def test_mesh_light_ies_profile_about_its_triangles_normal(tmp_path):
+    profile = read_ies(str(DATA / "spot.ies"))
+    (tmp_path / "spot.ies").write_text((DATA / "spot.ies").read_text())
+
+    def configure(prim, _stage):
+        s = UsdLux.ShapingAPI.Apply(prim)
+        s.CreateShapingIesFileAttr(Sdf.AssetPath("spot.ies"))
+        s.CreateShapingConeAngleAttr(180.0)
+    measured = floor_under_mesh_light(tmp_path / "mesh_ies.usda", configure)
+    expected = floor_profile(lambda th: np.cos(th) * profile.eval(np.degrees(th), 0.0))
+    assert_profile(measured, expected)
+
+
+def test_a_tilted_mesh_light_aims_its_cone_along_its_normal(tmp_path):
+    """The quad tilted 30 degrees about z: its normal, so its 20-degree cone, points down and towards +x; the lit
+    spot is centred H tan 30 along +x, with the cone measured from that normal."""
+    tilt = math.radians(30.0)
+    normal = np.array([math.sin(tilt), -math.cos(tilt), 0.0])
+
+    def tilted(light, stage):
+        stage.RemovePrim("/World/Spot")
+        a = A / 2
+        u = np.array([math.cos(tilt), math.sin(tilt), 0.0])  # the quad's x edge, tilted up towards +x
+        w = np.array([0.0, 0.0, 1.0])
+        c = np.array([0.0, H, 0.0])
+        corners = [c - a * u - a * w, c + a * u - a * w, c + a * u + a * w, c - a * u + a * w]
+        m = stages.quad(stage, "/World/Panel", corners)
+        UsdLux.MeshLightAPI.Apply(m.GetPrim())
+        lux = UsdLux.LightAPI(m.GetPrim())
+        lux.CreateIntensityAttr(1.0)
+        lux.CreateNormalizeAttr(True)
+        UsdLux.ShapingAPI.Apply(m.GetPrim()).CreateShapingConeAngleAttr(20.0)
+    measured = floor_under_point_light(tmp_path / "tilted.usda", tilted)
+
+    def radiance(px, z):
+        d = np.stack([(px - W / 2) * PX, np.full_like(px, -H), np.full_like(px, z)], -1)
+        r = np.linalg.norm(d, axis=-1)
+        cos_axis = d @ normal / r
+        theta = np.arccos(np.clip(cos_axis, -1, 1))
+        return cos_axis * schema_cone(theta, 20.0, 0.0) * H / (math.pi * r ** 3)
+    zs = (np.arange(32) + 0.5) / 32 * 4 * PX - 2 * PX
+    expected = np.mean([pixel_average(lambda px: radiance(px, z), 0, W) for z in zs], 0)
+    assert_profile(measured, expected)
+    lit = np.nonzero(measured > 0)[0]
+    assert (lit.min() + lit.max() + 1) / 2 * PX - W / 2 * PX > 0.4, "the spot is off to +x"

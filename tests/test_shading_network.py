@@ -375,34 +375,69 @@ def Material "M"
     assert "sheen" in warnings(scene)
 
 
-def test_the_universal_surface_wins_over_a_materialx_look(tmp_path):
-    # the usd-wg teapot layout's material: a green UsdPreviewSurface for every renderer, a grey standard_surface
-    # in the mtlx context; the universal one is rendered; alone, the MaterialX look is
-    both = """
+LOOKS = """
 def Material "M"
-{
-    token outputs:mtlx:surface.connect = </M/SS.outputs:out>
-    token outputs:surface.connect = </M/P.outputs:surface>
+{{
+{outputs}
     def Shader "SS"
-    {
+    {{
         uniform token info:id = "ND_standard_surface_surfaceshader"
         float inputs:base = 1
         color3f inputs:base_color = (0.8, 0.8, 0.8)
+        {base_color_connection}
         token outputs:out
-    }
-    def Shader "P"
-    {
+    }}
+    def Shader "Noise"
+    {{
+        uniform token info:id = "ND_noise3d_color3"
+        color3f outputs:out
+    }}
+    def Shader "A"
+    {{
+        uniform token info:id = "arnold:standard_surface"
+        float inputs:base = 1
+        color3f inputs:base_color = (0.2, 0.3, 0.9)
+        token outputs:surface
+    }}
+    def Shader "P" (customData = {{bool HoudiniIsAutoCreatedShader = 1}})
+    {{
         uniform token info:id = "UsdPreviewSurface"
         color3f inputs:diffuseColor = (0.1, 0.9, 0.05)
         token outputs:surface
-    }
-}
+    }}
+}}
 """
-    np.testing.assert_allclose(evaluate(load(tmp_path, QUAD.format(mat="M") + both))["diffuse_color"][0],
-                               [0.1, 0.9, 0.05], atol=1e-6)
-    mtlx_only = both.replace('    token outputs:surface.connect = </M/P.outputs:surface>\n', '')
-    np.testing.assert_allclose(evaluate(load(tmp_path, QUAD.format(mat="M") + mtlx_only, "m.usda"))
-                               ["diffuse_color"][0], [0.8, 0.8, 0.8], atol=1e-6)
+OUTPUTS = {"mtlx": "    token outputs:mtlx:surface.connect = </M/SS.outputs:out>",
+           "arnold": "    token outputs:arnold:surface.connect = </M/A.outputs:surface>",
+           "universal": "    token outputs:surface.connect = </M/P.outputs:surface>"}
+MTLX_GREY, ARNOLD_BLUE, PREVIEW_GREEN = [0.8, 0.8, 0.8], [0.2, 0.3, 0.9], [0.1, 0.9, 0.05]
+
+
+def look(tmp_path, outputs, noise=False, name="look.usda"):
+    body = LOOKS.format(outputs="\n".join(OUTPUTS[o] for o in outputs), base_color_connection=(
+        "color3f inputs:base_color.connect = </M/Noise.outputs:out>" if noise else ""))
+    return load(tmp_path, QUAD.format(mat="M") + body, name)
+
+
+def test_render_contexts_mtlx_first_then_arnold_then_the_universal_output(tmp_path):
+    """ComputeSurfaceSource's order for a MaterialX-capable renderer that reads Arnold's networks too: a Houdini
+    auto-created UsdPreviewSurface beside a MaterialX (or Arnold) look is not what renders; alone, it does."""
+    for outputs, want in (((("mtlx", "universal"), MTLX_GREY), (("arnold", "universal"), ARNOLD_BLUE),
+                           (("mtlx", "arnold", "universal"), MTLX_GREY), (("universal",), PREVIEW_GREEN))):
+        scene = look(tmp_path, outputs, name=f"{'_'.join(outputs)}.usda")
+        np.testing.assert_allclose(evaluate(scene)["diffuse_color"][0], want, atol=1e-6, err_msg=str(outputs))
+        assert "universal surface output rendered instead" not in warnings(scene)
+
+
+def test_a_look_with_a_node_we_do_not_evaluate_falls_back_to_the_universal_output_in_one_warning(tmp_path):
+    scene = look(tmp_path, ("mtlx", "universal"), noise=True)
+    np.testing.assert_allclose(evaluate(scene)["diffuse_color"][0], PREVIEW_GREEN, atol=1e-6)
+    named = [w for w in scene.warnings if "universal surface output rendered instead" in w]
+    assert len(named) == 1 and "ND_noise3d_color3" in named[0] and "/M" in named[0], scene.warnings
+    # nothing to fall back on: the MaterialX look as far as it goes (base_color keeps its value), its node named
+    alone = look(tmp_path, ("mtlx",), noise=True, name="alone.usda")
+    np.testing.assert_allclose(evaluate(alone)["diffuse_color"][0], MTLX_GREY, atol=1e-6)
+    assert "ND_noise3d_color3" in warnings(alone) and "universal surface output" not in warnings(alone)
 
 
 MTLX_DOC = """<?xml version="1.0"?>

@@ -26,19 +26,30 @@ def bar_points(n=4, length=2.0, half=0.1):
     return pts, [4] * n, idx
 
 
-def skel_stage(path, *, angles={0.0: 0.0, 1.0: 90.0}, blend=False, root_offset=(0.0, 0.0, 0.0), axis=(0, 0, 1)):
-    """A SkelRoot with a two-joint skeleton (root at the origin, 'root/tip' 1 unit along x), an animation that
-    turns the tip joint about ``axis`` through ``angles`` {time: degrees}, and a bar mesh skinned to both joints
-    (weights blending along x); with ``blend``, a blend shape lifting the bar's end, its weight animated 0 -> 1."""
+def skel_stage(path, *, angles={0.0: 0.0, 1.0: 90.0}, blend=False, root_offset=(0.0, 0.0, 0.0), axis=(0, 0, 1),
+               joints=None, normals=False):
+    """A SkelRoot at /World/Char with a two-joint skeleton (root at the origin, 'root/tip' 1 unit along x), an
+    animation that turns the tip joint about ``axis`` through ``angles`` {time: degrees}, and a bar mesh skinned to
+    both joints (weights blending along x); with ``blend``, a blend shape lifting the bar's end, its weight animated
+    0 -> 1; ``joints``: the mesh's own skel:joints (its joint indices refer to that order); ``normals``: authored
+    vertex normals +z."""
     stage = stages.new_stage(path)
-    root = UsdSkel.Root.Define(stage, "/World/Char")
+    skel_character(stage, "/World/Char", angles=angles, blend=blend, root_offset=root_offset, axis=axis,
+                   joints=joints, normals=normals)
+    return stage
+
+
+def skel_character(stage, root_path, *, angles={0.0: 0.0, 1.0: 90.0}, blend=False, root_offset=(0.0, 0.0, 0.0),
+                   axis=(0, 0, 1), joints=None, normals=False):
+    """The character of ``skel_stage`` under ``root_path`` (the SkelRoot; children Skel, Anim, Bar)."""
+    root = UsdSkel.Root.Define(stage, root_path)
     UsdGeom.Xformable(root).AddTranslateOp().Set(Gf.Vec3d(*root_offset))
-    skel = UsdSkel.Skeleton.Define(stage, "/World/Char/Skel")
+    skel = UsdSkel.Skeleton.Define(stage, f"{root_path}/Skel")
     skel.CreateJointsAttr(["root", "root/tip"])
     rest = [Gf.Matrix4d(1), Gf.Matrix4d(1).SetTranslate(Gf.Vec3d(1, 0, 0))]
     skel.CreateBindTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(1), Gf.Matrix4d(1).SetTranslate(Gf.Vec3d(1, 0, 0))]))
     skel.CreateRestTransformsAttr(Vt.Matrix4dArray(rest))
-    anim = UsdSkel.Animation.Define(stage, "/World/Char/Anim")
+    anim = UsdSkel.Animation.Define(stage, f"{root_path}/Anim")
     anim.CreateJointsAttr(["root", "root/tip"])
     anim.CreateTranslationsAttr(Vt.Vec3fArray([Gf.Vec3f(0, 0, 0), Gf.Vec3f(1, 0, 0)]))
     anim.CreateScalesAttr(Vt.Vec3hArray([Gf.Vec3h(1, 1, 1), Gf.Vec3h(1, 1, 1)]))
@@ -50,18 +61,25 @@ def skel_stage(path, *, angles={0.0: 0.0, 1.0: 90.0}, blend=False, root_offset=(
     binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
     binding.CreateAnimationSourceRel().SetTargets([anim.GetPath()])
     pts, counts, idx = bar_points()
-    mesh = UsdGeom.Mesh.Define(stage, "/World/Char/Bar")
+    mesh = UsdGeom.Mesh.Define(stage, f"{root_path}/Bar")
     mesh.CreatePointsAttr(Vt.Vec3fArray([Gf.Vec3f(*p) for p in pts]))
     mesh.CreateFaceVertexCountsAttr(counts)
     mesh.CreateFaceVertexIndicesAttr(idx)
     mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    if normals:
+        mesh.CreateNormalsAttr(Vt.Vec3fArray([Gf.Vec3f(0, 0, 1)] * len(pts)))
+        mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
     mb = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+    order = list(joints or ["root", "root/tip"])
+    if joints is not None:
+        mb.CreateJointsAttr(order)
+    j_root, j_tip = order.index("root"), order.index("root/tip")
     w = np.clip(np.array([p[0] for p in pts]) - 0.5, 0.0, 1.0)  # 0 -> root joint, 1 -> tip joint
-    mb.CreateJointIndicesPrimvar(False, 2).Set(Vt.IntArray([j for _ in pts for j in (0, 1)]))
+    mb.CreateJointIndicesPrimvar(False, 2).Set(Vt.IntArray([j for _ in pts for j in (j_root, j_tip)]))
     mb.CreateJointWeightsPrimvar(False, 2).Set(Vt.FloatArray([float(x) for wi in w for x in (1 - wi, wi)]))
     mb.CreateGeomBindTransformAttr(Gf.Matrix4d(1))
     if blend:
-        shape = UsdSkel.BlendShape.Define(stage, "/World/Char/Bar/Lift")
+        shape = UsdSkel.BlendShape.Define(stage, f"{root_path}/Bar/Lift")
         shape.CreateOffsetsAttr(Vt.Vec3fArray([Gf.Vec3f(0, 0, 0.5)] * 2))
         shape.CreatePointIndicesAttr(Vt.IntArray([len(pts) - 2, len(pts) - 1]))
         mb.CreateBlendShapesAttr(["lift"])
@@ -70,7 +88,7 @@ def skel_stage(path, *, angles={0.0: 0.0, 1.0: 90.0}, blend=False, root_offset=(
         bw = anim.CreateBlendShapeWeightsAttr()
         bw.Set(Vt.FloatArray([0.0]), 0.0)
         bw.Set(Vt.FloatArray([1.0]), 1.0)
-    return stage
+    return root
 
 
 def baked_world_points(path, tmp_path, times):
@@ -195,3 +213,122 @@ def test_skinned_motion_blur_renders_a_streak(tmp_path):
     partial_sharp = np.count_nonzero((sharp > 0.02) & (sharp < 0.6))
     assert partial_blur > 3 * max(partial_sharp, 1)
     assert np.count_nonzero(blurred > 0.02) > 2 * np.count_nonzero(sharp > 0.02)
+
+
+def bar_pose(angle_deg):
+    """Points of the bar skinned with its tip joint turned by ``angle_deg`` about +x (linear blend skinning: the
+    root joint stays, the tip joint turns about the x axis, which runs through it)."""
+    p = np.array(bar_points()[0], np.float64)
+    w = np.clip(p[:, 0] - 0.5, 0.0, 1.0)
+    a = np.radians(angle_deg)
+    return np.stack([p[:, 0], p[:, 1] * ((1 - w) + w * np.cos(a)), w * p[:, 1] * np.sin(a)], axis=1)
+
+
+def world_points(scene, name, k=0, s=None):
+    """World points of key k of the instance named ``name`` (its transform at normalised time s, default the key's)."""
+    inst = [i for i in scene.instances if i.name == name]
+    assert len(inst) == 1, f"{name} is in the scene once"
+    mesh = scene.meshes[inst[0].mesh]
+    s = float(mesh.point_times[k]) if mesh.deforming else (0.0 if s is None else s)
+    m = matrix_at(inst[0].transform, s)
+    return mesh, mesh.points[k].astype(np.float64) @ m[:3, :3].T + m[:3, 3]
+
+
+def tip_normals(mesh):
+    """Authored normals at the corners of the triangles skinned to the tip joint alone (x > 1.5)."""
+    x = mesh.points[0][mesh.triangles].mean(1)[:, 0]
+    return mesh.normals[x > 1.5].reshape(-1, 3)
+
+
+JOINT_ORDERS = {"skeleton order": ["root", "root/tip"], "reordered": ["root/tip", "root"]}
+
+
+@pytest.mark.parametrize("order", JOINT_ORDERS.values(), ids=JOINT_ORDERS.keys())
+def test_own_joint_order_with_authored_normals(tmp_path, order):
+    """A mesh authoring its own skel:joints (Maya USD and Houdini crowds write it, often in the skeleton's order)
+    and normals is skinned like UsdSkel bakes it, its normals carried along, without a warning about skinning."""
+    path = tmp_path / "joints.usda"
+    angles = {t: 90.0 * t for t in (0.0, 0.25, 0.5, 0.75, 1.0)}
+    stage = skel_stage(path, angles=angles, axis=(1, 0, 0), joints=order, normals=True, root_offset=(0.5, -1, 2))
+    stages.camera(stage, shutter=(0.0, 1.0), translate=(1, 0, 10))
+    stage.Save()
+    scene = load_scene(path, 0.0)
+    assert not [w for w in scene.warnings if "skin" in w or "unreadable" in w], scene.warnings
+    bar = [m for m in scene.meshes if m.name.endswith("Bar")]
+    assert len(bar) == 1 and bar[0].deforming
+    baked = baked_world_points(path, tmp_path, bar[0].point_times.astype(np.float64))
+    for k in range(len(bar[0].point_times)):
+        np.testing.assert_allclose(world_points(scene, "/World/Char/Bar", k)[1], baked[k], atol=1e-5)
+    still = load_scene(path, 1.0, motion_blur=False)
+    mesh, pts = world_points(still, "/World/Char/Bar")
+    np.testing.assert_allclose(pts, bar_pose(90.0) + (0.5, -1, 2), atol=1e-5)
+    np.testing.assert_allclose(tip_normals(mesh), np.tile((0, -1, 0), (len(tip_normals(mesh)), 1)), atol=1e-5)
+
+
+def test_instanceable_skel_roots_with_collection_bound_material(tmp_path):
+    """Crowd members referencing one instanceable SkelRoot (its mesh with its own, reordered skel:joints and
+    normals), a material bound through a collection on an ancestor: each member is skinned, placed and shaded."""
+    path = tmp_path / "crowd.usda"
+    stage = stages.new_stage(path)
+    stage.CreateClassPrim("/Lib")
+    skel_character(stage, "/Lib/Char", axis=(1, 0, 0), joints=["root/tip", "root"], normals=True)
+    red = stages.material(stage, "Red", diffuse=(1, 0, 0))
+    offsets = [(0.0, 2.0 * i, 0.0) for i in range(3)]
+    for i, off in enumerate(offsets):
+        member = stage.DefinePrim(f"/World/Crowd/C{i}")
+        member.GetReferences().AddInternalReference("/Lib/Char")
+        member.SetInstanceable(True)
+        member.GetAttribute("xformOp:translate").Set(Gf.Vec3d(*off))  # the SkelRoot's own op, referenced
+    world = stage.GetPrimAtPath("/World")
+    skins = Usd.CollectionAPI.Apply(world, "skins")
+    skins.CreateIncludesRel().AddTarget("/World/Crowd")
+    UsdShade.MaterialBindingAPI.Apply(world).Bind(skins, red, "skins")
+    stage.Save()
+    scene = load_scene(path, 1.0, motion_blur=False)
+    red_id = [i for i, m in enumerate(scene.materials) if m.name == "/World/Looks/Red"]
+    for i, off in enumerate(offsets):
+        mesh, pts = world_points(scene, f"/World/Crowd/C{i}/Bar")
+        np.testing.assert_allclose(pts, bar_pose(90.0) + off, atol=1e-5)
+        np.testing.assert_allclose(tip_normals(mesh), np.tile((0, -1, 0), (len(tip_normals(mesh)), 1)), atol=1e-5)
+        assert red_id and set(np.unique(mesh.material_ids)) == set(red_id)
+
+
+def test_skinned_motion_blur_under_an_animated_parent(tmp_path):
+    """A character (own skel:joints, normals) under a parent moving 3 units along z during the shutter: at every
+    key, the skinned pose of that time placed where the parent is then."""
+    path = tmp_path / "moving.usda"
+    stage = stages.new_stage(path)
+    mover = UsdGeom.Xform.Define(stage, "/World/Mover")
+    op = mover.AddTranslateOp()
+    op.Set(Gf.Vec3d(0, 0, 0), 0.0)
+    op.Set(Gf.Vec3d(0, 0, 3), 1.0)
+    skel_character(stage, "/World/Mover/Char", axis=(1, 0, 0), joints=["root", "root/tip"], normals=True)
+    stages.camera(stage, shutter=(0.0, 1.0), translate=(1, 0, 10))
+    stage.Save()
+    scene = load_scene(path, 0.0)
+    mesh, _ = world_points(scene, "/World/Mover/Char/Bar")
+    assert mesh.deforming and len(mesh.point_times) >= 5
+    for k, s in enumerate(mesh.point_times.astype(np.float64)):
+        _, pts = world_points(scene, "/World/Mover/Char/Bar", k)
+        np.testing.assert_allclose(pts, bar_pose(90.0 * s) + (0, 0, 3 * s), atol=1e-4)
+
+
+@pytest.mark.parametrize("step, warning", [("normal_matrices", "authored normals of skinned meshes"),
+                                           ("_blend", "blend shapes that UsdSkel could not apply")])
+def test_a_failing_optional_step_degrades_with_one_warning(tmp_path, monkeypatch, step, warning):
+    """Skinning the normals or applying blend shapes fails: the mesh is still skinned and drawn, one warning says
+    which step was left out."""
+    from renderer.usd.skel import Skinning
+
+    def fail(*args, **kwargs):
+        raise TypeError("not this time")
+
+    monkeypatch.setattr(Skinning, step, fail)
+    path = tmp_path / "degrade.usda"
+    stage = skel_stage(path, axis=(1, 0, 0), joints=["root", "root/tip"], normals=True, blend=step == "_blend")
+    stage.Save()
+    scene = load_scene(path, 1.0, motion_blur=False)
+    _, pts = world_points(scene, "/World/Char/Bar")
+    np.testing.assert_allclose(pts, bar_pose(90.0), atol=1e-5)
+    assert len([w for w in scene.warnings if w.startswith(warning)]) == 1, scene.warnings
+    assert not [w for w in scene.warnings if "skipped" in w or "unskinned" in w], scene.warnings

@@ -302,7 +302,8 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
                 light.length * sx * 0.5 if light.kind == LIGHT_CYLINDER else light.radius * sx
             power = delivered_irradiance(phi, cap, pos, centre, radius)
         if light.shaping is not None:
-            frac = _shaped_fraction(light.shaping, one_sided=light.kind in (LIGHT_RECT, LIGHT_DISK))
+            one_sided = light.kind in (LIGHT_RECT, LIGHT_DISK) or (light.kind == LIGHT_MESH and light.one_sided)
+            frac = _shaped_fraction(light.shaping, one_sided=one_sided)
             power *= frac
             phi *= frac
         if not np.isfinite(rad).all() or (rad <= 0).all() or not power > 0:

@@ -172,6 +172,21 @@ class TextureInput:
     uv_translation: tuple[float, float] = (0.0, 0.0)
     post_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
     post_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    # Lookups not by uv (MaterialX geometric nodes, evaluated at the hit): ``projection`` "uv" (the above),
+    # "planar" (st = the first two rows of q), "triplanar" (three textures, see ``triplanar_*``) or "value" (no
+    # lookup: rgb = q); q = geo_matrix (3x4, row-major) @ (g, 1), g the hit's ``geometry`` ("P" position, "N"
+    # normal, "T" tangent) in ``space`` ("object" or "world").
+    projection: str = "uv"
+    geometry: str = "P"
+    space: str = "object"
+    geo_matrix: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
+    # MaterialX triplanarprojection: ``texture`` is the x image, these the y and z ones (None: the fallback);
+    # weights |n| ** (1 / max(blend, 0.03)), normalised, n the hit's normal in ``triplanar_normal_space``;
+    # ``up_axis`` 0, 1, 2 (X, Y, Z) orients the projected st as MaterialX's nodegraph does
+    triplanar_textures: tuple[Texture | None, Texture | None] = (None, None)
+    triplanar_normal_space: str = "object"
+    blend: float = 1.0
+    up_axis: int = 2
 
 
 @dataclass
@@ -399,10 +414,13 @@ class RenderSettingsInfo:
     aspect_ratio_conform_policy: str = "expandAperture"
     # UsdRender's dataWindowNDC (xmin, ymin, xmax, ymax), (0, 0) bottom left; None = the whole image
     data_window_ndc: tuple[float, float, float, float] | None = None
+    # UsdRender's includedPurposes: the purposes drawn; None = not authored (the importer's own policy)
+    included_purposes: tuple[str, ...] | None = None
+    # the material binding purpose asked for first by materialBindingPurposes ("full", "preview", or "" for
+    # all-purpose bindings only); a purpose falls back to all-purpose bindings, as UsdShade computes them
+    material_binding_purpose: str = "full"
     # UsdRender's renderingColorSpace: the linear space the render works in (None: linear Rec.709)
     rendering_color_space: str | None = None
-    # UsdRender's includedPurposes (None: not authored; the importer's default policy)
-    included_purposes: tuple[str, ...] | None = None
 
 
 @dataclass

@@ -37,6 +37,18 @@ from renderer.struct_refs import by_reference
 # No gradients are ever taken: no adjoint code (half the compile time and code size).
 wp.set_module_options({"enable_backward": False})
 
+# Texture-binding kinds (``TextureInput.projection``) and the geometric vectors they read (GEO_P + space)
+KIND_UV = 0
+KIND_PLANAR = 1
+KIND_TRIPLANAR = 2
+KIND_VALUE = 3
+KINDS = {"uv": KIND_UV, "planar": KIND_PLANAR, "triplanar": KIND_TRIPLANAR, "value": KIND_VALUE}
+GEO_P = 0  # + GEO_WORLD: world space, else object space
+GEO_N = 2
+GEO_T = 4
+GEO_WORLD = 1
+GEO_CODES = {"P": GEO_P, "N": GEO_N, "T": GEO_T}
+
 # UsdPreviewSurface input slots
 IN_DIFFUSE = 0
 IN_EMISSIVE = 1
@@ -102,6 +114,34 @@ class Materials:
     b_xt: wp.array(dtype=wp.vec2)  # UsdTransform2d translation
     b_post_scale: wp.array(dtype=wp.vec3)  # network math after the lookup: value * post_scale + post_bias
     b_post_bias: wp.array(dtype=wp.vec3)
+    # lookups not by uv (``TextureInput.projection``): KIND_*, the geometric vector's GEO_* code (and for a
+    # triplanar projection its normal's), q = [b_gm0; b_gm1; b_gm2] (g, 1), the y and z textures, (blend, up axis)
+    b_kind: wp.array(dtype=wp.int32)
+    b_geo: wp.array(dtype=wp.vec2i)
+    b_gm0: wp.array(dtype=wp.vec4)
+    b_gm1: wp.array(dtype=wp.vec4)
+    b_gm2: wp.array(dtype=wp.vec4)
+    b_tex_yz: wp.array(dtype=wp.vec2i)
+    b_tri: wp.array(dtype=wp.vec2)
+    geo_driven: wp.array(dtype=wp.int32)  # per material: 1 when an input needs the hit's HitGeometry
+
+
+@wp.struct
+class HitGeometry:
+    """What lookups not by uv read at a hit (MaterialX position / normal / tangent, triplanar projections): the
+    position, the shading normal on the side the surface's winding faces and the tangent (dP/du made orthogonal
+    to the normal; any perpendicular without uvs), in object and world space; ``width``: the ray cone's width at
+    the hit (scene units), the footprint of projected lookups. ``valid`` 0 (the default): not known (shadow rays,
+    points sampled on lights), such inputs take their mean."""
+
+    valid: int
+    p_object: wp.vec3
+    p_world: wp.vec3
+    n_object: wp.vec3
+    n_world: wp.vec3
+    t_object: wp.vec3
+    t_world: wp.vec3
+    width: float
 
 
 @wp.struct
@@ -131,9 +171,98 @@ class MaterialSample:
 
 
 @wp.func
-def binding_rgba(mats: Materials, tex: Textures, b: int, uv: wp.vec2, footprint: float):
+def hit_vector(hg: HitGeometry, code: int):
+    """The geometric vector GEO_* ``code`` of a hit."""
+    if code == GEO_P:
+        return hg.p_object
+    if code == GEO_P + GEO_WORLD:
+        return hg.p_world
+    if code == GEO_N:
+        return hg.n_object
+    if code == GEO_N + GEO_WORLD:
+        return hg.n_world
+    if code == GEO_T:
+        return hg.t_object
+    return hg.t_world
+
+
+@wp.func
+def affine_row(r: wp.vec4, g: wp.vec3):
+    return r[0] * g[0] + r[1] * g[1] + r[2] * g[2] + r[3]
+
+
+@wp.func
+def row_scale(r: wp.vec4):
+    return wp.length(wp.vec3(r[0], r[1], r[2]))
+
+
+@wp.func
+def fetch_or(tex: Textures, texture: int, s: float, t: float, wrap: wp.vec2i, footprint: float, fallback: wp.vec4):
+    c, ok = texture_fetch_lod(tex, texture, s, t, wrap[0], wrap[1], footprint)
+    if ok:
+        return c
+    return fallback
+
+
+@wp.func
+def projected_rgba(mats: Materials, tex: Textures, b: int, hg: HitGeometry):
+    """The RGBA of a binding not by uv (KIND_PLANAR, KIND_TRIPLANAR, KIND_VALUE) at a hit, before scale/bias:
+    q = M (g, 1) of the hit's geometric vector g; a planar projection looks up st = (q0, q1), a triplanar one
+    three textures at st from q's axes (oriented by the up axis, as MaterialX's nodegraph) blended by the normal's
+    weights |n|^(1 / max(blend, 0.03)) (normalised), a value is (q, 1)."""
+    kind = mats.b_kind[b]
+    codes = mats.b_geo[b]
+    g = hit_vector(hg, codes[0])
+    r0 = mats.b_gm0[b]
+    r1 = mats.b_gm1[b]
+    r2 = mats.b_gm2[b]
+    q = wp.vec3(affine_row(r0, g), affine_row(r1, g), affine_row(r2, g))
+    if kind == KIND_VALUE:
+        return wp.vec4(q[0], q[1], q[2], 1.0)
+    w = mats.b_wrap[b]
+    fb = mats.b_fallback[b]
+    if kind == KIND_PLANAR:
+        fp = hg.width * wp.sqrt(row_scale(r0) * row_scale(r1))
+        return fetch_or(tex, mats.b_texture[b], q[0], q[1], w, fp, fb)
+    n = hit_vector(hg, codes[1])
+    a = wp.vec3(wp.abs(n[0]), wp.abs(n[1]), wp.abs(n[2]))
+    tri = mats.b_tri[b]
+    k = 1.0 / wp.max(tri[0], 0.03)
+    a = a / wp.max(a[0] + a[1] + a[2], 1.0e-12)
+    a = wp.vec3(wp.pow(a[0], k), wp.pow(a[1], k), wp.pow(a[2], k))
+    a = a / wp.max(a[0] + a[1] + a[2], 1.0e-12)
+    up = int(tri[1])
+    # st of the x, y and z images (MaterialX NG_triplanarprojection's switches on upaxis)
+    sx = wp.vec2(q[1], q[2])
+    sy = wp.vec2(q[0], q[2])
+    sz = wp.vec2(q[0], q[1])
+    if up == 1:
+        sx = wp.vec2(q[2], q[1])
+    elif up == 0:
+        sx = wp.vec2(q[2], q[1])
+        sy = wp.vec2(q[2], q[0])
+        sz = wp.vec2(-q[1], q[0])
+    yz = mats.b_tex_yz[b]
+    fx = hg.width * wp.sqrt(row_scale(r1) * row_scale(r2))
+    fy = hg.width * wp.sqrt(row_scale(r0) * row_scale(r2))
+    fz = hg.width * wp.sqrt(row_scale(r0) * row_scale(r1))
+    c = wp.vec4(0.0)
+    if a[0] > 0.0:
+        c += fetch_or(tex, mats.b_texture[b], sx[0], sx[1], w, fx, fb) * a[0]
+    if a[1] > 0.0:
+        c += fetch_or(tex, yz[0], sy[0], sy[1], w, fy, fb) * a[1]
+    if a[2] > 0.0:
+        c += fetch_or(tex, yz[1], sz[0], sz[1], w, fz, fb) * a[2]
+    return c
+
+
+@wp.func
+def binding_rgba(mats: Materials, tex: Textures, b: int, uv: wp.vec2, footprint: float, hg: HitGeometry):
     """The RGBA a texture binding delivers at the hit's uv (non-finite uv: the primvar reader's fallback),
-    filtered over ``footprint`` (width in uv units of the ray cone at the hit; 0: the finest level)."""
+    filtered over ``footprint`` (width in uv units of the ray cone at the hit; 0: the finest level); bindings
+    not by uv at the hit's ``hg`` (``projected_rgba``)."""
+    if mats.b_kind[b] != KIND_UV:
+        return wp.cw_mul(projected_rgba(mats, tex, b, hg), mats.b_scale[b]) + mats.b_bias[b]
     st = uv
     fp = footprint
     if mats.b_const_st[b] != 0 or not (wp.isfinite(uv[0]) and wp.isfinite(uv[1])):
@@ -166,25 +295,31 @@ def select_scalar(c: wp.vec4, output: int):
 
 
 @wp.func(inline=True)  # small and called per input: no copy of the Materials struct
-def input_color(mats: Materials, tex: Textures, mat: int, slot: int, uv: wp.vec2, footprint: float):
-    """A colour (or vector) input of material ``mat`` at uv."""
+def input_color(mats: Materials, tex: Textures, mat: int, slot: int, uv: wp.vec2, footprint: float,
+                hg: HitGeometry):
+    """A colour (or vector) input of material ``mat`` at uv (and the hit's geometry ``hg``)."""
     i = mat * NUM_INPUTS + slot
     b = mats.binding[i]
     if b < 0:
         return mats.value[i]
-    c = select_color(binding_rgba(mats, tex, b, uv, footprint), mats.b_output[b])
+    if hg.valid == 0 and mats.b_kind[b] != KIND_UV:
+        return mats.value[i]
+    c = select_color(binding_rgba(mats, tex, b, uv, footprint, hg), mats.b_output[b])
     return wp.cw_mul(c, mats.b_post_scale[b]) + mats.b_post_bias[b]
 
 
 @wp.func(inline=True)  # small and called per input: no copy of the Materials struct
-def input_scalar(mats: Materials, tex: Textures, mat: int, slot: int, uv: wp.vec2, footprint: float):
-    """A float input of material ``mat`` at uv."""
+def input_scalar(mats: Materials, tex: Textures, mat: int, slot: int, uv: wp.vec2, footprint: float,
+                 hg: HitGeometry):
+    """A float input of material ``mat`` at uv (and the hit's geometry ``hg``)."""
     i = mat * NUM_INPUTS + slot
     b = mats.binding[i]
     if b < 0:
         return mats.value[i][0]
-    return select_scalar(binding_rgba(mats, tex, b, uv, footprint), mats.b_output[b]) * mats.b_post_scale[b][0] \
-        + mats.b_post_bias[b][0]
+    if hg.valid == 0 and mats.b_kind[b] != KIND_UV:
+        return mats.value[i][0]
+    return select_scalar(binding_rgba(mats, tex, b, uv, footprint, hg), mats.b_output[b]) * \
+        mats.b_post_scale[b][0] + mats.b_post_bias[b][0]
 
 
 @wp.func
@@ -198,10 +333,11 @@ def clamp01_3(c: wp.vec3):
 
 
 @wp.func(inline=True)  # called once per path vertex: no copy of the big structs
-def eval_opacity_cone(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, s: float, footprint: float):
+def eval_opacity_cone(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, s: float, footprint: float,
+                      hg: HitGeometry):
     """Just the opacity of ``eval_material`` at normalised shutter time s (after opacityThreshold): for shadow
     rays through cut-outs, and for transparency that changes during the shutter (opacity keys)."""
-    opacity = clamp01(input_scalar(mats, tex, mat_id, IN_OPACITY, uv, footprint))
+    opacity = clamp01(input_scalar(mats, tex, mat_id, IN_OPACITY, uv, footprint, hg))
     n = mats.opacity_key_count[mat_id]
     if n > 0:
         off = mats.opacity_key_off[mat_id]
@@ -217,7 +353,7 @@ def eval_opacity_cone(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, 
                 opacity = k[1] + (k1[1] - k[1]) * u
             k = k1
         opacity = clamp01(opacity)
-    threshold = input_scalar(mats, tex, mat_id, IN_OPACITY_THRESHOLD, uv, footprint)
+    threshold = input_scalar(mats, tex, mat_id, IN_OPACITY_THRESHOLD, uv, footprint, hg)
     if threshold > 0.0:
         if opacity >= threshold:
             opacity = 1.0
@@ -227,32 +363,34 @@ def eval_opacity_cone(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, 
 
 
 @wp.func(inline=True)  # called once per path vertex: no copy of the big structs
-def eval_emission_cone(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, footprint: float):
+def eval_emission_cone(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, footprint: float, hg: HitGeometry):
     """Just the emissive colour of ``eval_material``: for points sampled on emissive meshes."""
-    e = input_color(mats, tex, mat_id, IN_EMISSIVE, uv, footprint)
+    e = input_color(mats, tex, mat_id, IN_EMISSIVE, uv, footprint, hg)
     return wp.vec3(wp.max(e[0], 0.0), wp.max(e[1], 0.0), wp.max(e[2], 0.0))
 
 
 @wp.func(inline=True)  # called once per path vertex: no copy of the big structs
-def eval_material_cone(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, s: float, footprint: float):
+def eval_material_cone(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, s: float, footprint: float,
+                       hg: HitGeometry):
     """All UsdPreviewSurface inputs of material ``mat_id`` at texture coordinates ``uv``.
 
     ``uv`` is the hit's interpolated primvar (st); ``footprint`` the ray cone's width at the hit in uv units
     (mip level selection, ``textures.texture_fetch_lod``; 0 = the finest level). Pass a non-finite uv (e.g. ``wp.vec2(wp.nan, wp.nan)``) for
-    a mesh without texture coordinates, which gives each primvar reader's fallback.
+    a mesh without texture coordinates, which gives each primvar reader's fallback. ``hg``: the hit's geometry
+    for inputs driven by position, normal or tangent (``HitGeometry``; not valid: their means).
     """
     ms = MaterialSample()
-    ms.diffuse_color = clamp01_3(input_color(mats, tex, mat_id, IN_DIFFUSE, uv, footprint))
-    ms.emissive_color = eval_emission_cone(mats, tex, mat_id, uv, footprint)
-    ms.specular_color = clamp01_3(input_color(mats, tex, mat_id, IN_SPECULAR, uv, footprint))
+    ms.diffuse_color = clamp01_3(input_color(mats, tex, mat_id, IN_DIFFUSE, uv, footprint, hg))
+    ms.emissive_color = eval_emission_cone(mats, tex, mat_id, uv, footprint, hg)
+    ms.specular_color = clamp01_3(input_color(mats, tex, mat_id, IN_SPECULAR, uv, footprint, hg))
     ms.use_specular_workflow = mats.use_specular_workflow[mat_id]
-    ms.metallic = clamp01(input_scalar(mats, tex, mat_id, IN_METALLIC, uv, footprint))
-    ms.roughness = clamp01(input_scalar(mats, tex, mat_id, IN_ROUGHNESS, uv, footprint))
-    ms.clearcoat = clamp01(input_scalar(mats, tex, mat_id, IN_CLEARCOAT, uv, footprint))
-    ms.clearcoat_roughness = clamp01(input_scalar(mats, tex, mat_id, IN_CLEARCOAT_ROUGHNESS, uv, footprint))
-    ms.opacity = eval_opacity_cone(mats, tex, mat_id, uv, s, footprint)
-    ms.ior = wp.max(input_scalar(mats, tex, mat_id, IN_IOR, uv, footprint), 1.0e-3)
-    n = input_color(mats, tex, mat_id, IN_NORMAL, uv, footprint)
+    ms.metallic = clamp01(input_scalar(mats, tex, mat_id, IN_METALLIC, uv, footprint, hg))
+    ms.roughness = clamp01(input_scalar(mats, tex, mat_id, IN_ROUGHNESS, uv, footprint, hg))
+    ms.clearcoat = clamp01(input_scalar(mats, tex, mat_id, IN_CLEARCOAT, uv, footprint, hg))
+    ms.clearcoat_roughness = clamp01(input_scalar(mats, tex, mat_id, IN_CLEARCOAT_ROUGHNESS, uv, footprint, hg))
+    ms.opacity = eval_opacity_cone(mats, tex, mat_id, uv, s, footprint, hg)
+    ms.ior = wp.max(input_scalar(mats, tex, mat_id, IN_IOR, uv, footprint, hg), 1.0e-3)
+    n = input_color(mats, tex, mat_id, IN_NORMAL, uv, footprint, hg)
     ln = wp.length(n)
     ms.normal_ts = wp.vec3(0.0, 0.0, 1.0)
     ms.has_normal_map = 0
@@ -261,7 +399,7 @@ def eval_material_cone(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2,
         ms.normal_ts = n / ln
         if mats.binding[i] >= 0 or n[0] != 0.0 or n[1] != 0.0 or n[2] != 1.0:
             ms.has_normal_map = 1
-    ms.occlusion = clamp01(input_scalar(mats, tex, mat_id, IN_OCCLUSION, uv, footprint))
+    ms.occlusion = clamp01(input_scalar(mats, tex, mat_id, IN_OCCLUSION, uv, footprint, hg))
     a = mats.absorption_cd[mat_id]
     ms.absorption_color = wp.vec3(a[0], a[1], a[2])
     ms.absorption_distance = a[3]
@@ -271,20 +409,21 @@ def eval_material_cone(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2,
 
 @wp.func(inline=True)
 def eval_opacity(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, s: float):
-    """``eval_opacity_cone`` at the finest texture level (shadow rays)."""
-    return eval_opacity_cone(mats, tex, mat_id, uv, s, 0.0)
+    """``eval_opacity_cone`` at the finest texture level without the hit's geometry (shadow rays)."""
+    return eval_opacity_cone(mats, tex, mat_id, uv, s, 0.0, HitGeometry())
 
 
 @wp.func(inline=True)
 def eval_emission(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2):
-    """``eval_emission_cone`` at the finest texture level (points sampled on emissive meshes)."""
-    return eval_emission_cone(mats, tex, mat_id, uv, 0.0)
+    """``eval_emission_cone`` at the finest texture level without the hit's geometry (points sampled on
+    emissive meshes)."""
+    return eval_emission_cone(mats, tex, mat_id, uv, 0.0, HitGeometry())
 
 
 @wp.func(inline=True)
 def eval_material(mats: Materials, tex: Textures, mat_id: int, uv: wp.vec2, s: float):
-    """``eval_material_cone`` at the finest texture level (bilinear, no footprint)."""
-    return eval_material_cone(mats, tex, mat_id, uv, s, 0.0)
+    """``eval_material_cone`` at the finest texture level (bilinear, no footprint), without the hit's geometry."""
+    return eval_material_cone(mats, tex, mat_id, uv, s, 0.0, HitGeometry())
 
 
 @wp.func
@@ -416,9 +555,12 @@ def collect_textures(materials: list[Material]) -> list[Texture]:
     for mat in materials:
         for name in INPUT_SLOTS:
             ti = mat.textures.get(name)
-            if ti is not None and ti.texture is not None and id(ti.texture) not in seen:
-                seen[id(ti.texture)] = len(out)
-                out.append(ti.texture)
+            if ti is None:
+                continue
+            for texture in (ti.texture,) + (ti.triplanar_textures if ti.projection == "triplanar" else ()):
+                if texture is not None and id(texture) not in seen:
+                    seen[id(texture)] = len(out)
+                    out.append(texture)
     return out
 
 
@@ -506,7 +648,23 @@ def upload_materials(materials: list[Material], device: str = "cpu") -> Material
     rows_or_dummy = rows or [None]
     tex_ids, outs, wraps, scales, biases, fallbacks, const_st, sts, xfs, xts = ([] for _ in range(10))
     post_scales, post_biases = [], []
+    kinds, geo_codes, geo_m, tex_yz, tri = [], [], [], [], []
+
+    def texture_id(texture):
+        return tex_index[id(texture)] if texture is not None else -1
+
     for ti in rows_or_dummy:
+        if ti is None or ti.projection == "uv":
+            kinds.append(KIND_UV), geo_codes.append((0, 0)), geo_m.append(np.eye(3, 4)), tex_yz.append((-1, -1))
+            tri.append((1.0, 2.0))
+        else:
+            space = lambda name: GEO_WORLD if name == "world" else 0  # noqa: E731
+            kinds.append(KINDS[ti.projection])
+            geo_codes.append((GEO_CODES[ti.geometry] + space(ti.space), GEO_N + space(ti.triplanar_normal_space)))
+            geo_m.append(np.asarray(ti.geo_matrix, np.float64).reshape(3, 4))
+            yz = ti.triplanar_textures if ti.projection == "triplanar" else (None, None)
+            tex_yz.append((texture_id(yz[0]), texture_id(yz[1])))
+            tri.append((ti.blend, float(ti.up_axis)))
         if ti is None:
             tex_ids.append(-1), outs.append(OUTPUT_RGB), wraps.append((2, 2)), scales.append((1, 1, 1, 1))
             biases.append((0, 0, 0, 0)), fallbacks.append((0, 0, 0, 1)), const_st.append(1), sts.append((0, 0))
@@ -514,7 +672,7 @@ def upload_materials(materials: list[Material], device: str = "cpu") -> Material
             continue
         post_scales.append(ti.post_scale)
         post_biases.append(ti.post_bias)
-        tex_ids.append(tex_index[id(ti.texture)] if ti.texture is not None else -1)
+        tex_ids.append(texture_id(ti.texture))
         outs.append(OUTPUTS.get(ti.output, OUTPUT_RGB))
         wraps.append((WRAP_MODES.get(ti.wrap_s, 2), WRAP_MODES.get(ti.wrap_t, 2)))
         scales.append(ti.scale)
@@ -536,6 +694,14 @@ def upload_materials(materials: list[Material], device: str = "cpu") -> Material
     m.b_xt = f32(np.nan_to_num(xts), wp.vec2)
     m.b_post_scale = f32(np.nan_to_num(post_scales), wp.vec3)
     m.b_post_bias = f32(np.nan_to_num(post_biases), wp.vec3)
+    m.b_kind = wp.array(np.array(kinds, np.int32), dtype=wp.int32, device=device)
+    m.b_geo = wp.array(np.array(geo_codes, np.int32), dtype=wp.vec2i, device=device)
+    gm = np.nan_to_num(np.stack(geo_m))
+    m.b_gm0, m.b_gm1, m.b_gm2 = (f32(gm[:, r], wp.vec4) for r in range(3))
+    m.b_tex_yz = wp.array(np.array(tex_yz, np.int32), dtype=wp.vec2i, device=device)
+    m.b_tri = f32(np.nan_to_num(tri), wp.vec2)
+    driven = [int(any(ti.projection != "uv" for ti in x.textures.values())) for x in mats]
+    m.geo_driven = wp.array(np.array(driven, np.int32), dtype=wp.int32, device=device)
     return m
 
 
@@ -548,6 +714,14 @@ def eval_material_kernel(mats: Materials, tex: Textures, mat_ids: wp.array(dtype
                          uvs: wp.array(dtype=wp.vec2), out: wp.array(dtype=MaterialSample)):
     i = wp.tid()
     out[i] = eval_material(mats, tex, mat_ids[i], uvs[i], 0.0)
+
+
+@wp.kernel
+def eval_material_geo_kernel(mats: Materials, tex: Textures, mat_ids: wp.array(dtype=wp.int32),
+                             uvs: wp.array(dtype=wp.vec2), hgs: wp.array(dtype=HitGeometry),
+                             out: wp.array(dtype=MaterialSample)):
+    i = wp.tid()
+    out[i] = eval_material_cone(mats, tex, mat_ids[i], uvs[i], 0.0, 0.0, hgs[i])
 
 
 @wp.kernel
@@ -573,11 +747,35 @@ def apply_normal_map_kernel(ns: wp.array(dtype=wp.vec3), tangents: wp.array(dtyp
 _SAMPLE_FIELDS = [name for name in MaterialSample.vars]
 
 
-def evaluate_materials(mats: Materials, tex: Textures, mat_ids, uvs, device: str = "cpu") -> dict[str, np.ndarray]:
-    """``eval_material`` at N (material id, uv) pairs; returns {MaterialSample field: (N, ...) array}."""
+def hit_geometries(n: int, **fields) -> list:
+    """N ``HitGeometry`` records (valid) for ``evaluate_materials``: fields p_object, p_world, n_object, n_world,
+    t_object, t_world as (N, 3) arrays (default 0), width (N,) (default 0)."""
+    out = []
+    for i in range(n):
+        hg = HitGeometry()
+        hg.valid = 1
+        for name in ("p_object", "p_world", "n_object", "n_world", "t_object", "t_world"):
+            if name in fields:
+                setattr(hg, name, wp.vec3(*(float(x) for x in np.asarray(fields[name], np.float64)[i])))
+        hg.width = float(np.asarray(fields.get("width", np.zeros(n)), np.float64)[i])
+        out.append(hg)
+    return out
+
+
+def evaluate_materials(mats: Materials, tex: Textures, mat_ids, uvs, device: str = "cpu",
+                       geometry: list | None = None) -> dict[str, np.ndarray]:
+    """``eval_material`` at N (material id, uv) pairs, with the hits' ``geometry`` (``hit_geometries``) when
+    given; returns {MaterialSample field: (N, ...) array}."""
     ids = np.ascontiguousarray(np.asarray(mat_ids, np.int32).reshape(-1))
     uv = np.ascontiguousarray(np.asarray(uvs, np.float32).reshape(-1, 2))
     out = wp.empty(len(ids), dtype=MaterialSample, device=device)
+    if geometry is not None:
+        wp.launch(eval_material_geo_kernel, dim=len(ids),
+                  inputs=[mats, tex, wp.array(ids, dtype=wp.int32, device=device),
+                          wp.array(uv, dtype=wp.vec2, device=device),
+                          wp.array(geometry, dtype=HitGeometry, device=device), out], device=device)
+        rec = out.numpy()
+        return {name: np.asarray(rec[name]) for name in _SAMPLE_FIELDS}
     wp.launch(eval_material_kernel, dim=len(ids),
               inputs=[mats, tex, wp.array(ids, dtype=wp.int32, device=device),
                       wp.array(uv, dtype=wp.vec2, device=device), out], device=device)

@@ -17,6 +17,7 @@ from renderer.errors import SceneError
 from renderer.motion.transform import MotionTransform
 from renderer.scene.model import CONFORM_POLICIES, Camera, RenderSettingsInfo
 from renderer.usd.motion import TransformSampler, motion_transform
+from renderer.usd.reads import reads
 
 AUTO_FOCAL_35MM = 35.0  # the automatic camera's lens, in "mm" against a 36 mm wide aperture
 
@@ -51,12 +52,18 @@ def settings_prim(stage: Usd.Stage, settings_path: str | None, warn):
     return found[0] if found else None
 
 
+# what ``renderer.usd.products`` reads of products and vars (declared here, where the importer sees them)
+@reads("RenderProduct", "productName", "productType")
+@reads("RenderVar", "sourceName", "sourceType", "dataType")
 def settings_products(stage: Usd.Stage, prim) -> list:
     """The RenderProduct prims of a RenderSettings prim, in its ``products`` order."""
     products = [stage.GetPrimAtPath(t) for t in UsdRender.Settings(prim).GetProductsRel().GetForwardedTargets()]
     return [p for p in products if p and p.IsA(UsdRender.Product)]
 
 
+@reads("RenderSettings", "disableMotionBlur", "instantaneousShutter", "disableDepthOfField", "includedPurposes",
+       "materialBindingPurposes", "renderingColorSpace")
+@reads("RenderProduct", "disableMotionBlur", "instantaneousShutter", "disableDepthOfField")
 def render_settings(stage: Usd.Stage, frame: float, warn, settings_path: str | None = None,
                     product_path: str | None = None) -> tuple[RenderSettingsInfo, object]:
     """(RenderSettingsInfo, settings prim or None) of the settings prim ``settings_prim`` picks, with the authored
@@ -70,11 +77,9 @@ def render_settings(stage: Usd.Stage, frame: float, warn, settings_path: str | N
     info.disable_motion_blur = bool(_get(prim, "disableMotionBlur", frame, False)) or bool(
         _get(prim, "instantaneousShutter", frame, False))
     info.disable_depth_of_field = bool(_get(prim, "disableDepthOfField", frame, False))
+    _read_purposes(info, rs, frame, warn)
     space = _get(prim, "renderingColorSpace", frame, None)
     info.rendering_color_space = str(space) if space else None
-    purposes = rs.GetIncludedPurposesAttr()
-    if purposes.HasAuthoredValue():
-        info.included_purposes = tuple(str(t) for t in purposes.Get(frame) or ())
     # the product's authored values override the settings' (UsdRenderSettingsBase is shared)
     products = settings_products(stage, prim)
     if product_path is not None:
@@ -95,6 +100,23 @@ def _authored(prim, name: str) -> bool:
     return bool(attr) and attr.HasAuthoredValue()
 
 
+def _read_purposes(info: RenderSettingsInfo, rs, frame: float, warn) -> None:
+    """includedPurposes (the purposes drawn) and materialBindingPurposes (the binding purpose asked for first;
+    Houdini writes the all-purpose token as "allPurpose")."""
+    attr = rs.GetIncludedPurposesAttr()
+    if attr.HasAuthoredValue():
+        info.included_purposes = tuple(str(p) for p in attr.Get(frame) or ())
+    attr = rs.GetMaterialBindingPurposesAttr()
+    if attr.HasAuthoredValue():
+        purposes = ["" if str(p) in ("", "allPurpose") else str(p) for p in attr.Get(frame) or ()]
+        known = [p for p in purposes if p in ("full", "preview", "")]
+        if len(known) < len(purposes):
+            warn(f"{rs.GetPath()}: materialBindingPurposes other than full, preview and all-purpose ignored",
+                 ", ".join(p for p in purposes if p not in known))
+        info.material_binding_purpose = known[0] if known else "full"
+
+
+@reads("RenderSettingsBase", "resolution", "pixelAspectRatio", "aspectRatioConformPolicy", "dataWindowNDC")
 def _read_settings_base(info: RenderSettingsInfo, base, frame: float, warn) -> None:
     """Fill ``info`` from a RenderSettingsBase (settings or product), taking only what is authored."""
     prim = base.GetPrim()
@@ -158,6 +180,7 @@ def shutter_offsets(prim, frame: float) -> tuple[float, float]:
     return float(cam.GetShutterOpenAttr().Get(frame) or 0.0), float(cam.GetShutterCloseAttr().Get(frame) or 0.0)
 
 
+@reads("Camera", "exposure", "exposure:time", "exposure:iso", "exposure:fStop", "exposure:responsivity")
 def _exposure_stops(cam: UsdGeom.Camera, frame: float) -> float:
     """Exposure in stops: log2 of UsdGeomCamera's linear exposure scale (``exposure`` and the ``exposure:*``
     time/iso/fStop/responsivity inputs), or the plain ``exposure`` attribute if that cannot be computed."""
@@ -170,6 +193,9 @@ def _exposure_stops(cam: UsdGeom.Camera, frame: float) -> float:
     return float(cam.GetExposureAttr().Get(frame) or 0.0)
 
 
+@reads("Camera", "clippingRange", "projection", "focalLength", "horizontalAperture", "verticalAperture",
+       "horizontalApertureOffset", "verticalApertureOffset", "fStop", "focusDistance", "shutter:open",
+       "shutter:close")
 def read_camera(prim, sampler: TransformSampler, settings: RenderSettingsInfo, warn) -> Camera:
     """A UsdGeomCamera with its lens in scene units and its camera-to-world motion over the shutter."""
     frame = sampler.shutter.frame

@@ -42,6 +42,7 @@ from renderer.usd.mesh import GeomData
 from renderer.motion.shutter import Shutter
 from renderer.usd.motion import point_keys
 from renderer.usd.primvars import varying_colors
+from renderer.usd.reads import reads
 
 DEFAULT_WIDTH = 1.0  # scene units; the schema has no fallback, Hydra and RenderMan use 1
 NOMINAL_WIDTH = 1920  # pixels across assumed for density when the stage sets no resolution
@@ -159,6 +160,10 @@ def _keys(prim, shutter: Shutter, warn, path: str):
     return np.asarray(times), pts
 
 
+@reads("Points", "widths")
+@reads("Curves", "curveVertexCounts", "widths")
+@reads("BasisCurves", "type", "basis", "wrap")
+@reads("PointBased", "points", "normals")
 def read_points_or_curves(prim, shutter: Shutter, warn, view: View | None) -> CurveGeom | None:
     """Tessellate a Points/BasisCurves/HermiteCurves prim; None (with a warning) when it cannot be rendered."""
     kind = prim.GetTypeName()
@@ -297,6 +302,7 @@ def _tessellated_points(times, centres, wd, idx, n: int, colors, view, normals) 
 # Curves
 
 
+@reads("HermiteCurves", "tangents")
 def _hermite_to_bezier(prim, counts, pts, frame: float, warn, path):
     """HermiteCurves (points + tangents per vertex) as nonperiodic cubic Bezier control points (K, V', 3)."""
     tan = UsdGeom.HermiteCurves(prim).GetTangentsAttr().Get(frame)
@@ -352,6 +358,7 @@ def nurbs_basis(knots: np.ndarray, order: int, u: np.ndarray) -> np.ndarray:
     return b[:, :n]
 
 
+@reads("NurbsCurves", "order", "knots", "pointWeights", "ranges")
 def _nurbs_polylines(prim, counts, pts, frame: float, warn, path):
     """NurbsCurves sampled into polylines: (counts, points (K, N, 3), vertex widths (values, "vertex") or None)."""
     nc = UsdGeom.NurbsCurves(prim)

@@ -8,10 +8,11 @@ the package's other modules: ``mesh``, ``primitives``, ``curves``, ``materials``
 
 Policies worth knowing:
 
-* **Purpose**: the purposes asked for (``purposes``, else the render settings' ``includedPurposes``) are drawn,
-  ``default`` always. Without either, ``default`` and ``render`` prims are drawn, ``guide`` never; ``proxy`` prims
-  are drawn only when the stage has no prim of purpose ``render`` at all (a stage-wide rule, simpler than
-  per-model proxy pairing).
+* **Purpose**: the purposes asked for (``purposes``), else those the render settings' ``includedPurposes`` name;
+  without either ``default`` and ``render`` prims are drawn, ``guide`` never, ``proxy`` prims only when the stage
+  has no prim of purpose ``render`` at all (a stage-wide rule, simpler than per-model proxy pairing).
+* **Unread attributes**: every authored attribute of a UsdGeom, UsdLux, UsdShade, UsdSkel, UsdRender or UsdVol
+  schema that no reader declared (``reads``) is named in one warning per attribute and prim type.
 * **Visibility**: inherited ``invisible`` hides the subtree. Time-sampled visibility becomes the instance's
   ``visible_from``/``visible_to`` (the hull of the visible part of the shutter, with a warning if it toggles more
   than once). Prims inside PointInstancer prototypes use their visibility at the frame.
@@ -48,9 +49,19 @@ from renderer.usd.motion import (TransformSampler, collapse_keys, motion_transfo
                                  refine_keys, samples_in_shutter, shutter_interval)
 from renderer.usd.primitives import PRIMITIVE_TYPES, primitive_signature, read_primitive
 from renderer.usd.primvars import default_uv_name, read_display_colors, read_named_uvs
+from renderer.usd.reads import reads, report_unread
 from renderer.usd.skel import Skinning
 from renderer.usd.subdiv import SubdivisionDetail
 from renderer.usd import volumes as usd_volumes  # noqa: I100
+
+# What reading a prim's data can raise (pxr's errors and Boost.Python's ArgumentError, a TypeError): the prim,
+# or the optional step that read it, is skipped with a warning naming the error.
+_READ_ERRORS = (Tf.ErrorException, ValueError, TypeError, ArithmeticError)
+
+
+def _failure(prim, e: Exception) -> str:
+    return f"{prim.GetPath()} ({type(e).__name__}: {' '.join(str(e).split())[:160]})"
+
 
 _PI_ATTRS = ("positions", "orientations", "orientationsf", "scales", "velocities", "angularVelocities",
              "accelerations", "protoIndices")
@@ -212,10 +223,10 @@ class _Importer:
         self._density_camera = None  # (camera row matrix, aperture, focal length, width px, ortho) for curves
         self._in_prototype = 0  # > 0 while reading PointInstancer prototypes (no single view)
         self.csg = usd_csg.CsgGroups(self.warn)
+        self._skipped: set[str] = set()  # prims skipped with a warning of their own (not checked for unread data)
         self.settings_path: str | None = None
         self.product_path: str | None = None
         self.purposes: tuple[str, ...] = ()
-        self._included: set[str] | None = None  # the purposes drawn, when asked for; None: the default policy
 
     # -- top level ------------------------------------------------------------------------------------------------
     def run(self) -> sc.Scene:
@@ -226,16 +237,16 @@ class _Importer:
             warn(f"{len(errors)} composition error(s) (missing references/payloads?); the rest was loaded",
                  str(errors[0]).splitlines()[0] if str(errors[0]) else None)
         settings, _ = usd_camera.render_settings(stage, self.frame, warn, self.settings_path, self.product_path)
-        included = self.purposes or settings.included_purposes
-        self._included = None if included is None else {"default", *included}
         self.color_spaces = ColorSpaces(settings.rendering_color_space, self.ocio_config)
         self.colors = AttributeColors(self.color_spaces, warn)
         cam_prim = usd_camera.find_camera(stage, self.camera_path, settings, warn)
         self._frame_bounds = cam_prim is None
         self.shutter = self._shutter(cam_prim, settings)
         self.xf = TransformSampler(self.shutter)
-        self.materials = MaterialTable(self.frame, warn, self.shutter, self.colors)
-        self.volume_reader = usd_volumes.VolumeReader(self.frame, warn)
+        self.materials = MaterialTable(self.frame, warn, self.shutter, self.colors, settings.material_binding_purpose)
+        # None: default and render, proxy where no render
+        self._included = self.purposes or settings.included_purposes
+        self.volume_reader = usd_volumes.VolumeReader(self.frame, warn, self._skipped)
         self.detail = self._subdivision_detail(cam_prim, settings)
         self.skinning = Skinning(self.shutter, warn)
         if cam_prim is not None:
@@ -264,7 +275,7 @@ class _Importer:
         for prim, insts in self._mesh_lights:
             for light in apply_mesh_light(prim, insts, self.meshes, self.instances, self.materials.materials,
                                           float(self.shutter.normalise([self.frame])[0]), self.frame, self.warn,
-                                          self.colors):
+                                          self.shutter, self.colors):
                 self.lights.append(light)
                 self._light_prims.append((light, prim))
             self._mesh_light_instances.update({i: prim for i in insts})
@@ -274,6 +285,7 @@ class _Importer:
         if not self.lights:
             self.lights.append(usd_lights.default_light(cam_row, self._up_axis()))
             warn(usd_lights.default_light_warning())
+        report_unread(stage, warn, self._skipped)
 
         return realize_tessellations(sc.Scene(
             meshes=self.meshes,
@@ -323,6 +335,9 @@ class _Importer:
         return Shutter.around(self.frame, None if still else (o, c), tcps)
 
     # -- traversal ------------------------------------------------------------------------------------------------
+    @reads("Imageable", "visibility", "purpose")
+    @reads("Xform")
+    @reads("Scope")
     def _traverse(self) -> None:
         predicate = Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)
         it = iter(Usd.PrimRange.Stage(self.stage, predicate))
@@ -345,21 +360,19 @@ class _Importer:
             if self._statically_invisible(img):
                 it.PruneChildren()
                 continue
+            if prim.IsModel() or prim.HasAttribute("model:applyDrawMode"):
+                self._draw_mode(prim)
             info = img.ComputePurposeInfo(parent_info) if parent_info is not None else img.ComputePurposeInfo()
             purposes[str(prim.GetPath())] = info
             purpose = str(info.purpose)
-            if not self._draws(purpose):
-                purpose = "guide"  # not drawn, as a guide is not
-            elif purpose == "guide":
-                purpose = "default"  # guides asked for: drawn as any other geometry
             if prim.IsA(UsdGeom.PointInstancer):
                 it.PruneChildren()
-                if purpose != "guide":
+                if self._may_draw(purpose):
                     self._guarded(self._visit_gprim, prim, purpose)
             elif prim.IsA(UsdGeom.Mesh) or prim.GetTypeName() in PRIMITIVE_TYPES or usd_curves.handles(prim):
                 it.PruneChildren()
                 first = len(self.instances)
-                if purpose != "guide":
+                if self._may_draw(purpose):
                     self._guarded(self._visit_gprim, prim, purpose)
                 if usd_lights.is_light(prim):  # MeshLightAPI: its instances become emitters (see mesh_lights)
                     self._mesh_lights.append((prim, list(range(first, len(self.instances)))))
@@ -367,22 +380,36 @@ class _Importer:
                 self._guarded(self._light, prim)
             elif prim.IsA(UsdLux.LightFilter):
                 self.warn("light filters ignored (not modelled)", f"{prim.GetPath()} ({prim.GetTypeName()})")
+                self._skipped.add(str(prim.GetPath()))
             elif usd_volumes.is_volume(prim):
                 it.PruneChildren()
-                if purpose != "guide":
+                if self._may_draw(purpose):
                     self._guarded(self._volume, prim)
             elif prim.IsA(UsdGeom.Gprim):
                 it.PruneChildren()
-                if purpose != "guide":
+                self._skipped.add(str(prim.GetPath()))  # what is not drawn is not read, whatever its type
+                if self._may_draw(purpose):
                     self.warn("unsupported geometry types skipped", f"{prim.GetPath()} ({prim.GetTypeName()})")
+
+    @reads("GeomModelAPI", "model:drawMode", "model:applyDrawMode", "model:cardGeometry", "model:cardVisibility",
+           "model:drawModeColor", *(f"model:cardTexture{a}{s}" for a in "XYZ" for s in ("Pos", "Neg")))
+    def _draw_mode(self, prim) -> None:
+        """UsdGeomModelAPI draw modes (cards, bounds, origin) are stand-ins for imaging; the full geometry is
+        rendered, and one warning names the models where a draw mode would apply (their card settings with it)."""
+        api = UsdGeom.ModelAPI(prim)
+        attr = api.GetModelApplyDrawModeAttr()
+        applies = bool(attr.Get()) if attr and attr.HasAuthoredValue() else Usd.ModelAPI(prim).IsKind("component")
+        if applies:
+            mode = str(api.ComputeModelDrawMode())
+            if mode not in ("default", "inherited"):
+                self.warn("model draw modes not applied: the full geometry rendered", f"{prim.GetPath()} ({mode})")
 
     def _guarded(self, fn, prim, *args) -> None:
         """Run fn(prim, ...); a prim whose data cannot be read (wrong types, bad values) is skipped with a warning."""
         try:
             fn(prim, *args)
-        except (Tf.ErrorException, ValueError, TypeError, ArithmeticError) as e:
-            self.warn("prims with unreadable data skipped",
-                      f"{prim.GetPath()} ({type(e).__name__}: {' '.join(str(e).split())[:160]})")
+        except _READ_ERRORS as e:
+            self.warn("prims with unreadable data skipped", _failure(prim, e))
 
     def _statically_invisible(self, img) -> bool:
         attr = img.GetVisibilityAttr()
@@ -392,8 +419,10 @@ class _Importer:
             return False
         return attr.Get(self.frame) == UsdGeom.Tokens.invisible
 
-    def _draws(self, purpose: str) -> bool:
-        return purpose != "guide" if self._included is None else purpose in self._included
+    def _may_draw(self, purpose: str) -> bool:
+        """Whether prims of a purpose may be drawn: those asked for or the render settings' includedPurposes name, else all but
+        guides (proxies then only where the stage has no render purpose, see ``_visit_gprim``)."""
+        return purpose in self._included if self._included is not None else purpose != "guide"
 
     def _visit_gprim(self, prim, purpose: str) -> None:
         interval = self._visible_interval(prim)
@@ -427,7 +456,11 @@ class _Importer:
         path = str(prim.GetPath())
         times = self.skinning.key_times(prim, skin)
         if prim.IsA(UsdGeom.Mesh):
-            keys = self.skinning.skinned_points(prim, skin, times)
+            try:
+                keys = self.skinning.skinned_points(prim, skin, times)
+            except _READ_ERRORS as e:  # the skinning fails, not the mesh: drawn as authored
+                self.warn("skinned meshes UsdSkel cannot skin drawn unskinned", _failure(prim, e))
+                return False
             if keys is None:
                 self.warn("skinned meshes UsdSkel cannot skin drawn unskinned", path)
                 return False
@@ -438,7 +471,11 @@ class _Importer:
                 xf_times, rows = self.xf.motion(skin.skeleton)
                 self._add_instances([mesh], [path], xf_times, rows[None], interval)
             return True
-        rel = self.skinning.skinned_transforms(skin, times)
+        try:
+            rel = self.skinning.skinned_transforms(skin, times)
+        except _READ_ERRORS as e:
+            self.warn("rigidly skinned prims UsdSkel cannot skin drawn unskinned", _failure(prim, e))
+            return False
         if rel is None:
             self.warn("rigidly skinned prims UsdSkel cannot skin drawn unskinned", path)
             return False
@@ -559,8 +596,13 @@ class _Importer:
             geom.uvs = uvs
 
     def _skinned_normals(self, prim, skin, geom) -> np.ndarray | None:
-        """Authored per-corner normals of a skinned polygon mesh carried to the skinned pose at the frame."""
-        mats = self.skinning.normal_matrices(prim, skin, self.frame)
+        """Authored per-corner normals of a skinned polygon mesh carried to the skinned pose at the frame; None
+        (the renderer's own normals, with one warning) where they cannot be: an optional step never drops the mesh."""
+        try:
+            mats = self.skinning.normal_matrices(prim, skin, self.frame)
+        except _READ_ERRORS as e:
+            self.warn("authored normals of skinned meshes that cannot be skinned ignored", _failure(prim, e))
+            return None
         if mats is None or len(mats) != geom.points.shape[1]:
             self.warn("authored normals of skinned meshes that cannot be skinned ignored", str(prim.GetPath()))
             return None
@@ -595,6 +637,7 @@ class _Importer:
             group = self._pending.setdefault((len(norm), norm.tobytes()), (norm, []))
             group[1].append((np.arange(first, len(self.instances)), rows[finite], np.asarray(kept, np.int64)))
 
+    @reads("Boundable", "extent")  # a cache of bounds: ours are computed from the geometry itself
     def _place_instances(self) -> None:
         """The transforms of the instances added since the last call (``MotionTransform``s, decomposed per set of
         key times in one batch), and their world bounds for the automatic camera."""
@@ -672,6 +715,8 @@ class _Importer:
         keys = sh.keys(samples)
         return np.union1d(keys, sh.uniform(5)) if curved else keys
 
+    @reads("PointInstancer", "positions", "orientations", "orientationsf", "scales", "velocities",
+           "angularVelocities", "accelerations", "protoIndices", "ids", "invisibleIds")  # ids: the mask
     def _pi_placements(self, prim, times) -> tuple[list[int], list[str], np.ndarray]:
         """(mesh per placement, names, row-vector world matrices (M, K, 4, 4)) of every instance's geometry."""
         pi = UsdGeom.PointInstancer(prim)
@@ -754,7 +799,7 @@ class _Importer:
                 it.PruneChildren()
                 continue
             purpose = img.GetPurposeAttr().Get()
-            if not self._draws(str(purpose)):
+            if not self._may_draw(str(purpose)):
                 it.PruneChildren()
                 continue
             if purpose == UsdGeom.Tokens.proxy and self._saw_render and self._included is None:
@@ -800,6 +845,8 @@ class _Importer:
 
     # -- lights ---------------------------------------------------------------------------------------------------
     def _light(self, prim) -> None:
+        if prim.GetTypeName() not in usd_lights.LIGHT_TYPES:  # read_light names it among unsupported light types
+            self._skipped.add(str(prim.GetPath()))
         if self._visible_interval(prim) is None:
             return
         light = usd_lights.read_light(prim, self.xf, self.warn, colors=self.colors)

@@ -40,6 +40,7 @@ from renderer.scene import model as sc
 from renderer.shading.textures import ImageError
 from renderer.usd.color import AttributeColors
 from renderer.usd.motion import TransformSampler, motion_transform
+from renderer.usd.reads import reads
 from renderer.usd.texture_files import read_asset_image, resolve_asset
 
 # Row-vector matrix of a +90 degree turn about X: the dome's +Y pole to +Z (UsdLuxDomeLight.OrientToStageUpAxis).
@@ -95,6 +96,8 @@ def _source_attr(prim, name: str):
     return old if old and old.HasAuthoredValue() and not (new and new.HasAuthoredValue()) else new
 
 
+@reads("LightAPI", "inputs:intensity", "inputs:exposure", "inputs:color", "inputs:enableColorTemperature",
+       "inputs:colorTemperature", "inputs:normalize")
 def base_emission(prim, frame: float, colors: AttributeColors | None = None) -> np.ndarray:
     """intensity * 2^exposure * color * blackbody (if enabled): the radiance before sizeFactor, nits (RGB).
     ``colors``: color (from its authored colour space) and the blackbody (linear Rec.709, UsdLux's) converted
@@ -134,6 +137,14 @@ def dome_seen_by_camera(prim, frame: float) -> bool:
     return True
 
 
+@reads("LightAPI", "inputs:diffuse", "inputs:specular")
+@reads("RectLight", "inputs:width", "inputs:height", "inputs:texture:file")
+@reads("DiskLight", "inputs:radius")
+@reads("SphereLight", "inputs:radius", "treatAsPoint")
+@reads("CylinderLight", "inputs:length", "inputs:radius")
+@reads("DistantLight", "inputs:angle")
+@reads("DomeLight", "inputs:texture:file", "inputs:texture:format")
+@reads("DomeLight_1", "inputs:texture:file", "inputs:texture:format", "poleAxis")
 def read_light(prim, sampler: TransformSampler, warn, placement=None, name: str | None = None,
                colors: AttributeColors | None = None) -> sc.Light | None:
     """A UsdLux light prim to a Light (None for unsupported kinds, with a warning). ``placement`` (absolute
@@ -244,6 +255,9 @@ def _has_shaping(prim) -> bool:
                or (prim.GetAttribute(n) and prim.GetAttribute(n).HasAuthoredValue()) for n in _SHAPING_NAMES)
 
 
+@reads("ShapingAPI", "inputs:shaping:cone:angle", "inputs:shaping:cone:softness", "inputs:shaping:focus",
+       "inputs:shaping:focusTint", "inputs:shaping:ies:file", "inputs:shaping:ies:angleScale",
+       "inputs:shaping:ies:normalize")
 def read_shaping(prim, shutter, warn) -> sc.Shaping | None:
     """ShapingAPI of a light (None when it has none): cone, softness and focus at the shutter's open and close
     (an animated cone blurs), focus tint and IES profile at the frame."""

@@ -17,6 +17,7 @@ import numpy as np
 from pxr import Sdf, UsdLux
 
 from renderer.scene import model as sc
+from renderer.usd.reads import reads
 
 
 def _everything(api) -> bool:
@@ -57,6 +58,10 @@ def _get(prim, name: str, frame: float, default):
     return default
 
 
+@reads("LightAPI", *(f"collection:{c}{part}" for c in ("lightLink", "shadowLink")
+                     for part in ("", ":includeRoot", ":expansionRule", ":membershipExpression", ":mode")))
+@reads("ShadowAPI", "inputs:shadow:enable", "inputs:shadow:color", "inputs:shadow:distance", "inputs:shadow:falloff",
+       "inputs:shadow:falloffGamma")
 def apply_linking(light: sc.Light, prim, instances: list[sc.Instance], frame: float, warn) -> None:
     """Fill ``light``'s linking masks and shadow controls from its prim."""
     api = UsdLux.LightAPI(prim)

@@ -1,9 +1,14 @@
 """Material import: bound UsdShade materials to the renderer's ``Material`` s (UsdPreviewSurface 2.5, textured).
 
-**Binding.** Per prim: ``UsdShadeMaterialBindingAPI.ComputeBoundMaterial`` with the "full" purpose, which falls
-back to the all-purpose binding (direct and collection bindings, ``bindingStrength`` honoured by USD); then the
-material's surface shader: the first of a supported model (``surfaces``) among its ``mtlx``, universal and
-``arnold`` surface outputs. Inputs are read through the shading network (``shading_network``: NodeGraphs,
+**Binding.** Per prim: ``UsdShadeMaterialBindingAPI.ComputeBoundMaterial`` with the "full" purpose (or the first
+the render settings' ``materialBindingPurposes`` name), which falls back to the all-purpose binding (direct and collection bindings, ``bindingStrength`` honoured by USD); then the
+material's surface shader, as ``UsdShadeMaterial.ComputeSurfaceSource`` picks it for the render contexts of a
+MaterialX-capable renderer, ``mtlx`` then ``arnold`` (``SURFACE_CONTEXTS``), the universal output the fallback:
+the first context whose surface is of a supported model (``surfaces``) and whose network uses only nodes we
+evaluate; where such a network uses others, the universal output is rendered instead, the nodes named in one
+warning (with no universal surface to fall back on, the network is rendered as far as it goes). So a Houdini
+auto-created UsdPreviewSurface (``HoudiniIsAutoCreatedShader``, a flat approximation) beside a MaterialX or
+Arnold network is not what renders. Inputs are read through the shading network (``shading_network``: NodeGraphs,
 interface inputs, multi-output shaders, MaterialX nodes) and mapped onto UsdPreviewSurface inputs. GeomSubsets of family ``materialBind`` give per-face material
 ids, each subset bound the same way.
 
@@ -63,8 +68,9 @@ import numpy as np
 from pxr import Gf, UsdGeom, UsdShade
 
 from renderer.scene.model import Material, Texture, TextureInput
-from renderer.usd.shading_network import (Const, Display, Network, Tex, UV, expand_rgba, select_post, shader_id,
-                                          tex_mean)
+from renderer.usd.reads import reads
+from renderer.usd.shading_network import (Const, Display, Geo, Network, Tex, UV, expand_rgba, geo_texture_input,
+                                          select_post, shader_id, tex_mean)
 from renderer.usd import arnold_nodes
 from renderer.usd.surfaces import PREVIEW, PREVIEW_DEFAULTS, surface_inputs, surface_model
 from renderer.usd.color import AttributeColors, attribute_colors
@@ -76,10 +82,9 @@ ABSORPTION_DISTANCE = "drt:absorptionDistance"
 SCATTER_COLOR = "drt:scatterColor"
 SCATTER_DISTANCE = "drt:scatterDistance"
 SCATTER_ANISOTROPY = "drt:scatterAnisotropy"
-# Render contexts of a Material's surface output, in preference order: the universal output first, the one an
-# author gives every renderer (a material carrying both a UsdPreviewSurface and a MaterialX look renders as its
-# UsdPreviewSurface, as the shared assets' notes ask), then MaterialX, then Arnold's own.
-SURFACE_CONTEXTS = ("", "mtlx", "arnold")
+# Render contexts of a Material's surface output, in preference order (the contextVector of
+# UsdShadeMaterial.ComputeSurfaceSource); the universal output is the fallback of them all.
+SURFACE_CONTEXTS = ("mtlx", "arnold")
 
 # UsdPreviewSurface input -> (the Material field it fills, its spec default) ("color": 3 floats, else a scalar).
 _INPUTS = {name: (field, PREVIEW_DEFAULTS[name]) for name, field in (
@@ -90,6 +95,17 @@ _INPUTS = {name: (field, PREVIEW_DEFAULTS[name]) for name, field in (
     ("opacityThreshold", "opacity_threshold"), ("ior", "ior"), ("normal", "normal"), ("occlusion", "occlusion"))}
 
 
+def _output_source(output):
+    """The shader prim an (authored) output is connected to, through NodeGraphs; None if none."""
+    if not output:
+        return None
+    for attr in output.GetValueProducingAttributes():
+        if UsdShade.Output.IsOutput(attr) and attr.GetPrim().IsValid():
+            return attr.GetPrim()
+    return None
+
+
+@reads("Gprim", "primvars:displayColor")
 def display_color(prim, frame: float, colors: AttributeColors | None = None) -> tuple[float, float, float] | None:
     """The prim's displayColor: the constant value, or the average of a varying one; None if not authored.
     ``colors``: converted into the rendering space."""
@@ -159,9 +175,10 @@ def _vec(value, n: int, default) -> tuple:
 class MaterialTable:
     """Deduplicated materials of one scene; ``assign`` returns material ids for a prim."""
 
-    def __init__(self, frame: float, warn, shutter=None, colors: AttributeColors | None = None):
+    def __init__(self, frame: float, warn, shutter=None, colors: AttributeColors | None = None, purpose: str = "full"):
         self.frame = frame
         self.colors = colors  # colours into the rendering space (None: as authored)
+        self.purpose = purpose  # the binding purpose ("" all-purpose), falling back to all-purpose bindings
         self.shutter = shutter  # renderer.motion.shutter.Shutter: constant inputs varying inside it get keys (opacity)
         self.warn = warn
         self.materials: list[Material] = []
@@ -182,6 +199,7 @@ class MaterialTable:
         mat = self._bound(prim)
         return self._material_id(mat, prim)
 
+    @reads("GeomSubset", "elementType", "indices", "familyName")
     def assign(self, prim, tri_faces: np.ndarray, num_faces: int) -> np.ndarray:
         """Per-triangle material ids (T,) int32, honouring GeomSubset ``materialBind`` bindings."""
         default = self.prim_material(prim)
@@ -228,9 +246,8 @@ class MaterialTable:
         except Exception:  # noqa: BLE001 - exotic schemas: no subsets
             return []
 
-    @staticmethod
-    def _bound(prim) -> UsdShade.Material | None:
-        mat, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)
+    def _bound(self, prim) -> UsdShade.Material | None:
+        mat, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(self.purpose)
         return mat if mat and mat.GetPrim().IsValid() else None
 
     def _add(self, key: tuple, material: Material) -> int:
@@ -281,17 +298,31 @@ class MaterialTable:
         self._surfaces[path] = hit
         return hit
 
-    @staticmethod
-    def _surface_shader(mat: UsdShade.Material):
+    @reads("Material", "outputs:surface")
+    @reads("NodeGraph")
+    @reads("Shader", "info:id", "info:implementationSource")  # UsdShadeShader.GetShaderId
+    def _surface_shader(self, mat: UsdShade.Material):
         """(surface shader prim of a supported model, None) or (None, what was found instead)."""
-        found = []
+        degraded = []  # (context, its surface if of a supported model, nodes we do not evaluate) in context order
         for ctx in SURFACE_CONTEXTS:
-            src = mat.ComputeSurfaceSource(ctx)  # the context's output, else the universal one
-            if src and src[0] and src[0].GetPrim().IsValid():
-                sid = shader_id(src[0].GetPrim())
-                if surface_model(sid) is not None:
-                    return src[0].GetPrim(), None
-                found.append(sid)
+            prim = _output_source(mat.GetSurfaceOutput(ctx))
+            if prim is None:
+                continue
+            sid = shader_id(prim)
+            missing = [sid] if surface_model(sid) is None else self.net.unimplemented(prim)
+            if not missing:
+                return prim, None
+            degraded.append((ctx, prim if surface_model(sid) is not None else None, missing))
+        universal = _output_source(mat.GetSurfaceOutput())
+        if universal is not None and surface_model(shader_id(universal)) is not None:
+            if degraded:
+                self.warn("looks using nodes we do not evaluate: the universal surface output rendered instead",
+                          f"{mat.GetPath()} ({'; '.join(c + ': ' + ', '.join(m) for c, _, m in degraded)})")
+            return universal, None
+        for _, prim, _ in degraded:  # no fallback: the network as far as we evaluate it (its nodes warn)
+            if prim is not None:
+                return prim, None
+        found = [m[0] for _, _, m in degraded] + ([shader_id(universal)] if universal is not None else [])
         for out in mat.GetSurfaceOutputs():  # other render contexts (ri, ...): supported or named in the warning
             for attr in out.GetValueProducingAttributes():
                 if UsdShade.Output.IsOutput(attr):
@@ -311,6 +342,8 @@ class MaterialTable:
         for inp_name, (field_name, default) in _INPUTS.items():
             sig = signals.get(inp_name)
             value = None
+            if isinstance(sig, Geo):  # evaluated at the hit (a binding without a texture)
+                sig = Tex(geo_texture_input(sig), min(len(sig.offset), 3))
             if isinstance(sig, Display):
                 display_fields.append((field_name, _as_field(sig.fallback, default) or default,
                                        tuple(float(x) for x in sig.scale)))
@@ -344,7 +377,7 @@ class MaterialTable:
             if (nm.scale[:3] == (1.0, 1.0, 1.0) and nm.bias[:3] == (0.0, 0.0, 0.0)
                     and nm.post_scale == (1.0, 1.0, 1.0) and nm.post_bias == (0.0, 0.0, 0.0)):
                 self.warn("normal maps without scale 2 / bias -1 read as authored (values in [0, 1])", path)
-        self._displacement(shader, path)
+        self._displacement(mat, shader, path)
         if len(set(uv_sets)) > 1:
             self.warn("materials reading several uv sets: meshes have one (their st or first texCoord2f primvar)",
                       f"{path} ({', '.join(sorted(set(uv_sets)))})")
@@ -403,7 +436,13 @@ class MaterialTable:
                     out[key] = _vec(v, 3, (0.0, 0.0, 0.0)) if n == 3 else float(v)
         return out
 
-    def _displacement(self, shader, path: str) -> None:
-        inp = UsdShade.ConnectableAPI(shader).GetInput("displacement")
-        if inp and (inp.HasConnectedSource() or (inp.Get(self.frame) or 0.0) != 0.0):
-            self.warn("UsdPreviewSurface displacement ignored", path)
+    @reads("Material", "outputs:displacement")
+    def _displacement(self, mat: UsdShade.Material, shader, path: str) -> None:
+        """One warning when the material displaces: its surface shader's (or its displacement output's shader's)
+        ``displacement`` input connected or non-zero."""
+        shaders = [shader, _output_source(mat.GetDisplacementOutput())]
+        for node in [s for s in shaders if s is not None]:
+            inp = UsdShade.ConnectableAPI(node).GetInput("displacement")
+            if inp and (inp.HasConnectedSource() or (inp.Get(self.frame) or 0.0) != 0.0):
+                self.warn("UsdPreviewSurface displacement ignored", path)
+                return

@@ -17,6 +17,7 @@ from renderer.usd import subdiv as usd_subdiv
 from renderer.motion.shutter import Shutter
 from renderer.usd.motion import point_keys
 from renderer.usd.primvars import expand_primvar, read_primvar, read_uv_primvar, read_uv_primvar_raw
+from renderer.usd.reads import reads
 from renderer.usd.subdiv import SubdivisionDetail
 from renderer.usd.triangulation import drop_holes, hole_indices, triangulate
 
@@ -40,6 +41,9 @@ class GeomData:
     point_radii: np.ndarray | None = None  # ``Mesh.point_radii``: a cloud of exact spheres
 
 
+@reads("Mesh", "faceVertexCounts", "faceVertexIndices", "subdivisionScheme")
+@reads("PointBased", "points", "normals")
+@reads("Gprim", "doubleSided", "orientation")
 def read_mesh(prim, shutter: Shutter, warn, detail: SubdivisionDetail | None = None,
               world: np.ndarray | None = None, keys: tuple[np.ndarray, np.ndarray] | None = None) -> GeomData | None:
     """Triangulate a UsdGeomMesh at the frame (topology) with point keys over the shutter; subdivision surfaces

@@ -11,6 +11,12 @@ rays" in the schema's words); rays that hit the mesh see its material. ``light:m
   (a material that does not glow leaves L untinted, so a mesh light with a plain material still lights);
 - independent: rays see the material's glow; L as authored;
 - noMaterialResponse: the surface has no material response at all (no reflection, no glow); L as authored.
+
+ShapingAPI (cone angle and softness, focus, focus tint, IES profile) shapes L as for any other light, measured in
+the light frame of each emitting triangle: its primary axis (the schema's -Z) is the triangle's normal on the
+side it emits from (both sides of a doubleSided mesh, each about its own normal), its X the mesh's object X made
+orthogonal to that normal (the IES azimuth); see ``lights.sample.mesh_light_shaping``. A flat mesh thus shapes
+like a rect light; a curved one spreads its cone with its normals.
 """
 from __future__ import annotations
 
@@ -20,11 +26,13 @@ import numpy as np
 
 from renderer.motion.transform import matrix_at
 from renderer.scene import model as sc
-from renderer.usd.lights import base_emission, normalized
+from renderer.usd.lights import base_emission, normalized, read_shaping
+from renderer.usd.reads import reads
 
 SYNC_MODES = ("materialGlowTintsLight", "independent", "noMaterialResponse")
 
 
+@reads("MeshLightAPI", "light:materialSyncMode")
 def sync_mode(prim, warn) -> str:
     attr = prim.GetAttribute("light:materialSyncMode")
     mode = str(attr.Get()) if attr and attr.Get() is not None else "materialGlowTintsLight"
@@ -51,14 +59,16 @@ def light_material(base: sc.Material) -> sc.Material:
 
 
 def apply_mesh_light(prim, instances: list[int], scene_meshes: list[sc.Mesh], scene_instances: list[sc.Instance],
-                     materials: list[sc.Material], frame_s: float, frame: float, warn,
+                     materials: list[sc.Material], frame_s: float, frame: float, warn, shutter,
                      colors=None) -> list[sc.Light]:
-    """The lights of a MeshLightAPI prim's instances (one LIGHT_MESH each, emitting L uniformly over its area).
-    With noMaterialResponse, each instance gets a copy of its mesh whose triangles reflect nothing. ``colors``
+    """The lights of a MeshLightAPI prim's instances (one LIGHT_MESH each, emitting L uniformly over its area,
+    shaped by its ShapingAPI). With noMaterialResponse, each instance gets a copy of its mesh whose triangles
+    reflect nothing. ``shutter``: the importer's (shaping is keyed at its open and close); ``colors``
     (``usd.color.AttributeColors``): its colour into the rendering colour space."""
     mode = sync_mode(prim, warn)
     emission = base_emission(prim, frame, colors)
     norm = normalized(prim, frame)
+    shaping = read_shaping(prim, shutter, warn)
     lights = []
     for i in instances:
         inst = scene_instances[i]
@@ -85,5 +95,6 @@ def apply_mesh_light(prim, instances: list[int], scene_meshes: list[sc.Mesh], sc
             inst.mesh = len(scene_meshes) - 1
         lights.append(sc.Light(kind=sc.LIGHT_MESH, name=inst.name or str(prim.GetPath()),
                                radiance=tuple(float(x) for x in e), transform=inst.transform, instance=i,
-                               one_sided=not scene_meshes[inst.mesh].double_sided, uniform=True))
+                               one_sided=not scene_meshes[inst.mesh].double_sided, uniform=True,
+                               shaping=shaping))
     return lights

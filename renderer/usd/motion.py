@@ -19,6 +19,7 @@ from pxr import Gf, Usd, UsdGeom
 
 from renderer.motion.shutter import Shutter
 from renderer.motion.transform import MotionTransform
+from renderer.usd.reads import reads
 
 MAX_SEGMENT_DEGREES = 10.0  # largest rotation between two consecutive keys
 _MAX_REFINE_ROUNDS = 6  # at most 2^6 sub-segments per authored segment
@@ -84,6 +85,7 @@ class TransformSampler:
             return np.array([self.shutter.frame], np.float64)
         return self.shutter.keys(samples)
 
+    @reads("Xformable", "xformOpOrder")  # with the xformOp:* it orders, through UsdGeom.XformCache
     def motion(self, prim) -> tuple[np.ndarray, np.ndarray]:
         """(times (K,), row-vector world matrices (K, 4, 4)) with keys refined for curved motion."""
         times = self.key_times(prim)
@@ -263,6 +265,7 @@ def refine_keys(evaluate, times) -> tuple[np.ndarray, np.ndarray]:
     return times, mats
 
 
+@reads("PointBased", "points", "velocities", "accelerations")
 def point_keys(pb: UsdGeom.PointBased, shutter: Shutter, count: int, warn) -> tuple[np.ndarray, np.ndarray] | None:
     """(times (P,), points (P, V, 3) float32) over the shutter, or None if the frame has no usable points.
 

@@ -16,6 +16,7 @@ from renderer.usd.mesh import GeomData
 from renderer.motion.shutter import Shutter
 from renderer.usd.motion import collapse_keys, samples_in_shutter
 from renderer.usd.primvars import CUBE_COUNTS, CUBE_INDICES, CUBE_POINTS, expand_primvar, read_uv_primvar
+from renderer.usd.reads import reads
 from renderer.usd.triangulation import triangulate
 
 SPHERE_SEGMENTS = 64  # around the axis
@@ -140,6 +141,15 @@ def _get(prim, name: str, t: float, default):
     return default if v is None else v
 
 
+@reads("Sphere", "radius")
+@reads("Cube", "size")
+@reads("Cylinder", "radius", "height", "axis")
+@reads("Cylinder_1", "radiusBottom", "radiusTop", "height", "axis")
+@reads("Cone", "radius", "height", "axis")
+@reads("Capsule", "radius", "height", "axis")
+@reads("Capsule_1", "radiusBottom", "radiusTop", "height", "axis")
+@reads("Plane", "width", "length", "axis")
+@reads("Gprim", "doubleSided")
 def _primitive_params(prim, t: float) -> tuple:
     kind = prim.GetTypeName()
     g = lambda n, d: float(_get(prim, n, t, d))  # noqa: E731

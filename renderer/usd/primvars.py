@@ -10,6 +10,7 @@ import numpy as np
 from pxr import UsdGeom
 
 from renderer.usd import subdiv as usd_subdiv
+from renderer.usd.reads import reads
 from renderer.usd.subdiv import SubdivisionDetail
 from renderer.usd.triangulation import drop_holes, hole_indices, triangulate
 
@@ -185,6 +186,7 @@ def varying_colors(values) -> np.ndarray | None:
     return v if np.all(np.isfinite(v)) and not np.all(v == v[0]) else None
 
 
+@reads("Gprim", "primvars:displayColor")
 def read_display_colors(prim, frame: float, warn, level: int | None = None) -> np.ndarray | None:
     """Per-corner displayColor (T, 3, 3) float32 of a Mesh whose displayColor varies over it (uniform, vertex,
     varying or faceVarying with unequal values); None when it is constant, absent, mis-sized or not finite."""

@@ -11,15 +11,21 @@ once into a *signal*:
   through UsdTransform2d, place2d and affine math);
 * ``Tex``: one texture lookup as the kernels do it (``TextureInput``: file, uv, wrap, scale/bias, the output
   channels, then a per-channel remap ``post_scale`` / ``post_bias``);
-* ``Display``: the prim's displayColor (a primvar reader of displayColor), filled per prim by the material table.
+* ``Display``: the prim's displayColor (a primvar reader of displayColor), filled per prim by the material table;
+* ``Geo``: the hit's position, normal or tangent in object or world space, mapped affinely (MaterialX position,
+  normal, tangent), evaluated by the kernels at the hit: as a value, or as the st of an image (a planar
+  projection), or through a triplanarprojection (``TextureInput.projection``).
 
 Nodes: UsdUVTexture, UsdPrimvarReader_*, UsdTransform2d, and the MaterialX standard library's image,
-tiledimage, texcoord, geompropvalue, constant, place2d, normalmap and math (multiply, add, subtract, divide, mix,
-invert, clamp, min, max, power, remap, smoothstep, luminance, rgbtohsv, hsvtorgb, convert, dot, combine2/3/4,
-extract, separate2/3/4, swizzle). MaterialX ids (``ND_<category>_<type>...``) name their category and type.
+tiledimage, texcoord, geompropvalue, position, normal, tangent, triplanarprojection, constant, place2d, normalmap
+and math (multiply, add, subtract, divide, mix, invert, clamp, min, max, power, remap, smoothstep, luminance,
+rgbtohsv, hsvtorgb, convert, dot, dotproduct, crossproduct, normalize, combine2/3/4, extract, separate2/3/4,
+swizzle). MaterialX ids (``ND_<category>_<type>...``) name their category and type; ``implements`` tells which
+are evaluated, ``unimplemented`` lists the others in a network.
 
-Math nodes are NumPy functions of their inputs. All-constant inputs fold into a constant; a function of a
-single texture that is affine in it (checked numerically with probe values, so channel-mixing functions are
+Math nodes are NumPy functions of their inputs. All-constant inputs fold into a constant; a function of one
+geometric quantity that is affine in it (channels may mix: an extract, a dot product with a constant) folds
+into its mapping; a function of a single texture that is affine in it (checked numerically with probe values, so channel-mixing functions are
 not mistaken for affine ones) folds into the lookup's remap, keeping the original texture (its wrap modes,
 UDIM tiles and mip levels); anything else over textures that share one uv mapping is *baked*: evaluated on the
 texel grid of the largest of them (at most ``BAKE_MAX`` texels a side) into a new texture. What cannot be
@@ -77,7 +83,45 @@ class Display:
     scale: np.ndarray = field(default_factory=lambda: np.ones(3))  # (3,) network gain applied to it
 
 
-Signal = Const | UV | Tex | Display
+@dataclass(frozen=True, eq=False)
+class Geo:
+    """A geometric quantity of the hit mapped affinely: value = matrix @ g + offset, g the hit's position, normal or
+    tangent (``source`` "P", "N", "T") in ``space`` "object" or "world" (MaterialX position / normal / tangent)."""
+    source: str
+    space: str
+    matrix: np.ndarray  # (k, 3)
+    offset: np.ndarray  # (k,)
+
+
+Signal = Const | UV | Tex | Display | Geo
+
+# MaterialX's default outputs of its geometric nodes (where a value is needed without a hit)
+GEO_DEFAULTS = {"P": (0.0, 0.0, 0.0), "N": (0.0, 1.0, 0.0), "T": (1.0, 0.0, 0.0)}
+_GEO_NODES = {"position": "P", "normal": "N", "tangent": "T"}
+_SPACES = {"object": "object", "model": "object", "world": "world"}
+
+
+def geo(source: str, space: str = "object") -> Geo:
+    return Geo(source, space, np.eye(3), np.zeros(3))
+
+
+def geo_default(g: Geo) -> Const:
+    """The value of a geometric signal where there is no hit: the node's default output, mapped."""
+    return Const(g.matrix @ np.asarray(GEO_DEFAULTS[g.source], np.float64) + g.offset)
+
+
+def geo_texture_input(g: Geo) -> TextureInput:
+    """A geometric signal as a surface input's binding ("value"): rgb = its (up to 3) components at the hit; the
+    fallback (and the input's constant) is its value without a hit."""
+    m = np.zeros((3, 4))
+    k = min(len(g.offset), 3)
+    m[:k, :3], m[:k, 3] = g.matrix[:k], g.offset[:k]
+    if k == 1:  # a scalar feeding a colour: replicated
+        m[1:] = m[0]
+    d = np.resize(geo_default(g).value, 3) if k > 1 else np.repeat(geo_default(g).value[:1], 3)
+    return TextureInput(texture=None, output="rgb", fallback=(float(d[0]), float(d[1]), float(d[2]), 1.0),
+                        projection="value", geometry=g.source, space=g.space,
+                        geo_matrix=tuple(float(x) for x in m.reshape(-1)))
 
 
 def const(v) -> Const:
@@ -135,17 +179,27 @@ def select_post(rgba: np.ndarray, ti: TextureInput, n: int) -> np.ndarray:
     return out
 
 
-def tex_mean(ti: TextureInput, n: int = 3) -> np.ndarray:
-    """Mean value (n,) of a textured input over its texture (area-weighted over UDIM tiles)."""
-    if ti.texture is None:
-        return select_post(np.asarray(ti.fallback, np.float64), ti, n)
+def _texture_mean(texture: Texture | None, fallback) -> np.ndarray:
+    """Mean RGBA (4,) of a texture's texels (area-weighted over UDIM tiles); ``fallback`` without one."""
+    if texture is None:
+        return np.asarray(fallback, np.float64)
     total, area = np.zeros(4), 0.0
-    for im in ti.texture.images:
+    for im in texture.images:
         im = np.asarray(im, np.float32)
         c = im.reshape(-1, im.shape[-1]).mean(0, dtype=np.float64)
         total += expand_rgba(c[None])[0] * (im.shape[0] * im.shape[1])
         area += im.shape[0] * im.shape[1]
-    mean = total / max(area, 1.0)
+    return total / max(area, 1.0)
+
+
+def tex_mean(ti: TextureInput, n: int = 3) -> np.ndarray:
+    """Mean value (n,) of a textured input over its texture (area-weighted over UDIM tiles; a triplanar
+    projection's three textures equally; a geometric value's value without a hit)."""
+    if ti.texture is None and ti.projection != "triplanar":
+        return select_post(np.asarray(ti.fallback, np.float64), ti, n)
+    mean = _texture_mean(ti.texture, ti.fallback)
+    if ti.projection == "triplanar":
+        mean = np.mean([mean] + [_texture_mean(t, ti.fallback) for t in ti.triplanar_textures], axis=0)
     return select_post(mean * np.asarray(ti.scale) + np.asarray(ti.bias), ti, n)
 
 
@@ -229,6 +283,10 @@ MATH = {
     "rgbtohsv": ((("in", 0.0),), _rgb_to_hsv),
     "hsvtorgb": ((("in", 0.0),), _hsv_to_rgb),
     "dot": ((("in", 0.0),), lambda x: x),
+    "dotproduct": ((("in1", 0.0), ("in2", 0.0)), lambda a, b: (a * b).sum(-1, keepdims=True)),
+    "crossproduct": ((("in1", 0.0), ("in2", 0.0)), lambda a, b: np.cross(np.resize(a, a.shape[:-1] + (3,)),
+                                                                          np.resize(b, b.shape[:-1] + (3,)))),
+    "normalize": ((("in", 0.0),), lambda x: _safe_div(x, np.linalg.norm(x, axis=-1, keepdims=True))),
     "constant": ((("value", 0.0),), lambda x: x),
     "convert": ((("in", 0.0),), lambda x: x),
     "combine2": ((("in1", 0.0), ("in2", 0.0)), _combine),
@@ -238,7 +296,16 @@ MATH = {
     "normalmap": ((("in", (0.5, 0.5, 1.0)), ("scale", 1.0)),
                   lambda c, s: (c[..., :3] * 2.0 - 1.0) * np.concatenate([np.broadcast_to(s[..., :1], c[..., :1].shape)] * 2 + [np.ones_like(c[..., :1])], -1)),
 }
+# Node categories evaluated by ``Network._evaluate`` besides MATH (and the extra ``nodes`` it is given)
+_NODE_KINDS = {"UsdUVTexture": "texture", "image": "texture", "tiledimage": "texture", "UsdPrimvarReader": "primvar",
+               "geompropvalue": "primvar", "texcoord": "texcoord", "UsdTransform2d": "transform2d",
+               "place2d": "transform2d", "separate2": "channels", "separate3": "channels", "separate4": "channels",
+               "extract": "channels", "swizzle": "channels", "position": "geometric", "normal": "geometric",
+               "tangent": "geometric", "triplanarprojection": "triplanar"}
 _SEPARATE_OUTPUTS = {"outr": 0, "outg": 1, "outb": 2, "outa": 3, "outx": 0, "outy": 1, "outz": 2, "outw": 3}
+
+
+_PROBES = (np.array([0.3, 0.71, 0.13, 0.57]), np.array([-1.7, 2.9, 0.45, 3.3]))  # irregular: no channel symmetry
 
 
 def _affine(fn, n: int) -> tuple[np.ndarray, np.ndarray] | None:
@@ -249,7 +316,7 @@ def _affine(fn, n: int) -> tuple[np.ndarray, np.ndarray] | None:
         with np.errstate(all="ignore"):
             b = np.asarray(fn(np.zeros(n)), np.float64)
             a = np.asarray(fn(np.ones(n)), np.float64) - b
-            for probe in (np.array([0.3, 0.71, 0.13, 0.57][:n]), np.array([-1.7, 2.9, 0.45, 3.3][:n])):
+            for probe in (p[:n] for p in _PROBES):
                 got = np.asarray(fn(probe), np.float64)
                 want = a * (probe if n > 1 else probe[0]) + b
                 if got.shape != np.broadcast(a, b).shape or want.shape != got.shape:
@@ -258,9 +325,31 @@ def _affine(fn, n: int) -> tuple[np.ndarray, np.ndarray] | None:
                     return None
     except (ValueError, IndexError):
         return None
-    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+    return _finite_pair(a, b)
+
+
+def _affine_matrix(fn, n: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """(M (k, n), c (k,)) with fn(x) == M @ x + c for x of n components (channels may mix), else None.
+
+    Columns from the unit vectors, checked at two irregular vectors."""
+    try:
+        with np.errstate(all="ignore"):
+            c = np.asarray(fn(np.zeros(n)), np.float64).reshape(-1)
+            cols = [np.asarray(fn(e), np.float64).reshape(-1) - c for e in np.eye(n)]
+            if any(col.shape != c.shape for col in cols) or c.size == 0:
+                return None
+            m = np.stack(cols, axis=1)
+            for probe in (p[:n] for p in _PROBES):
+                got = np.asarray(fn(probe), np.float64).reshape(-1)
+                if got.shape != c.shape or not np.allclose(got, m @ probe + c, rtol=1e-6, atol=1e-9):
+                    return None
+    except (ValueError, IndexError):
         return None
-    return a, b
+    return _finite_pair(m, c)
+
+
+def _finite_pair(a: np.ndarray, b: np.ndarray):
+    return (a, b) if np.all(np.isfinite(a)) and np.all(np.isfinite(b)) else None
 
 
 def _fold(tex: Tex, a: np.ndarray, b: np.ndarray) -> Tex:
@@ -367,6 +456,35 @@ class Network:
         self._outputs[key] = sig
         return sig
 
+    def implements(self, sid: str) -> bool:
+        """Whether ``output`` evaluates nodes of this shader id (the others warn and give no signal)."""
+        if sid in self.nodes:
+            return True
+        cat, _ = node_kind(sid)
+        return cat in _NODE_KINDS or cat in MATH
+
+    def unimplemented(self, prim) -> list[str]:
+        """Shader ids of the nodes feeding a shader's inputs (through NodeGraphs, upstream) that ``output`` does
+        not evaluate, in the order met."""
+        missing: list[str] = []
+        seen: set[str] = set()
+        stack = [prim]
+        while stack:
+            for inp in UsdShade.ConnectableAPI(stack.pop()).GetInputs():
+                if not inp.HasConnectedSource():
+                    continue
+                for attr in inp.GetValueProducingAttributes():
+                    if not UsdShade.Output.IsOutput(attr) or str(attr.GetPrim().GetPath()) in seen:
+                        continue
+                    up = attr.GetPrim()
+                    seen.add(str(up.GetPath()))
+                    sid = shader_id(up)
+                    if self.implements(sid):
+                        stack.append(up)
+                    elif sid not in missing:
+                        missing.append(sid)
+        return missing
+
     def _evaluate(self, prim, output: str) -> Signal | None:
         sid = shader_id(prim)
         extra = self.nodes.get(sid)
@@ -374,16 +492,21 @@ class Network:
             return extra(self, prim, output)
         cat, typ = node_kind(sid)
         where = f"{prim.GetPath()} ({sid})"
-        if cat in ("UsdUVTexture", "image", "tiledimage"):
+        kind = _NODE_KINDS.get(cat)
+        if kind == "texture":
             return self._texture(prim, cat, typ, output)
-        if cat in ("UsdPrimvarReader", "geompropvalue"):
+        if kind == "primvar":
             return self._primvar(prim, cat, typ)
-        if cat == "texcoord":
+        if kind == "texcoord":
             return UV("st", (0.0, 0.0), np.eye(2), np.zeros(2))
-        if cat in ("UsdTransform2d", "place2d"):
+        if kind == "transform2d":
             return self._transform2d(prim, cat)
-        if cat in ("separate2", "separate3", "separate4", "extract", "swizzle"):
+        if kind == "channels":
             return self._channels(prim, cat, output, where)
+        if kind == "geometric":
+            return self._geometric(prim, cat, where)
+        if kind == "triplanar":
+            return self._triplanar(prim, typ, where)
         spec = MATH.get(cat)
         if spec is None:
             self.warn("unsupported shading nodes: the input keeps its own value (or the default)", where)
@@ -393,6 +516,70 @@ class Network:
         return self.apply(fn, args, where, _TYPES.get(typ or "", 0))
 
     # -- node kinds -----------------------------------------------------------------------------------------
+    def _geometric(self, prim, cat: str, where: str) -> Geo:
+        """MaterialX position / normal / tangent: the hit's, in object (also "model") or world space."""
+        space = str(self.value(prim, "space", "object") or "object")
+        if space not in _SPACES:
+            self.warn("geometric nodes in spaces other than model, object and world read in object space",
+                      f"{where} ({space})")
+        return geo(_GEO_NODES[cat], _SPACES.get(space, "object"))
+
+    def _image_output(self, prim, typ: str | None):
+        """(components, TextureInput output, fallback RGBA, the authored default or None) of a MaterialX image
+        node of output type ``typ`` (its ``default`` where there is no file or tile)."""
+        n = _TYPES.get(typ or "color3", 3) or 3
+        output = {1: "r", 2: "rgb", 3: "rgb", 4: "rgba"}[n]
+        default = _numeric(self.value(prim, "default", None))
+        d = np.resize(default.value, 4) if default is not None else np.zeros(4)
+        fallback = (tuple(float(x) for x in d) if n == 4 else (float(d[0]),) * 4 if n == 1
+                    else (float(d[0]), float(d[1]), float(d[2 % len(d)]), 1.0))
+        if default is not None and default.value.size >= 3 and n >= 3:
+            fallback = tuple(float(x) for x in np.resize(default.value, 3)) + (fallback[3],)
+        return n, output, fallback, default
+
+    def _triplanar(self, prim, typ: str | None, where: str) -> Signal | None:
+        """MaterialX triplanarprojection: three images projected along the axes of an (affinely mapped) hit
+        position, blended by the hit's normal (see ``TextureInput``)."""
+        n, output, fallback, _ = self._image_output(prim, typ)
+        pos = self.input(prim, "position")
+        if pos is None:
+            pos = geo("P")
+        if not (isinstance(pos, Geo) and pos.source == "P" and len(pos.offset) == 3):
+            self.warn("triplanar projections of something else than the hit's position: object-space position used",
+                      where)
+            pos = geo("P")
+        normal = self.input(prim, "normal")
+        nspace = "object"
+        if normal is not None:
+            if isinstance(normal, Geo) and normal.source == "N" and len(normal.offset) == 3 and np.allclose(
+                    normal.offset, 0.0) and np.allclose(normal.matrix, normal.matrix[0, 0] * np.eye(3)) and \
+                    normal.matrix[0, 0] > 0:
+                nspace = normal.space
+            else:
+                self.warn("triplanar projections weighted by something else than the hit's normal: object-space "
+                          "normal used", where)
+        up = int(self.value(prim, "upaxis", 2) or 0)
+        if up not in (0, 1, 2):
+            self.warn("triplanar upaxis outside 0..2 read as 2 (Z)", where)
+            up = 2
+        blend = float(self.constant(prim, "blend", (1.0,), where)[0])
+        textures = []
+        for name in ("filex", "filey", "filez"):
+            attr, value = self.raw(prim, name)
+            path = str(getattr(value, "path", value) or "").strip() if value is not None else ""
+            texture = None
+            if path:
+                colorspace = self._colorspace(prim, attr, "auto8" if n >= 3 and typ in ("color3", "color4") else "raw")
+                texture, _ = self.files.load(*resolve_asset(attr, value), colorspace, where)
+            textures.append(texture)
+        m = np.concatenate([pos.matrix, pos.offset[:, None]], axis=1)
+        ti = TextureInput(texture=textures[0], output=output, fallback=fallback, uv_primvar=None,
+                          projection="triplanar", geometry="P", space=pos.space,
+                          geo_matrix=tuple(float(x) for x in m.reshape(-1)),
+                          triplanar_textures=(textures[1], textures[2]), triplanar_normal_space=nspace,
+                          blend=blend, up_axis=up)
+        return Tex(ti, n)
+
     def _primvar(self, prim, cat: str, typ: str | None) -> Signal:
         name = "geomprop" if cat == "geompropvalue" else "varname"
         var = self.value(prim, name, None)
@@ -414,7 +601,7 @@ class Network:
             inner = UV("st", (0.0, 0.0), np.eye(2), np.zeros(2))
         if isinstance(inner, Const):
             inner = UV(None, tuple(float(x) for x in np.resize(inner.value, 2)), np.eye(2), np.zeros(2))
-        if not isinstance(inner, UV):
+        if not (isinstance(inner, UV) or (isinstance(inner, Geo) and len(inner.offset) >= 2)):
             self.warn("texture coordinates from unsupported nodes: a constant st (0, 0) is used", str(prim.GetPath()))
             inner = UV(None, (0.0, 0.0), np.eye(2), np.zeros(2))
         v = lambda nm, d: self.constant(prim, nm, d, str(prim.GetPath()))  # noqa: E731
@@ -436,6 +623,8 @@ class Network:
             t = -a @ pivot - off + pivot
             if int(self.value(prim, "operationorder", 0) or 0) != 0:
                 self.warn("place2d operationorder other than 0 (SRT) read as SRT", str(prim.GetPath()))
+        if isinstance(inner, Geo):  # st projected from the hit's position (or normal)
+            return Geo(inner.source, inner.space, a @ inner.matrix[:2], a @ inner.offset[:2] + t)
         return UV(inner.primvar, inner.fallback, a @ inner.matrix, a @ inner.translation + t)
 
     def _channels(self, prim, cat: str, output: str, where: str) -> Signal | None:
@@ -491,31 +680,31 @@ class Network:
             fallback = _vec(self.value(prim, "fallback", None), 4, (0.0, 0.0, 0.0, 1.0))
             wrap_names = [str(self.value(prim, w, "useMetadata")) for w in ("wrapS", "wrapT")]
         else:
-            n = _TYPES.get(typ or "color3", 3) or 3
-            output = {1: "r", 2: "rgb", 3: "rgb", 4: "rgba"}[n]
-            default = _numeric(self.value(prim, "default", None))
-            d = np.resize(default.value, 4) if default is not None else np.zeros(4)
-            fallback = (tuple(float(x) for x in d) if n == 4 else (float(d[0]),) * 4 if n == 1
-                        else (float(d[0]), float(d[1]), float(d[2 % len(d)]), 1.0))
-            if default is not None and default.value.size >= 3 and n >= 3:
-                fallback = tuple(float(x) for x in np.resize(default.value, 3)) + (fallback[3],)
+            n, output, fallback, default = self._image_output(prim, typ)
             scale, bias = (1.0, 1.0, 1.0, 1.0), (0.0, 0.0, 0.0, 0.0)
             uv = self.input(prim, "texcoord")
             if uv is None:
                 uv = UV("st", (0.0, 0.0), np.eye(2), np.zeros(2))
-            if cat == "tiledimage" and isinstance(uv, UV):
+            if cat == "tiledimage" and (isinstance(uv, UV) or (isinstance(uv, Geo) and len(uv.offset) >= 2)):
                 tiling, offset, img, tile = (self.constant(prim, nm, d, where) for nm, d in (
                     ("uvtiling", (1.0, 1.0)), ("uvoffset", (0.0, 0.0)), ("realworldimagesize", (1.0, 1.0)),
                     ("realworldtilesize", (1.0, 1.0))))
                 k = np.diag(tile / np.where(np.abs(img) > 1e-12, img, 1e-12))
-                uv = UV(uv.primvar, uv.fallback, k @ np.diag(tiling) @ uv.matrix,
-                        k @ (tiling * uv.translation - offset))
+                if isinstance(uv, Geo):
+                    uv = Geo(uv.source, uv.space, k @ np.diag(tiling) @ uv.matrix[:2],
+                             k @ (tiling * uv.offset[:2] - offset))
+                else:
+                    uv = UV(uv.primvar, uv.fallback, k @ np.diag(tiling) @ uv.matrix,
+                            k @ (tiling * uv.translation - offset))
             # MaterialX colour-manages colour images only; "auto" decodes 8-bit ones (Arnold's reading)
             colorspace = self._colorspace(prim, attr, "auto8" if n >= 3 and typ in ("color3", "color4") else "raw")
             wrap_names = [_ADDRESS.get(str(self.value(prim, w, "periodic")), "repeat")
                           for w in ("uaddressmode", "vaddressmode")]
             if not path:
                 return Tex(TextureInput(None, output, fallback=fallback), n) if default is not None else None
+        projected = None  # st from the hit's position (or normal): a planar projection
+        if isinstance(uv, Geo) and len(uv.offset) >= 2:
+            projected, uv = uv, UV(None, (0.0, 0.0), np.eye(2), np.zeros(2))
         if isinstance(uv, Const) or uv is None:
             st = tuple(float(x) for x in np.resize(uv.value, 2)) if uv is not None else (0.0, 0.0)
             uv = UV(None, st, np.eye(2), np.zeros(2))
@@ -537,6 +726,11 @@ class Network:
                           wrap_s=wraps[0], wrap_t=wraps[1], uv_primvar=uv.primvar, st=uv.fallback,
                           uv_matrix=(float(m[0, 0]), float(m[0, 1]), float(m[1, 0]), float(m[1, 1])),
                           uv_translation=(float(uv.translation[0]), float(uv.translation[1])))
+        if projected is not None:
+            m = np.zeros((3, 4))
+            m[:2, :3], m[:2, 3] = projected.matrix[:2], projected.offset[:2]
+            ti = replace(ti, projection="planar", geometry=projected.source, space=projected.space,
+                         geo_matrix=tuple(float(x) for x in m.reshape(-1)))
         return Tex(ti, n)
 
     def _colorspace(self, prim, file_attr, auto: str) -> str:
@@ -587,6 +781,11 @@ class Network:
         args = [a if not isinstance(a, Display) else Const(a.fallback * a.scale) for a in args]
         if any(a is None for a in args):
             args = [a if a is not None else const(0.0) for a in args]
+        if any(isinstance(a, Geo) for a in args):
+            g = self._geo_math(fn, args, where)
+            if g is not None:
+                return g
+            args = [geo_default(a) if isinstance(a, Geo) else a for a in args]
         texs = [i for i, a in enumerate(args) if isinstance(a, Tex)]
         uvs = [i for i, a in enumerate(args) if isinstance(a, UV)]
         with np.errstate(all="ignore"):
@@ -613,6 +812,23 @@ class Network:
             v = fn(*[tex_mean(a.ti, a.n) if isinstance(a, Tex) else a.value for a in args])
             return Const(np.nan_to_num(np.asarray(v, np.float64).reshape(-1)))
 
+    def _geo_math(self, fn, args, where: str) -> Geo | None:
+        """fn of one geometric quantity (and constants) when affine in it; None (after a warning) otherwise."""
+        geos = [a for a in args if isinstance(a, Geo)]
+        g0 = geos[0]
+        if any((g.source, g.space) != (g0.source, g0.space) for g in geos) or \
+                any(not isinstance(a, (Geo, Const)) for a in args):
+            self.warn("position, normal or tangent combined with other varying values (textures, uvs, another "
+                      "of them): their value without a hit used", where)
+            return None
+        f = lambda g: fn(*[a.matrix @ g + a.offset if isinstance(a, Geo) else a.value for a in args])  # noqa: E731
+        mc = _affine_matrix(f, 3)
+        if mc is None or len(mc[1]) > 4:
+            self.warn("position, normal or tangent through math that is not affine in them: their value without a "
+                      "hit used", where)
+            return None
+        return Geo(g0.source, g0.space, mc[0], mc[1])
+
     def _uv_math(self, fn, args, i: int, where: str) -> Signal:
         uv = args[i]
         f1 = lambda x: fn(*[x if j == i else a.value for j, a in enumerate(args)])  # noqa
@@ -630,6 +846,8 @@ class Network:
         if any(mapping(t.ti) != mapping(first) for t in texs):
             return None
         if any(t.ti.texture is not None and t.ti.texture.udims is not None for t in texs):
+            return None
+        if any(t.ti.projection != "uv" for t in texs):  # lookups not by uv: their texels are not on one grid
             return None
         sizes = [t.ti.texture.images[0].shape[:2] for t in texs if t.ti.texture is not None]
         if not sizes:

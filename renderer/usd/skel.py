@@ -6,16 +6,22 @@ Skinned points are in the skeleton's space (UsdSkel): the geometry is placed by 
 local-to-world transform, not its own. Keys: the shutter ends, every joint-animation, blend-shape-weight, points
 and skinning-primvar sample inside it, and ``CURVE_KEYS`` evenly spaced times when the skeleton moves (joint
 rotations are slerped by UsdSkel, so points travel on arcs between samples).
+
+A mesh's own ``skel:joints`` (any order, even the skeleton's) makes UsdSkel give it a joint mapper, which the
+normals use too. What UsdSkel cannot do degrades alone, with one warning each: blend shapes it cannot apply are
+left out, authored normals it cannot skin give way to the renderer's own; only when the points themselves cannot
+be skinned is the mesh drawn as authored (never dropped).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
-from pxr import Usd, UsdGeom, UsdSkel, Vt
+from pxr import Tf, Usd, UsdGeom, UsdSkel, Vt
 
 from renderer.motion.shutter import Shutter
 from renderer.usd.motion import shutter_interval
+from renderer.usd.reads import reads
 
 CURVE_KEYS = 5
 
@@ -27,6 +33,12 @@ class SkinBinding:
     skeleton: Usd.Prim
 
 
+@reads("SkelRoot")
+@reads("Skeleton", "joints", "bindTransforms", "restTransforms")
+@reads("SkelAnimation", "joints", "translations", "rotations", "scales", "blendShapes", "blendShapeWeights")
+@reads("BlendShape", "offsets", "pointIndices")
+@reads("SkelBindingAPI", "skel:joints", "skel:blendShapes", "primvars:skel:jointIndices", "primvars:skel:jointWeights",
+       "primvars:skel:geomBindTransform", "primvars:skel:skinningMethod")
 class Skinning:
     """Finds the skinning of gprims below SkelRoots (one UsdSkel.Cache for the stage) and evaluates it."""
 
@@ -75,12 +87,21 @@ class Skinning:
         return np.union1d(keys, sh.uniform(CURVE_KEYS)) if moving else np.array([sh.frame])
 
     def skinned_points(self, prim, b: SkinBinding, times: np.ndarray) -> np.ndarray | None:
-        """(P, V, 3) float32 skinned points (skeleton space) at absolute times; None if UsdSkel cannot skin it."""
+        """(P, V, 3) float32 skinned points (skeleton space) at absolute times; None if UsdSkel cannot skin it.
+        Blend shapes UsdSkel cannot apply are left out (one warning), the points still skinned."""
+        blend = UsdSkel.BlendShapeQuery(UsdSkel.BindingAPI(prim)) if b.query.HasBlendShapes() else None
+        if blend is not None:
+            try:
+                return self._skinned_points(prim, b, times, blend)
+            except (Tf.ErrorException, ValueError, TypeError, ArithmeticError):
+                self.warn("blend shapes that UsdSkel could not apply ignored", str(prim.GetPath()))
+        return self._skinned_points(prim, b, times, None)
+
+    def _skinned_points(self, prim, b: SkinBinding, times: np.ndarray, blend) -> np.ndarray | None:
         attr = UsdGeom.PointBased(prim).GetPointsAttr()
         base = attr.Get(self.shutter.frame)
         if base is None:
             return None
-        blend = UsdSkel.BlendShapeQuery(UsdSkel.BindingAPI(prim)) if b.query.HasBlendShapes() else None
         out = []
         for t in times:
             pts = attr.Get(float(t))
@@ -117,9 +138,10 @@ class Skinning:
         influences = b.query.ComputeJointInfluences(float(t))
         if xforms is None or not influences:
             return None
-        mapper = b.query.GetJointMapper()
-        if mapper is not None and not mapper.IsNull():
-            xforms = mapper.RemapTransforms(xforms)
+        mapper = b.query.GetJointMapper()  # set by any authored skel:joints, even in the skeleton's own order
+        if mapper is not None and not mapper.IsNull() and not mapper.IsIdentity():
+            # usd-core's binding is RemapTransforms(source, target, elementSize=1), returning the remapped array
+            xforms = mapper.RemapTransforms(xforms, Vt.Matrix4dArray(), 1)
         x = np.asarray(xforms, np.float64).reshape(-1, 4, 4)[:, :3, :3]
         idx = np.asarray(influences[0], np.int64)
         w = np.asarray(influences[1], np.float64)

@@ -19,6 +19,7 @@ import numpy as np
 from pxr import UsdGeom
 
 from renderer.subdiv import FVAR_MODES, MAX_LEVEL, SubdivOptions, subdivide, topology, triangle_count
+from renderer.usd.reads import reads
 
 EDGE_PIXELS = 4.0  # target projected length of a refined edge, pixels
 DEFAULT_LEVEL = 2  # no camera to measure from
@@ -73,6 +74,8 @@ class SubdivisionDetail:
         return level
 
 
+@reads("Mesh", "interpolateBoundary", "faceVaryingLinearInterpolation", "triangleSubdivisionRule", "creaseIndices",
+       "creaseLengths", "creaseSharpnesses", "cornerIndices", "cornerSharpnesses")
 def options(mesh: UsdGeom.Mesh, frame: float, scheme: str) -> SubdivOptions:
     """The mesh's subdivision attributes (unknown tokens fall back to USD's defaults)."""
     def get(attr, default):

@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 from pxr import UsdGeom
 
+from renderer.usd.reads import reads
+
 
 def _newell(x: np.ndarray, y: np.ndarray, z: np.ndarray, nxt: np.ndarray):
     """Newell's normal (nx, ny, nz), each (F,), of polygons given by their corners' coordinates x, y, z (F, n)."""
@@ -119,6 +121,7 @@ def triangulate(counts: np.ndarray, indices: np.ndarray, points: np.ndarray) -> 
     return corners[order], tri_faces[order]
 
 
+@reads("Mesh", "holeIndices")
 def hole_indices(mesh: UsdGeom.Mesh, frame: float, num_faces: int) -> np.ndarray:
     """The mesh's ``holeIndices`` at the frame (authored face indices, in range), possibly empty."""
     holes = mesh.GetHoleIndicesAttr().Get(frame)

@@ -1,8 +1,9 @@
 """UsdVol: ``Volume`` prims, their ``field:*`` relationships to ``OpenVDBAsset`` fields, and their volume material.
 
 A field is read from its ``filePath`` at the frame (a time-sampled path is a file sequence), picked in the file by
-``fieldName`` and ``fieldIndex`` (``renderer.media.openvdb``); ``fieldDataType`` and ``vectorDataRoleHint`` are
-checked against what the grid holds; ``fieldClass`` levelSet fields are not fog and are skipped with a warning.
+``fieldName`` and ``fieldIndex`` (``renderer.media.openvdb``); a grid that is not the scalar or vector its role
+needs is skipped (its ``fieldDataType`` named in the warning); ``fieldClass`` levelSet fields are not fog and are
+skipped with a warning.
 ``Field3DAsset`` fields and other field types are named in a warning. Fields shared by several Volumes (instances)
 are read once.
 
@@ -31,6 +32,7 @@ from pxr import UsdShade, UsdVol
 
 from renderer.media.openvdb import VdbError, read_field
 from renderer.scene.model import Volume, VolumeField, VolumeMedium
+from renderer.usd.reads import reads
 from renderer.usd.texture_files import resolve_asset
 
 VELOCITY_NAMES = ("vel", "v", "velocity")
@@ -40,19 +42,23 @@ VOLUME_OUTPUTS = ("volume", "arnold:volume", "mtlx:volume")
 class VolumeReader:
     """Reads Volume prims of one stage at one frame; caches fields by (file, name, index)."""
 
-    def __init__(self, frame: float, warn):
+    def __init__(self, frame: float, warn, skipped: set[str] | None = None):
         self.frame = frame
         self.warn = warn
+        self.skipped = skipped if skipped is not None else set()  # fields skipped with a warning (paths)
         self._fields: dict[tuple, VolumeField | None] = {}
 
     # -- fields ---------------------------------------------------------------------------------------------------
+    @reads("OpenVDBAsset", "filePath", "fieldName", "fieldIndex", "fieldClass", "fieldDataType")
     def field(self, prim, vector: bool) -> VolumeField | None:
         path = str(prim.GetPath())
         if prim.IsA(UsdVol.Field3DAsset):
             self.warn("Field3D volume fields skipped (no reader for the format)", path)
+            self.skipped.add(path)
             return None
         if not prim.IsA(UsdVol.OpenVDBAsset):
             self.warn("volume fields of unsupported types skipped", f"{path} ({prim.GetTypeName()})")
+            self.skipped.add(path)
             return None
         asset = UsdVol.OpenVDBAsset(prim)
         attr = asset.GetFilePathAttr()
@@ -85,6 +91,7 @@ class VolumeReader:
         return f
 
     # -- volumes --------------------------------------------------------------------------------------------------
+    @reads("Volume")
     def volume(self, prim, transform) -> Volume | None:
         """The Volume of a prim placed by ``transform`` (a MotionTransform), or None (with a warning)."""
         vol = UsdVol.Volume(prim)
@@ -117,6 +124,7 @@ class VolumeReader:
                       velocity=velocity)
 
     # -- materials ------------------------------------------------------------------------------------------------
+    @reads("Material", "outputs:volume")
     def material(self, prim) -> tuple[VolumeMedium, dict]:
         """The medium of the prim's bound material's volume output, and the field names it reads."""
         mat, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
