@@ -458,7 +458,9 @@ class _Run:
             aovs = tuple(dict.fromkeys(base.options.aovs + needed_aovs(vars_)))
             request = replace(base, frame=frame, product=first.path if first else None,
                               options=replace(base.options, aovs=aovs))
+            t_prep = time.perf_counter()
             prep = request.prepare(stage=self.stage, reuse=self.prepared.get(key))
+            load = time.perf_counter() - t_prep + (t_prep - t0 if g == 0 else 0.0)
             self.prepared[key] = prep
             for w in prep.warnings:  # each once per run (``_Warnings``)
                 self.warn(w)
@@ -486,19 +488,19 @@ class _Run:
                                        user_aovs=base.options.aovs, half=base.half)
                 if zeroed:
                     self.warn(f"{zeroed} non-finite pixel values were zeroed in {name}")
-                self._report(name, prep, result, t0)
+                self._report(name, prep, result, load)
             if store is not None:
                 store.remove()
         self.alf.report(1.0)
 
-    def _report(self, name: str, prep, result, t0: float) -> None:
+    def _report(self, name: str, prep, result, load: float) -> None:
         options = prep.options
         sps = result.samples / max(result.seconds, 1e-9)
         rps = result.rays / max(result.seconds, 1e-9)
         spp = f"{options.spp} spp"
         if result.samples != prep.width * prep.height * options.spp:  # adaptive or time-limited
             spp = f"{result.samples / (prep.width * prep.height):.1f} spp on average, at most {options.spp}"
-        load = self.load_seconds + max(0.0, time.perf_counter() - t0 - result.seconds)
+        load += self.load_seconds  # the stage and kernels, on the first frame's report
         self.load_seconds = 0.0
         print(f"wrote {name} ({prep.width}x{prep.height}, {spp}, {self.threads} threads): "
               f"{result.seconds:.2f} s render + {load:.2f} s load, {_si(sps)}samples/s, {_si(rps)}rays/s",
