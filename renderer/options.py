@@ -29,6 +29,13 @@ def _absolute_prim_path(v: str) -> str | None:
     return None if v.startswith("/") else f"camera must be an absolute prim path, got {v!r}"
 
 
+def _absolute_settings_path(v: str) -> str | None:
+    return None if v.startswith("/") else f"render settings must be an absolute prim path, got {v!r}"
+
+
+PURPOSES = ("default", "render", "proxy", "guide")  # UsdGeom's purposes
+
+
 def _ocio_config(v: str) -> str | None:
     ok = v.startswith("ocio://") or v.startswith("/")
     return None if ok else f"ocio config must be an ocio:// URI or an absolute path, got {v!r}"
@@ -62,6 +69,7 @@ class Setting:
     shape: str = "one"  # "one", "pair" (two numbers) or "many" (a list of distinct choices)
     max_length: int | None = None  # of a string
     flag: str | None = None  # the command line's flag, if not --name (a default-on bool: --no-name)
+    aliases: tuple[str, ...] = ()  # other spellings of the flag (husk's short ones: -c, -s)
     metavar: str | None = None
     scene: bool = False  # the prepared scene depends on it; else it steers sampling and output only
     check: Callable[[Any], str | None] | None = None  # a rule beyond the bounds: the problem, or None
@@ -118,7 +126,16 @@ _MAX_TIME = 1.0e9  # |time code| bound: keeps frame arithmetic exact enough and 
 SETTINGS_TABLE: tuple[Setting, ...] = (
     # What the frame is seen through: the prepared scene depends on these.
     Setting("camera", str, None, "camera prim path (default: the render settings' camera, else the first)",
-            optional=True, max_length=1024, metavar="PRIM_PATH", scene=True, check=_absolute_prim_path),
+            optional=True, max_length=1024, metavar="PRIM_PATH", scene=True, check=_absolute_prim_path,
+            aliases=("-c",)),
+    Setting("settings_prim", str, None, "RenderSettings prim whose camera, resolution, products and vars are "
+            "rendered (default: the stage's renderSettingsPrimPath, else the only one, else the first in path order)",
+            optional=True, max_length=1024, flag="--settings", aliases=("-s",), metavar="PRIM_PATH", scene=True,
+            check=_absolute_settings_path),
+    Setting("purposes", str, (), "geometry purposes drawn, e.g. default,proxy (default: the render settings' "
+            "includedPurposes, else default and render, or proxy where no prim is render); comma-separated or "
+            "repeated", choices=PURPOSES, shape="many", flag="--purpose", metavar="LIST",
+            scene=True),
     Setting("width", int, None, "width of the image written (default: the render settings', else 640)",
             unit="pixels", optional=True, ge=1, le=16384, scene=True),
     Setting("height", int, None, "height of the image written (default: the render settings', else at the "
@@ -166,6 +183,8 @@ SETTINGS_TABLE: tuple[Setting, ...] = (
             "would leave threads idle)", unit="pixels", ge=1, le=4096, metavar="N"),
 )
 SETTINGS: dict[str, Setting] = {s.name: s for s in SETTINGS_TABLE}
+# husk's spellings of several settings at once: ``--res W H`` is ``--width W --height H``
+SHORTHANDS: dict[str, tuple[str, ...]] = {"--res": ("width", "height")}
 
 MAX_SPP = SETTINGS["spp"].le
 MAX_DEPTH = SETTINGS["max_depth"].le

@@ -12,6 +12,8 @@ return the frame as a ``FrameImage`` of plain values that its coordinator writes
 """
 from __future__ import annotations
 
+import hashlib
+import pickle
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -41,7 +43,7 @@ from renderer.media.upload import MediaUpload, upload_media
 from renderer.motion.transform import matrix_at
 from renderer.options import MAX_PIXELS, MAX_SPP, TIME_FILTERS, RenderOptions
 from renderer.scene.flatten import flatten_still_instances
-from renderer.scene.model import Scene
+from renderer.scene.model import LIGHT_MESH, Scene
 from renderer.shading.materials import upload_material_textures, upload_materials
 
 
@@ -74,6 +76,11 @@ class PreparedScene:
     device: str = "cpu"
     warnings: list[str] = field(default_factory=list)
     media: MediaUpload | None = None  # participating media (volumes, and materials' interior media)
+    # what the hierarchy was built from: the scene's geometry's fingerprint and its flattened form, and the
+    # materials' fingerprint (``prepare``'s ``reuse``)
+    geometry_key: bytes = b""
+    flat: Scene | None = None
+    materials_key: bytes = b""
 
 
 def resolve_resolution(scene: Scene, options: RenderOptions) -> tuple[int, int]:
@@ -94,8 +101,38 @@ def load_kernels(device: str = "cpu") -> dict[str, str]:
     return kernel_cache.load_modules(RENDER_MODULES, device)
 
 
-def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> PreparedScene:
-    """Build the hierarchy and upload lights, materials and camera: once per (scene, frame)."""
+def _fingerprint(*parts) -> bytes:
+    return hashlib.blake2b(pickle.dumps(parts, protocol=pickle.HIGHEST_PROTOCOL), digest_size=20).digest()
+
+
+def _geometry_key(scene: Scene) -> bytes:
+    """What flattening, laying out and uploading the geometry read of a scene: meshes, instances (their motion
+    keys are in shutter time), CSG, which lights are linked and which instances and triangles emit."""
+    lights = [(lt.kind == LIGHT_MESH, lt.instance if lt.kind == LIGHT_MESH else -1, lt.triangles, lt.uniform,
+               lt.illuminates, lt.casts_shadow) for lt in scene.lights]
+    return _fingerprint(scene.meshes, scene.instances, scene.csg_operations, lights)
+
+
+def _flatten(scene: Scene, key: bytes, reuse: PreparedScene | None) -> Scene:
+    """The scene with its still instances merged and its meshes laid out for quads, or the earlier frame's when
+    its geometry is the same (``_geometry_key``): then only the lights are this frame's (a mesh light keeps the
+    instance and triangles flattening gave it)."""
+    if reuse is None or reuse.geometry_key != key or reuse.flat is None:
+        return order_for_quads(flatten_still_instances(scene))  # before anything reads triangle indices
+    old = reuse.flat
+    lights = [replace(lt, instance=was.instance, triangles=was.triangles) if lt.kind == LIGHT_MESH else lt
+              for lt, was in zip(scene.lights, old.lights)]
+    return replace(scene, meshes=old.meshes, instances=old.instances, lights=lights)
+
+
+def prepare(scene: Scene, options: RenderOptions, device: str = "cpu",
+            reuse: PreparedScene | None = None) -> PreparedScene:
+    """Build the hierarchy and upload lights, materials and camera: once per (scene, frame).
+
+    ``reuse``: an earlier frame's prepared scene, on the same device. Its hierarchy is kept when this frame's
+    geometry is the same (bit for bit: a fingerprint of its meshes, instances and mesh lights), and its materials and
+    textures when the materials are; lights, media and camera are built anew. A range of frames of a still set
+    builds its hierarchy and reads its textures once."""
     options.validate()
     if options.denoise:
         denoise.require()
@@ -105,11 +142,20 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> Prepar
     if width * height > MAX_PIXELS:
         raise SettingsError(f"image of {width}x{height} pixels is too large")
     dof = options.dof and not scene.render_settings.disable_depth_of_field
-    flat = order_for_quads(flatten_still_instances(scene))  # before anything reads triangle indices
-    geometry, stats = upload_geometry(flat, device)
     warnings = list(scene.warnings)
-    textures = upload_material_textures(flat.materials, device, warn=warnings.append)
-    materials = upload_materials(flat.materials, device)
+    reuse = reuse if reuse is not None and reuse.device == device else None
+    geometry_key = _geometry_key(scene)
+    flat = _flatten(scene, geometry_key, reuse)
+    if reuse is not None and reuse.geometry_key == geometry_key:
+        geometry, stats = reuse.geometry, reuse.stats
+    else:
+        geometry, stats = upload_geometry(flat, device)
+    materials_key = _fingerprint(flat.materials)
+    if reuse is not None and reuse.materials_key == materials_key:
+        textures, materials = reuse.textures, reuse.materials
+    else:
+        textures = upload_material_textures(flat.materials, device, warn=warnings.append)
+        materials = upload_materials(flat.materials, device)
     lights, light_count = upload_lights(flat, device, warn=lambda what, name="": warnings.append(f"{what}: {name}"))
     media = upload_media(scene, flat.materials, device,
                          warn=lambda what, name="": warnings.append(f"{what}: {name}"))
@@ -120,7 +166,7 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu") -> Prepar
     return PreparedScene(scene=scene, options=options, width=width, height=height, framing=framing,
                          geometry=geometry, materials=materials, textures=textures, lights=lights,
                          light_count=light_count, camera=cam, stats=stats, device=device, warnings=warnings,
-                         media=media)
+                         media=media, geometry_key=geometry_key, flat=flat, materials_key=materials_key)
 
 
 def with_options(prep: PreparedScene, options: RenderOptions) -> PreparedScene:
@@ -265,33 +311,50 @@ class FrameResult:
 
 
 def render_frame(prep: PreparedScene, *, tile_size: int | None = None, threads: int = 2,
-                 progress: Callable[[int, int], None] | None = None) -> FrameResult:
+                 progress: Callable[[int, int], None] | None = None,
+                 finished: dict[int, TileSums] | None = None,
+                 on_tile: Callable[[int, TileSums], None] | None = None) -> FrameResult:
     """Render every tile of the frame on ``threads`` threads (Warp launches release the GIL); the tile size
-    defaults to ``auto_tile_size``."""
+    defaults to ``auto_tile_size``.
+
+    ``finished``: tiles already rendered, by index in ``split_tiles`` order (a resumed render's checkpoints):
+    they are not rendered again, and each tile rendered is added to it as it finishes (so the frame so far can
+    be assembled at any moment), after ``on_tile(index, tile)``."""
     if threads < 1:
         raise SettingsError(f"threads must be >= 1, got {threads}")
     if tile_size is None:
         tile_size = auto_tile_size(prep.width, prep.height, threads)
     tiles = split_tiles(prep.width, prep.height, tile_size)
+    finished = {} if finished is None else finished
     total = prep.width * prep.height * prep.options.spp
-    done = {}
+    done = {tiles[i]: t.tile.width * t.tile.height * prep.options.spp for i, t in finished.items()}
     lock = threading.Lock()
 
-    def work(tile: Tile) -> TileSums:
+    def work(index: int) -> TileSums:
+        tile = tiles[index]
+
         def on_wave(n: int, _: int) -> None:
             with lock:
                 done[tile] = n
                 if progress is not None:
                     progress(sum(done.values()), total)
         budget = tile_time_budget(prep.options, tile, prep.width, prep.height, min(threads, len(tiles)))
-        return render_tile(prep, tile, on_wave, time_budget=budget, shared_borders=True)
+        result = render_tile(prep, tile, on_wave, time_budget=budget, shared_borders=True)
+        if on_tile is not None:
+            on_tile(index, result)
+        with lock:
+            finished[index] = result
+        return result
 
     t0 = time.perf_counter()
+    todo = [i for i in range(len(tiles)) if i not in finished]
     if threads == 1:
-        results = [work(t) for t in tiles]
+        for i in todo:
+            work(i)
     else:
         with ThreadPoolExecutor(max_workers=threads) as pool:
-            results = list(pool.map(work, tiles))
+            list(pool.map(work, todo))
+    results = [finished[i] for i in range(len(tiles))]
     seconds = time.perf_counter() - t0
     sums = assemble(results, prep.width, prep.height)
     return FrameResult(sums=sums, seconds=seconds, samples=int(sums["spp"].sum()),

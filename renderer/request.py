@@ -64,6 +64,9 @@ class RenderRequest:
     options: RenderOptions = field(default_factory=RenderOptions)
     half: bool = default_of("half")  # store colour and AOVs as HALF in the EXR (does not change the pixels)
     ocio_config: str | None = default_of("ocio_config")  # None: $OCIO, else OpenColorIO's built-in config
+    settings_prim: str | None = default_of("settings_prim")  # RenderSettings prim; None: the stage's choice
+    purposes: tuple[str, ...] = default_of("purposes")  # purposes drawn; (): the render settings' choice
+    product: str | None = None  # the RenderProduct whose overrides apply; None: the settings' first
 
     @classmethod
     def from_settings(cls, scene_path: str, frame: float | None, given: dict) -> "RenderRequest":
@@ -74,8 +77,9 @@ class RenderRequest:
         check_settings(values)
         if values.get("shutter") is not None:
             values["shutter"] = tuple(float(t) for t in values["shutter"])
-        if "aovs" in values:
-            values["aovs"] = tuple(dict.fromkeys(values["aovs"]))  # a repeated name means the same channels
+        for name in ("aovs", "purposes"):
+            if name in values:
+                values[name] = tuple(dict.fromkeys(values[name]))  # a repeated name means the same thing
 
         def take(record) -> dict:
             return {f.name: values[f.name] for f in dataclasses.fields(record) if f.name in values}
@@ -86,7 +90,8 @@ class RenderRequest:
     def settings(self) -> dict:
         """The request's values of every setting it carries, by the table's names."""
         out = {"camera": self.camera, "shutter": self.shutter, "motion_blur": self.motion_blur, "half": self.half,
-               "ocio_config": self.ocio_config}
+               "ocio_config": self.ocio_config, "settings_prim": self.settings_prim,
+               "purposes": self.purposes}
         out.update((f.name, getattr(self.lens, f.name)) for f in dataclasses.fields(LensOverrides))
         out.update((f.name, getattr(self.options, f.name)) for f in dataclasses.fields(RenderOptions)
                    if f.name in SETTINGS)
@@ -95,7 +100,7 @@ class RenderRequest:
     def scene_key(self) -> tuple:
         """What the prepared scene depends on besides the scene's content: the frame and the settings the table
         marks ``scene``. Jobs that differ only in sampling and output settings share one prepared scene."""
-        return (self.frame, tuple(sorted((k, v) for k, v in self.settings().items() if SETTINGS[k].scene)))
+        return (self.frame, self.product, tuple(sorted((k, v) for k, v in self.settings().items() if SETTINGS[k].scene)))
 
     @property
     def motion_blur_keys(self) -> bool:
@@ -105,12 +110,16 @@ class RenderRequest:
     def at_frame(self, frame: float | None) -> "RenderRequest":
         return dataclasses.replace(self, frame=frame)
 
-    def load(self) -> Scene:
-        """The frame as the renderer's Scene, lens overrides applied."""
+    def load(self, stage=None) -> Scene:
+        """The frame as the renderer's Scene, lens overrides applied. ``stage``: the scene file's stage, already
+        open (``renderer.usd.importer.open_stage``), as a range of frames reads it."""
         scene = load_scene(os.fspath(self.scene_path), self.frame, camera_path=self.camera, shutter=self.shutter,
                            motion_blur=self.motion_blur_keys, image_width=self.options.width,
-                           ocio_config=self.ocio_config)
+                           ocio_config=self.ocio_config, settings_path=self.settings_prim,
+                           product_path=self.product, purposes=self.purposes, stage=stage)
         return self.lens.apply(scene)
 
-    def prepare(self, device: str = "cpu") -> PreparedScene:
-        return prepare(self.load(), self.options, device=device)
+    def prepare(self, device: str = "cpu", stage=None, reuse: PreparedScene | None = None) -> PreparedScene:
+        """The frame prepared; ``reuse``: a prepared earlier frame whose unchanged parts are kept
+        (``render.prepare``)."""
+        return prepare(self.load(stage), self.options, device=device, reuse=reuse)

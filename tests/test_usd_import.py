@@ -251,23 +251,6 @@ def test_prims_of_unknown_types_are_named_in_a_warning(tmp_path):
     assert len(unknown) == 1 and "/Proc (ArnoldUsd)" in unknown[0] and "/Group" not in unknown[0], scene.warnings
 
 
-def test_render_vars_we_do_not_write_are_named_in_a_warning(tmp_path):
-    stage, path = new_stage(tmp_path)
-    add_tri(stage)
-    settings = UsdRender.Settings.Define(stage, "/Render/Settings")
-    product = UsdRender.Product.Define(stage, "/Render/Product")
-    settings.CreateProductsRel().AddTarget(product.GetPath())
-    for name, source, kind in (("rgba", "color", "raw"), ("lg_key", "C.*<L.'key'>", "lpe"), ("n", "N", "raw")):
-        var = UsdRender.Var.Define(stage, f"/Render/Vars/{name}")
-        var.CreateSourceNameAttr(source)
-        var.CreateSourceTypeAttr(kind)
-        product.CreateOrderedVarsRel().AddTarget(var.GetPath())
-    scene = save_and_load(stage, path)
-    lines = [w for w in scene.warnings if "render vars not written" in w]
-    assert len(lines) == 1 and "/Render/Vars/lg_key" in lines[0] and "/Render/Vars/n " in lines[0]
-    assert "/Render/Vars/rgba" not in lines[0]
-
-
 def test_light_filters_are_named_in_a_warning(tmp_path):
     path = tmp_path / "filters.usda"
     path.write_text('#usda 1.0\ndef Cube "C"\n{\n}\ndef LightFilter "Gobo"\n{\n}\n'

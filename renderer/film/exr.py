@@ -62,7 +62,7 @@ def write_exr(
     path: str | os.PathLike,
     channels: Mapping[str, np.ndarray],
     *,
-    half: bool = False,
+    half: bool | frozenset[str] = False,
     display_window: tuple[int, int, int, int] | None = None,
     data_window: tuple[int, int, int, int] | None = None,
     attributes: Mapping[str, object] | None = None,
@@ -71,7 +71,8 @@ def write_exr(
     """Write a frame atomically as a single-part scanline EXR and return the number of non-finite values zeroed.
 
     channels: (H, W) real arrays keyed by EXR channel name, all the same shape.
-    half: store all channels but depth (``Z``, ``depth.*``) as HALF instead of FLOAT.
+    half: store all channels but depth (``Z``, ``depth.*``) as HALF instead of FLOAT; or the set of the channels
+        stored as HALF.
     display_window, data_window: inclusive pixel boxes (xmin, ymin, xmax, ymax); both default to (0, 0, W-1, H-1).
         The data window must be W x H pixels.
     attributes: extra header attributes (see the module docstring for the type mapping and matrix convention).
@@ -195,7 +196,7 @@ def _write_file(exr: OpenEXR.File, path: str) -> None:
     exr.write(path)
 
 
-def _prepare_channels(channels: Mapping[str, np.ndarray], half: bool) -> tuple[dict[str, np.ndarray], int]:
+def _prepare_channels(channels: Mapping[str, np.ndarray], half) -> tuple[dict[str, np.ndarray], int]:
     """Copies in the stored dtype with non-finite values zeroed and overflow clamped; and the count zeroed."""
     if not channels:
         raise ValueError("no channels to write")
@@ -214,7 +215,7 @@ def _prepare_channels(channels: Mapping[str, np.ndarray], half: bool) -> tuple[d
             shape = src.shape
         elif src.shape != shape:
             raise ValueError(f"channel {name!r} has shape {src.shape}, others have {shape}")
-        as_half = half and not _is_depth(name)
+        as_half = name in half if isinstance(half, frozenset) else half and not _is_depth(name)
         limit = HALF_MAX if as_half else FLOAT_MAX
         bad = ~np.isfinite(src)
         replaced += int(np.count_nonzero(bad))

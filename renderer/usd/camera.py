@@ -28,25 +28,47 @@ def _get(prim, name: str, frame: float, default):
     return default if v is None else v
 
 
-@reads("RenderSettings", "disableMotionBlur", "instantaneousShutter", "disableDepthOfField", "includedPurposes",
-       "materialBindingPurposes", "renderingColorSpace")
-@reads("RenderProduct")
-def render_settings(stage: Usd.Stage, frame: float, warn) -> tuple[RenderSettingsInfo, object]:
-    """(RenderSettingsInfo, settings prim or None) from ``renderSettingsPrimPath`` or the only RenderSettings prim."""
-    prim = None
+def settings_prim(stage: Usd.Stage, settings_path: str | None, warn):
+    """The RenderSettings prim to render: ``settings_path`` (SceneError if it is not one), else the stage's
+    ``renderSettingsPrimPath``, else the only one, else the first in path order (a warning names the others);
+    None if the stage has none."""
+    if settings_path is not None:
+        p = stage.GetPrimAtPath(settings_path) if Sdf.Path.IsValidPathString(settings_path) else None
+        if not p or not p.IsA(UsdRender.Settings):
+            found = [str(q.GetPath()) for q in stage.Traverse() if q.IsA(UsdRender.Settings)]
+            raise SceneError(f"render settings prim not found: {settings_path} (the stage has "
+                             f"{', '.join(found) if found else 'none'})")
+        return p
     meta = stage.GetMetadata("renderSettingsPrimPath") if stage.HasAuthoredMetadata("renderSettingsPrimPath") else ""
     if meta:
         p = stage.GetPrimAtPath(meta) if Sdf.Path.IsValidPathString(meta) else None
         if p and p.IsA(UsdRender.Settings):
-            prim = p
-        else:
-            warn(f"renderSettingsPrimPath {meta} is not a RenderSettings prim; ignored")
-    if prim is None:
-        found = [p for p in stage.Traverse() if p.IsA(UsdRender.Settings)]
-        if found:
-            prim = found[0]
-            if len(found) > 1:
-                warn(f"{len(found)} RenderSettings prims and no renderSettingsPrimPath: using {found[0].GetPath()}")
+            return p
+        warn(f"renderSettingsPrimPath {meta} is not a RenderSettings prim; ignored")
+    found = [p for p in stage.Traverse() if p.IsA(UsdRender.Settings)]
+    if len(found) > 1:
+        warn(f"{len(found)} RenderSettings prims and none named (--settings or renderSettingsPrimPath): using "
+             f"{found[0].GetPath()}, not {', '.join(str(p.GetPath()) for p in found[1:])}")
+    return found[0] if found else None
+
+
+# what ``renderer.usd.products`` reads of products and vars (declared here, where the importer sees them)
+@reads("RenderProduct", "productName", "productType")
+@reads("RenderVar", "sourceName", "sourceType", "dataType")
+def settings_products(stage: Usd.Stage, prim) -> list:
+    """The RenderProduct prims of a RenderSettings prim, in its ``products`` order."""
+    products = [stage.GetPrimAtPath(t) for t in UsdRender.Settings(prim).GetProductsRel().GetForwardedTargets()]
+    return [p for p in products if p and p.IsA(UsdRender.Product)]
+
+
+@reads("RenderSettings", "disableMotionBlur", "instantaneousShutter", "disableDepthOfField", "includedPurposes",
+       "materialBindingPurposes", "renderingColorSpace")
+@reads("RenderProduct", "disableMotionBlur", "instantaneousShutter", "disableDepthOfField")
+def render_settings(stage: Usd.Stage, frame: float, warn, settings_path: str | None = None,
+                    product_path: str | None = None) -> tuple[RenderSettingsInfo, object]:
+    """(RenderSettingsInfo, settings prim or None) of the settings prim ``settings_prim`` picks, with the authored
+    overrides of its product ``product_path`` (default: its first product)."""
+    prim = settings_prim(stage, settings_path, warn)
     info = RenderSettingsInfo()
     if prim is None:
         return info, None
@@ -58,13 +80,24 @@ def render_settings(stage: Usd.Stage, frame: float, warn) -> tuple[RenderSetting
     _read_purposes(info, rs, frame, warn)
     space = _get(prim, "renderingColorSpace", frame, None)
     info.rendering_color_space = str(space) if space else None
-    # the first RenderProduct's authored values override the settings' (UsdRenderSettingsBase is shared)
-    products = [stage.GetPrimAtPath(t) for t in rs.GetProductsRel().GetForwardedTargets()]
-    products = [p for p in products if p and p.IsA(UsdRender.Product)]
+    # the product's authored values override the settings' (UsdRenderSettingsBase is shared)
+    products = settings_products(stage, prim)
+    if product_path is not None:
+        products = [p for p in products if str(p.GetPath()) == product_path]
     if products:
         _read_settings_base(info, UsdRender.Product(products[0]), frame, warn)
-        _warn_unwritten_vars(stage, UsdRender.Product(products[0]), warn)
+        product = products[0]
+        for name in ("disableMotionBlur", "instantaneousShutter"):
+            if _authored(product, name) and bool(_get(product, name, frame, False)):
+                info.disable_motion_blur = True
+        if _authored(product, "disableDepthOfField"):
+            info.disable_depth_of_field = bool(_get(product, "disableDepthOfField", frame, False))
     return info, prim
+
+
+def _authored(prim, name: str) -> bool:
+    attr = prim.GetAttribute(name)
+    return bool(attr) and attr.HasAuthoredValue()
 
 
 def _read_purposes(info: RenderSettingsInfo, rs, frame: float, warn) -> None:
@@ -81,25 +114,6 @@ def _read_purposes(info: RenderSettingsInfo, rs, frame: float, warn) -> None:
             warn(f"{rs.GetPath()}: materialBindingPurposes other than full, preview and all-purpose ignored",
                  ", ".join(p for p in purposes if p not in known))
         info.material_binding_purpose = known[0] if known else "full"
-
-
-BEAUTY_SOURCES = {"color", "ci", "c", "rgba", "rgb", "beauty", "c.*", "c.*[<l.>o]", "c<.*>"}
-
-
-@reads("RenderVar", "sourceName", "sourceType")
-def _warn_unwritten_vars(stage: Usd.Stage, product, warn) -> None:
-    """The EXR holds the beauty (R, G, B, A) and the AOVs asked for on the command line or in the job; a product's
-    other render vars (light groups, LPEs, primvars) are named in one warning rather than dropped silently."""
-    for target in product.GetOrderedVarsRel().GetForwardedTargets():
-        var = stage.GetPrimAtPath(target)
-        if not var or not var.IsA(UsdRender.Var):
-            continue
-        rv = UsdRender.Var(var)
-        source = str(rv.GetSourceNameAttr().Get() or "")
-        if source.strip().lower() not in BEAUTY_SOURCES:
-            kind = str(rv.GetSourceTypeAttr().Get() or "raw")
-            warn("render vars not written (the EXR holds the beauty and the --aov channels)",
-                 f"{target} ({kind} {source})")
 
 
 @reads("RenderSettingsBase", "resolution", "pixelAspectRatio", "aspectRatioConformPolicy", "dataWindowNDC")

@@ -8,9 +8,9 @@ the package's other modules: ``mesh``, ``primitives``, ``curves``, ``materials``
 
 Policies worth knowing:
 
-* **Purpose**: the purposes the render settings' ``includedPurposes`` name; without it ``default`` and ``render``
-  prims are drawn, ``guide`` never, ``proxy`` prims only when the stage has no prim of purpose ``render`` at all (a
-  stage-wide rule, simpler than per-model proxy pairing).
+* **Purpose**: the purposes asked for (``purposes``), else those the render settings' ``includedPurposes`` name;
+  without either ``default`` and ``render`` prims are drawn, ``guide`` never, ``proxy`` prims only when the stage
+  has no prim of purpose ``render`` at all (a stage-wide rule, simpler than per-model proxy pairing).
 * **Unread attributes**: every authored attribute of a UsdGeom, UsdLux, UsdShade, UsdSkel, UsdRender or UsdVol
   schema that no reader declared (``reads``) is named in one warning per attribute and prim type.
 * **Visibility**: inherited ``invisible`` hides the subtree. Time-sampled visibility becomes the instance's
@@ -95,7 +95,8 @@ class WarningLog:
 def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_path: str | None = None,
                shutter: tuple[float, float] | None = None, motion_blur: bool = True,
                subdivision_level: int | None = None, image_width: int | None = None,
-               ocio_config: str | None = None) -> sc.Scene:
+               ocio_config: str | None = None, settings_path: str | None = None, product_path: str | None = None,
+               purposes: tuple[str, ...] = (), stage=None) -> sc.Scene:
     """Load one frame of a USD stage as a ``Scene``.
 
     ``frame`` defaults to the stage's startTimeCode (0 if no range is authored). The shutter is ``frame +``
@@ -105,6 +106,10 @@ def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_pa
     render settings' ``renderingColorSpace`` (default linear Rec.709) through the OpenColorIO config
     ``ocio_config`` (default ``$OCIO``, else OpenColorIO's built-in one; ``renderer.color``). Raises SceneError
     (one-line message) for a missing or malformed file or a bad camera path.
+
+    The render settings are those of ``settings_path`` (see ``camera.settings_prim``) with the overrides of its
+    product ``product_path`` (default: the first). ``stage``: the stage already opened from ``path``
+    (``open_stage``), for a range of frames to read one stage.
     """
     path = os.fspath(path)
     if not os.path.isfile(path):
@@ -116,10 +121,14 @@ def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_pa
         raise SettingsError(f"frame must be finite, got {frame}")
     if subdivision_level is not None and not 0 <= subdivision_level <= MAX_LEVEL:
         raise SettingsError(f"subdivision level must be between 0 and {MAX_LEVEL}, got {subdivision_level}")
-    stage = _open_stage(path)
+    if stage is None:
+        stage = _open_stage(path)
     try:
-        return _Importer(stage, path, frame, camera_path, shutter, motion_blur, subdivision_level,
-                         image_width, ocio_config).run()
+        importer = _Importer(stage, path, frame, camera_path, shutter, motion_blur, subdivision_level,
+                             image_width, ocio_config)
+        importer.settings_path, importer.product_path = settings_path, product_path
+        importer.purposes = tuple(purposes)
+        return importer.run()
     except Tf.ErrorException as e:
         raise SceneError(f"cannot read {os.path.basename(path)}: {_pxr_message(e)}") from None
 
@@ -147,6 +156,15 @@ def malformed_usd_message(name: str, err: Exception) -> str:
     m = re.search(r"line (\d+)", msg)
     where = f" at line {m.group(1)}" if m else ""
     return f"malformed USD in {name}{where}: {msg}"
+
+
+def open_stage(path: str | os.PathLike) -> Usd.Stage:
+    """The stage of a scene file, payloads loaded (SceneError for a missing or malformed file): to hand to
+    ``load_scene`` for each frame of a range."""
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise SceneError(f"scene file not found: {path}")
+    return _open_stage(path)
 
 
 def _open_stage(path: str) -> Usd.Stage:
@@ -206,6 +224,9 @@ class _Importer:
         self._in_prototype = 0  # > 0 while reading PointInstancer prototypes (no single view)
         self.csg = usd_csg.CsgGroups(self.warn)
         self._skipped: set[str] = set()  # prims skipped with a warning of their own (not checked for unread data)
+        self.settings_path: str | None = None
+        self.product_path: str | None = None
+        self.purposes: tuple[str, ...] = ()
 
     # -- top level ------------------------------------------------------------------------------------------------
     def run(self) -> sc.Scene:
@@ -215,7 +236,7 @@ class _Importer:
         if errors:
             warn(f"{len(errors)} composition error(s) (missing references/payloads?); the rest was loaded",
                  str(errors[0]).splitlines()[0] if str(errors[0]) else None)
-        settings, _ = usd_camera.render_settings(stage, self.frame, warn)
+        settings, _ = usd_camera.render_settings(stage, self.frame, warn, self.settings_path, self.product_path)
         self.color_spaces = ColorSpaces(settings.rendering_color_space, self.ocio_config)
         self.colors = AttributeColors(self.color_spaces, warn)
         cam_prim = usd_camera.find_camera(stage, self.camera_path, settings, warn)
@@ -223,7 +244,8 @@ class _Importer:
         self.shutter = self._shutter(cam_prim, settings)
         self.xf = TransformSampler(self.shutter)
         self.materials = MaterialTable(self.frame, warn, self.shutter, self.colors, settings.material_binding_purpose)
-        self._included = settings.included_purposes  # None: default and render, proxy where no render
+        # None: default and render, proxy where no render
+        self._included = self.purposes or settings.included_purposes
         self.volume_reader = usd_volumes.VolumeReader(self.frame, warn, self._skipped)
         self.detail = self._subdivision_detail(cam_prim, settings)
         self.skinning = Skinning(self.shutter, warn)
@@ -398,7 +420,7 @@ class _Importer:
         return attr.Get(self.frame) == UsdGeom.Tokens.invisible
 
     def _may_draw(self, purpose: str) -> bool:
-        """Whether prims of a purpose may be drawn: those the render settings' includedPurposes name, else all but
+        """Whether prims of a purpose may be drawn: those asked for or the render settings' includedPurposes name, else all but
         guides (proxies then only where the stage has no render purpose, see ``_visit_gprim``)."""
         return purpose in self._included if self._included is not None else purpose != "guide"
 

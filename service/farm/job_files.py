@@ -6,7 +6,7 @@
 Only the service reads and writes them (workers return tiles as task results and never see this directory). A
 tile's index is its place in the frame's grid (``renderer.film.tiles.split_tiles``).
 
-A checkpoint is written to a temporary file in its directory and renamed over its name (``renderer.files``), so a
+A checkpoint is written to a temporary file in its directory and renamed over its name (``renderer.checkpoint``), so a
 file that exists is complete: a service killed at any moment resumes from the tiles on disk, and assembling them
 gives the same bits as rendering the frame in one go (``render_tile`` is a pure function of scene, options and
 tile).
@@ -16,9 +16,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-import numpy as np
-
-from renderer.files import atomic_write
+from renderer.checkpoint import load_tile, save_tile  # noqa: F401 - the tile files' format is the renderer's
 
 
 class JobFiles:
@@ -42,13 +40,3 @@ class JobFiles:
     def remove(self) -> None:
         shutil.rmtree(self.root, ignore_errors=True)
 
-
-def save_tile(path: Path, arrays: dict[str, np.ndarray]) -> None:
-    """Write a tile checkpoint atomically. FileNotFoundError if the job's directory is gone (job deleted)."""
-    with atomic_write(path) as f:
-        np.savez(f, **arrays)
-
-
-def load_tile(path: Path) -> dict[str, np.ndarray]:
-    with np.load(path) as z:
-        return {k: z[k] for k in z.files}
