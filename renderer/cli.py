@@ -347,7 +347,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     """Render the frames, each to its outputs; in a range, a failed frame is reported and the others render."""
     from renderer.errors import RenderError
     from renderer.render import default_threads, load_kernels
-    from renderer.usd.importer import open_stage
+    from renderer.usd.stage import open_stage
     from renderer.usd.products import default_frame, resolve_settings_path
 
     if args.output is not None and not args.make_output_path and expand_frame(args.output, 0.0) == args.output:

@@ -112,7 +112,7 @@ class RenderRequest:
 
     def load(self, stage=None) -> Scene:
         """The frame as the renderer's Scene, lens overrides applied. ``stage``: the scene file's stage, already
-        open (``renderer.usd.importer.open_stage``), as a range of frames reads it."""
+        open (``renderer.usd.stage.open_stage``), as a range of frames reads it."""
         scene = load_scene(os.fspath(self.scene_path), self.frame, camera_path=self.camera, shutter=self.shutter,
                            motion_blur=self.motion_blur_keys, image_width=self.options.width,
                            ocio_config=self.ocio_config, settings_path=self.settings_prim,

@@ -204,7 +204,7 @@ def test_a_frame_reuses_the_hierarchy_of_the_one_before_while_the_geometry_is_st
     from renderer.render import render_frame
     from renderer.request import RenderRequest
     from renderer.options import RenderOptions
-    from renderer.usd.importer import open_stage
+    from renderer.usd.stage import open_stage
 
     stage = stages.new_stage(tmp_path / "a.usda")
     stages.camera(stage)

@@ -14,8 +14,8 @@ from renderer.motion.shutter import Shutter
 from renderer.accel import embree
 from renderer.accel.intersect import Geometry, intersect_closest
 from renderer.accel.quads import embree_triangle, order_for_quads, quad_order, quad_runs, reorder_mesh
+from renderer.accel.surface import surface_at
 from renderer.accel.upload import upload_geometry
-from renderer.integrator import surface_at
 from renderer.motion.transform import MotionTransform
 from renderer.scene.model import LIGHT_MESH, Camera, Instance, Light, Material, Mesh, Scene
 from tests.test_accel import rot_y

@@ -15,7 +15,8 @@ from renderer.scene import model as sc
 from renderer.motion.transform import matrix_at
 from renderer.usd.primvars import read_named_uvs
 from renderer.usd.materials import MaterialTable
-from renderer.usd.importer import WarningLog, load_scene
+from renderer.usd.importer import load_scene
+from renderer.usd.stage import WarningLog
 
 ASSETS = pathlib.Path("/work/shared/usd-assets")
 F = Sdf.ValueTypeNames

@@ -168,7 +168,7 @@ def test_subdivided_texture_coordinates_and_named_uv_sets(tmp_path):
     corner keeps uv = xy of the cage; a second set read by name for materials lines up with the same
     triangles; varying uvs refine linearly too."""
     from renderer.usd.primvars import read_named_uvs
-    from renderer.usd.importer import WarningLog
+    from renderer.usd.stage import WarningLog
 
     stage = stages.new_stage(tmp_path / "uv.usda")
     m = grid_mesh(stage, "/World/Grid", n=2, size=2.0, scheme=UsdGeom.Tokens.catmullClark)

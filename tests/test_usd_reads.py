@@ -12,11 +12,11 @@ from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdRender, UsdShade, UsdSkel, Usd
 
 import stages
 from renderer.usd import reads
-from renderer.usd.importer import WarningLog, load_scene
+from renderer.usd.importer import load_scene
+from renderer.usd.stage import WarningLog
 
 # one attribute no reader consumes, per claimed schema library: (prim type in the warning, attribute). UsdShade
-# has none left (``test_every_usdshade_attribute_is_read``), nor have UsdRender's settings, products and vars
-# (``drt render`` writes the products: ``renderer.usd.products``).
+# and UsdRender have none left (``test_every_usdshade_and_usdrender_attribute_is_read``).
 IGNORED = {
     "UsdGeom": ("Camera", "stereoRole"),
     "UsdLux": ("CylinderLight", "treatAsLine"),
@@ -97,13 +97,15 @@ def test_a_reader_declaring_an_attribute_silences_its_warning(tmp_path, monkeypa
     assert ("Camera", "stereoRole") not in found and ("CylinderLight", "treatAsLine") in found
 
 
-def test_every_usdshade_attribute_is_read():
-    """UsdShade's schema attributes (Material outputs, the shader id) are all declared by readers."""
+def test_every_usdshade_and_usdrender_attribute_is_read():
+    """UsdShade's schema attributes (Material outputs, the shader id) and UsdRender's (settings, products and vars:
+    ``drt render`` writes products and their vars) are all declared by readers."""
     reg = Usd.SchemaRegistry()
-    for schema in ("Material", "Shader", "NodeGraph"):
+    for schema in ("Material", "Shader", "NodeGraph", "RenderSettings", "RenderProduct", "RenderVar"):
         d = reg.FindConcretePrimDefinition(schema)
         names = {n for n in d.GetPropertyNames() if d.GetAttributeDefinition(n)}
-        assert names <= reads.consumed(schema), (schema, names - reads.consumed(schema))
+        base = reads.consumed("RenderSettingsBase") if schema in ("RenderSettings", "RenderProduct") else frozenset()
+        assert names <= reads.consumed(schema) | base, (schema, names - reads.consumed(schema) - base)
 
 
 def test_field3d_volumes_are_named_once(tmp_path):

@@ -8,18 +8,9 @@ import warp as wp
 
 from renderer.accel.csg import csg_closest
 from renderer.accel.intersect import BIG, Geometry, intersect_closest
+from renderer.accel.surface import display_diffuse, shading_normal, surface_at
 from renderer.camera import CameraParams, camera_ray
-from renderer.integrator import (
-    FLAG_DELTA,
-    RR_START,
-    display_diffuse,
-    finite3,
-    offset_origin,
-    regularized_params,
-    roughness_of_pdf,
-    shading_normal,
-    surface_at,
-)
+from renderer.integrator import FLAG_DELTA, RR_START, finite3, offset_origin, regularized_params, roughness_of_pdf
 from renderer.sampling.sobol import (
     BOUNCE_LOBE,
     BOUNCE_ROULETTE,

@@ -31,8 +31,9 @@ from __future__ import annotations
 import numpy as np
 
 from renderer.scene.model import Texture, TextureInput
-from renderer.usd.shading_network import (RAW_NAMES, SRGB_NAMES, UV, Const, Display, Network, Tex, _numeric, _vec,
-                                          const, shader_id)
+from renderer.usd.shading_network import Network, vector
+from renderer.usd.shading_nodes import RAW_NAMES, SRGB_NAMES, shader_id
+from renderer.usd.signals import UV, Const, Display, Tex, const, numeric
 from renderer.usd.texture_files import resolve_asset
 
 CHECKER_TEXELS = 32  # texels per checker square in the texture made for a checkerboard node
@@ -130,7 +131,7 @@ def _image(net: Network, prim, output: str):
     where = str(prim.GetPath())
     attr, value = net.raw(prim, "filename")
     path = str(getattr(value, "path", value) or "").strip() if value is not None else ""
-    missing = _vec(net.value(prim, "missing_texture_color", None), 4, (0.0, 0.0, 0.0, 0.0))
+    missing = vector(net.value(prim, "missing_texture_color", None), 4, (0.0, 0.0, 0.0, 0.0))
     if not path:
         return Tex(TextureInput(None, "rgba", fallback=missing), 4)
     uv = _uv_of(net, prim, "uvcoords", "uvset")
@@ -159,8 +160,8 @@ def _image(net: Network, prim, output: str):
     for w in ("swrap", "twrap"):
         mode = _WRAP.get(str(net.value(prim, w, "periodic")), "repeat")
         wraps.append("repeat" if mode == "useMetadata" else mode)
-    mul = _vec(net.value(prim, "multiply", None), 3, (1.0, 1.0, 1.0))
-    off = _vec(net.value(prim, "offset", None), 3, (0.0, 0.0, 0.0))
+    mul = vector(net.value(prim, "multiply", None), 3, (1.0, 1.0, 1.0))
+    off = vector(net.value(prim, "offset", None), 3, (0.0, 0.0, 0.0))
     out = {"r": "r", "g": "g", "b": "b", "a": "a", "rgb": "rgb"}.get(output, "rgba")
     n = 1 if len(out) == 1 else (3 if out == "rgb" else 4)
     ti = TextureInput(texture=texture, output=out, scale=mul + (1.0,), bias=off + (0.0,), fallback=missing,
@@ -215,7 +216,7 @@ def _checkerboard(net: Network, prim, output: str):
 def _user_data(n: int):
     def evaluate(net: Network, prim, output: str):
         var = str(net.value(prim, "attribute", "") or "")
-        fb = _numeric(net.value(prim, "default", None))
+        fb = numeric(net.value(prim, "default", None))
         if var == "displayColor":
             return Display(np.resize(fb.value, 3) if fb is not None else np.zeros(3))
         net.warn("arnold:user_data readers other than displayColor read their default", f"{prim.GetPath()} ({var})")

@@ -4,7 +4,7 @@ No pxr object leaves ``renderer/usd``. This module opens the stage (payloads loa
 shutter, walks the stage (native instances expanded as instance proxies, PointInstancers expanded per instance,
 purpose and visibility honoured) and assembles meshes, instances, materials, lights and camera. The parts live in
 the package's other modules: ``mesh``, ``primitives``, ``curves``, ``materials``, ``lights``, ``camera``,
-``motion``.
+``motion``, ``point_instancers``, ``stage`` (opening the file, the grouped warnings).
 
 Policies worth knowing:
 
@@ -24,13 +24,13 @@ Policies worth knowing:
 from __future__ import annotations
 
 import os
-import re
 
 import numpy as np
 from pxr import Gf, Tf, Usd, UsdGeom, UsdLux, UsdRender, UsdShade
 
 from renderer.color import ColorSpaces
 from renderer.errors import SceneError, SettingsError
+from renderer.motion.shutter import Shutter
 from renderer.scene import model as sc
 from renderer.scene.analytic import object_box, realize_tessellations
 from renderer.subdiv import MAX_LEVEL
@@ -44,13 +44,13 @@ from renderer.usd.materials import MaterialTable
 from renderer.usd.mesh import read_mesh
 from renderer.usd.mesh_lights import apply_mesh_light
 from renderer.usd.mtlx import compose_mtlx
-from renderer.motion.shutter import Shutter
-from renderer.usd.motion import (TransformSampler, collapse_keys, motion_transform, motion_transforms,
-                                 refine_keys, samples_in_shutter, shutter_interval)
+from renderer.usd.motion import TransformSampler, collapse_keys, motion_transform, motion_transforms, samples_in_shutter
+from renderer.usd.point_instancers import PointInstancing
 from renderer.usd.primitives import PRIMITIVE_TYPES, primitive_signature, read_primitive
 from renderer.usd.primvars import default_uv_name, read_display_colors, read_named_uvs
 from renderer.usd.reads import reads, report_unread
 from renderer.usd.skel import Skinning
+from renderer.usd.stage import WarningLog, _open_stage, _pxr_message
 from renderer.usd.subdiv import SubdivisionDetail
 from renderer.usd import volumes as usd_volumes  # noqa: I100
 
@@ -61,35 +61,6 @@ _READ_ERRORS = (Tf.ErrorException, ValueError, TypeError, ArithmeticError)
 
 def _failure(prim, e: Exception) -> str:
     return f"{prim.GetPath()} ({type(e).__name__}: {' '.join(str(e).split())[:160]})"
-
-
-_PI_ATTRS = ("positions", "orientations", "orientationsf", "scales", "velocities", "angularVelocities",
-             "accelerations", "protoIndices")
-
-
-class WarningLog:
-    """Human-readable warnings, grouped: one line per kind of problem listing a few of the prims concerned."""
-
-    MAX_ITEMS = 4
-
-    def __init__(self):
-        self._groups: dict[str, list[str]] = {}
-
-    def __call__(self, message: str, item: str | None = None) -> None:
-        items = self._groups.setdefault(message, [])
-        if item is not None and item not in items:
-            items.append(item)
-
-    def lines(self) -> list[str]:
-        out = []
-        for message, items in self._groups.items():
-            if not items:
-                out.append(message)
-                continue
-            shown = ", ".join(items[: self.MAX_ITEMS])
-            more = f" and {len(items) - self.MAX_ITEMS} more" if len(items) > self.MAX_ITEMS else ""
-            out.append(f"{message} ({len(items)}): {shown}{more}")
-        return out
 
 
 def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_path: str | None = None,
@@ -137,54 +108,11 @@ def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_pa
 # Opening and error messages
 
 
-def _pxr_message(err: Exception) -> str:
-    """The first meaningful pxr error text, squeezed onto one line."""
-    text = str(err)
-    parts = re.findall(r"Error in '[^']*' at line \d+ in file [^:]+ : '(.*?)'\s*(?=\n\s*Error in|$)", text, re.S)
-    msg = parts[0] if parts else text
-    msg = re.sub(r"pxrInternal_[A-Za-z0-9_]*::", "", msg)
-    msg = re.sub(r"\b[A-Za-z_]+::", "", msg)
-    return " ".join(msg.split())
-
-
-def malformed_usd_message(name: str, err: Exception) -> str:
-    """One line for a USD file pxr cannot read, with the line (and column) the parser reported."""
-    msg = _pxr_message(err)
-    m = re.search(r"[^\s:]*:(\d+):(\d+):\s*(.*)", msg)
-    if m:
-        return f"malformed USD in {name}: syntax error at line {m.group(1)} (column {m.group(2)}): {m.group(3)}"
-    m = re.search(r"line (\d+)", msg)
-    where = f" at line {m.group(1)}" if m else ""
-    return f"malformed USD in {name}{where}: {msg}"
-
-
-def open_stage(path: str | os.PathLike) -> Usd.Stage:
-    """The stage of a scene file, payloads loaded (SceneError for a missing or malformed file): to hand to
-    ``load_scene`` for each frame of a range."""
-    path = os.fspath(path)
-    if not os.path.isfile(path):
-        raise SceneError(f"scene file not found: {path}")
-    return _open_stage(path)
-
-
-def _open_stage(path: str) -> Usd.Stage:
-    name = os.path.basename(path)
-    try:
-        stage = Usd.Stage.Open(path, Usd.Stage.LoadAll)
-    except Tf.ErrorException as e:
-        raise SceneError(malformed_usd_message(name, e)) from None
-    except Exception as e:  # noqa: BLE001 - any other pxr failure is a user error about this file
-        raise SceneError(f"malformed USD in {name}: {' '.join(str(e).split())}") from None
-    if stage is None:
-        raise SceneError(f"malformed USD in {name}: the stage could not be opened")
-    return stage
-
-
 # ---------------------------------------------------------------------------------------------------------------
 # The importer
 
 
-class _Importer:
+class _Importer(PointInstancing):
     def __init__(self, stage, source, frame, camera_path, shutter_override, motion_blur, subdivision_level=None,
                  image_width=None, ocio_config=None):
         self.stage = stage
@@ -657,183 +585,6 @@ class _Importer:
             self._hi = np.maximum(self._hi, world.reshape(-1, 3).max(axis=0))
         self._pending.clear()
 
-    # -- point instancers ------------------------------------------------------------------------------------------
-    def _point_instancer(self, prim, interval) -> None:
-        times = self._pi_key_times(prim)
-        meshes, names, rows = self._pi_placements(prim, times)
-        if not meshes:
-            return
-        if len(times) > 1:
-            times, rows = refine_keys(lambda ts: self._pi_placements(prim, ts)[2], times)
-        is_light = np.asarray(meshes) < 0
-        self._proto_light_prims = [p for _, p in sorted(self._proto_lights.values(), key=lambda ip: ip[0])]
-        for j in np.nonzero(is_light)[0]:  # one light per instance of a light in a prototype
-            light = usd_lights.read_light(self._proto_light_prims[-meshes[j] - 1], self.xf, self.warn,
-                                          placement=(times, rows[j]), name=names[j], colors=self.colors)
-            if light is not None:
-                self.lights.append(light)
-                self._light_prims.append((light, self._proto_light_prims[-meshes[j] - 1]))
-        keep = np.nonzero(~is_light)[0]
-        if len(keep):
-            first = len(self.instances)
-            self._add_instances([meshes[j] for j in keep], [names[j] for j in keep], times, rows[keep], interval)
-            emitters: dict = {}  # MeshLightAPI prim path -> (prim, its placements' instance indices)
-            for i in range(first, len(self.instances)):
-                light_prim = self._placement_mesh_lights.get(self.instances[i].name)
-                if light_prim is not None:
-                    emitters.setdefault(str(light_prim.GetPath()), (light_prim, []))[1].append(i)
-            self._mesh_lights += list(emitters.values())
-
-    def _pi_key_times(self, prim) -> np.ndarray:
-        sh = self.shutter
-        if sh.static:
-            return np.array([self.frame])
-        moving, samples = self.xf.chain(prim)
-        samples = list(samples)
-        curved = False
-        for name in _PI_ATTRS:
-            a = prim.GetAttribute(name)
-            if not a or not a.HasAuthoredValue():
-                continue
-            if name in ("velocities", "angularVelocities", "accelerations"):
-                moving = True
-                curved = curved or name != "velocities"
-            if a.ValueMightBeTimeVarying():
-                moving = True
-                samples += samples_in_shutter(sh, a)
-        for target in UsdGeom.PointInstancer(prim).GetPrototypesRel().GetForwardedTargets():
-            proto = self.stage.GetPrimAtPath(target)
-            if not proto:
-                continue
-            for p in Usd.PrimRange(proto, Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)):
-                xf = UsdGeom.Xformable(p)
-                if xf and xf.TransformMightBeTimeVarying():
-                    moving = True
-                    samples += sh.inner(xf.GetTimeSamplesInInterval(shutter_interval(sh)))
-        if not moving:
-            return np.array([self.frame])
-        keys = sh.keys(samples)
-        return np.union1d(keys, sh.uniform(5)) if curved else keys
-
-    @reads("PointInstancer", "positions", "orientations", "orientationsf", "scales", "velocities",
-           "angularVelocities", "accelerations", "protoIndices", "ids", "invisibleIds")  # ids: the mask
-    def _pi_placements(self, prim, times) -> tuple[list[int], list[str], np.ndarray]:
-        """(mesh per placement, names, row-vector world matrices (M, K, 4, 4)) of every instance's geometry."""
-        pi = UsdGeom.PointInstancer(prim)
-        path = str(prim.GetPath())
-        frame = self.frame
-        targets = pi.GetPrototypesRel().GetForwardedTargets()
-        proto_idx = pi.GetProtoIndicesAttr().Get(frame)
-        k = len(times)
-        empty = ([], [], np.zeros((0, k, 4, 4)))
-        if proto_idx is None or len(proto_idx) == 0 or not targets:
-            return empty
-        proto_idx = np.asarray(proto_idx, np.int64)
-        n = len(proto_idx)
-        mask = np.asarray(pi.ComputeMaskAtTime(frame) or [True] * n, bool)
-        if len(mask) != n:
-            mask = np.ones(n, bool)
-        tcs = [Usd.TimeCode(float(t)) for t in times]
-        inst = pi.ComputeInstanceTransformsAtTimes(tcs, Usd.TimeCode(frame), UsdGeom.PointInstancer.ExcludeProtoXform,
-                                                   UsdGeom.PointInstancer.IgnoreMask)
-        if not inst or any(len(x) != n for x in inst):
-            one = pi.ComputeInstanceTransformsAtTime(Usd.TimeCode(frame), Usd.TimeCode(frame),
-                                                     UsdGeom.PointInstancer.ExcludeProtoXform,
-                                                     UsdGeom.PointInstancer.IgnoreMask)
-            if one is None or len(one) != n:
-                self.warn("PointInstancers with inconsistent positions/protoIndices skipped", path)
-                return empty
-            self.warn("PointInstancers whose instance transforms cannot be evaluated over the shutter are static",
-                      path)
-            inst = [one] * k
-        inst = np.stack([np.asarray(x, np.float64).reshape(n, 4, 4) for x in inst], axis=1)  # (N, K, 4, 4)
-        inst = inst @ self.xf.world(prim, times)[None]
-        if np.any((proto_idx < 0) | (proto_idx >= len(targets))):
-            self.warn("PointInstancer protoIndices out of range ignored", path)
-        meshes: list[int] = []
-        names: list[str] = []
-        rows: list[np.ndarray] = []
-        for j, target in enumerate(targets):
-            sel = np.nonzero((proto_idx == j) & mask)[0]
-            proto = self.stage.GetPrimAtPath(target)
-            if len(sel) == 0 or not proto:
-                continue
-            sub_meshes, sub_names, sub_rows = self._subtree_placements(proto, times)
-            if not sub_meshes:
-                continue
-            parent = np.linalg.inv(self.xf.world(proto.GetParent(), times))  # (K, 4, 4)
-            rel = sub_rows @ parent[None]  # (M, K, 4, 4) relative to the prototype's parent
-            world = np.einsum("mkab,nkbc->nmkac", rel, inst[sel])  # (n, M, K, 4, 4)
-            rows.append(world.reshape(-1, k, 4, 4))
-            meshes += sub_meshes * len(sel)
-            base = str(proto.GetParent().GetPath()).rstrip("/")
-            rel_names = [nm[len(base):] if nm.startswith(base + "/") else "/" + nm.lstrip("/") for nm in sub_names]
-            names += [f"{path}[{i}]{nm}" for i in sel for nm in rel_names]
-            for nm, rel in zip(sub_names, rel_names):  # placements of MeshLightAPI prims, by their names
-                if nm in self._proto_mesh_lights:
-                    for i in sel:
-                        self._placement_mesh_lights[f"{path}[{i}]{rel}"] = self._proto_mesh_lights[nm]
-        if not rows:
-            return empty
-        return meshes, names, np.concatenate(rows)
-
-    def _subtree_placements(self, root, times) -> tuple[list[int], list[str], np.ndarray]:
-        """Geometry under a prototype root (visibility and purpose at the frame, nested instancers expanded)."""
-        self._in_prototype += 1
-        try:
-            return self._subtree_placements_in(root, times)
-        finally:
-            self._in_prototype -= 1
-
-    def _subtree_placements_in(self, root, times) -> tuple[list[int], list[str], np.ndarray]:
-        meshes: list[int] = []
-        names: list[str] = []
-        rows: list[np.ndarray] = []
-        it = iter(Usd.PrimRange(root, Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)))
-        for prim in it:
-            img = UsdGeom.Imageable(prim)
-            if not img:
-                continue
-            vis = img.GetVisibilityAttr()
-            if vis and vis.HasAuthoredValue() and vis.Get(self.frame) == UsdGeom.Tokens.invisible:
-                it.PruneChildren()
-                continue
-            purpose = img.GetPurposeAttr().Get()
-            if not self._may_draw(str(purpose)):
-                it.PruneChildren()
-                continue
-            if purpose == UsdGeom.Tokens.proxy and self._saw_render and self._included is None:
-                it.PruneChildren()
-                continue
-            if prim.IsA(UsdGeom.PointInstancer):
-                it.PruneChildren()
-                m, nm, r = self._pi_placements(prim, times)
-                meshes += m
-                names += nm
-                rows.append(r)
-            elif prim.IsA(UsdGeom.Mesh) or prim.GetTypeName() in PRIMITIVE_TYPES or usd_curves.handles(prim):
-                it.PruneChildren()
-                mesh = self._mesh_index(prim)
-                if usd_lights.is_light(prim):  # each placement becomes a mesh light (see _point_instancer)
-                    self._proto_mesh_lights[str(prim.GetPath())] = prim
-                if mesh is not None:
-                    meshes.append(mesh)
-                    names.append(str(prim.GetPath()))
-                    rows.append(self.xf.world(prim, times)[None])
-            elif usd_volumes.is_volume(prim):
-                it.PruneChildren()
-                self.warn("volumes inside PointInstancer prototypes skipped", str(prim.GetPath()))
-            elif usd_lights.is_light(prim):  # placed like geometry, told apart by a negative index
-                key = str(prim.GetPath())
-                if key not in self._proto_lights:
-                    self._proto_lights[key] = (len(self._proto_lights), prim)
-                meshes.append(-1 - self._proto_lights[key][0])
-                names.append(str(prim.GetPath()))
-                rows.append(self.xf.world(prim, times)[None])
-        if not meshes:
-            return [], [], np.zeros((0, len(times), 4, 4))
-        return meshes, names, np.concatenate(rows)
-
     # -- volumes --------------------------------------------------------------------------------------------------
     def _volume(self, prim) -> None:
         if self._visible_interval(prim) is None:
@@ -875,4 +626,4 @@ class _Importer:
                                             instance=i))
 
 
-__all__ = ["load_scene", "WarningLog"]
+__all__ = ["load_scene"]

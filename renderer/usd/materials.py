@@ -69,8 +69,9 @@ from pxr import Gf, UsdGeom, UsdShade
 
 from renderer.scene.model import Material, Texture, TextureInput
 from renderer.usd.reads import reads
-from renderer.usd.shading_network import (Const, Display, Geo, Network, Tex, UV, expand_rgba, geo_texture_input,
-                                          select_post, shader_id, tex_mean)
+from renderer.usd.shading_network import Network
+from renderer.usd.shading_nodes import shader_id
+from renderer.usd.signals import UV, Const, Display, Geo, Tex, expand_rgba, geo_texture_input, select_post, tex_mean
 from renderer.usd import arnold_nodes
 from renderer.usd.surfaces import PREVIEW, PREVIEW_DEFAULTS, surface_inputs, surface_model
 from renderer.usd.color import AttributeColors, attribute_colors

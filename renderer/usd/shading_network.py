@@ -4,17 +4,8 @@
 (``GetValueProducingAttributes``): through NodeGraph outputs and interface inputs (``inputs:x.connect =
 </Mat.inputs:x>`` on a Material or NodeGraph), to the output of the shader that produces the value, which may be
 one of several (UsdUVTexture r/g/b/a/rgb, MaterialX separate3 outr/outg/outb). Each node output is evaluated
-once into a *signal*:
-
-* ``Const``: a constant (1..4 floats);
-* ``UV``: texture coordinates ``A @ primvar + t`` (UsdPrimvarReader_float2, MaterialX texcoord / geompropvalue,
-  through UsdTransform2d, place2d and affine math);
-* ``Tex``: one texture lookup as the kernels do it (``TextureInput``: file, uv, wrap, scale/bias, the output
-  channels, then a per-channel remap ``post_scale`` / ``post_bias``);
-* ``Display``: the prim's displayColor (a primvar reader of displayColor), filled per prim by the material table;
-* ``Geo``: the hit's position, normal or tangent in object or world space, mapped affinely (MaterialX position,
-  normal, tangent), evaluated by the kernels at the hit: as a value, or as the st of an image (a planar
-  projection), or through a triplanarprojection (``TextureInput.projection``).
+once into a *signal* (``renderer.usd.signals``: Const, UV, Tex, Display, Geo); node ids and the math nodes'
+functions are tabled in ``renderer.usd.shading_nodes``.
 
 Nodes: UsdUVTexture, UsdPrimvarReader_*, UsdTransform2d, and the MaterialX standard library's image,
 tiledimage, texcoord, geompropvalue, position, normal, tangent, triplanarprojection, constant, place2d, normalmap
@@ -25,343 +16,31 @@ are evaluated, ``unimplemented`` lists the others in a network.
 
 Math nodes are NumPy functions of their inputs. All-constant inputs fold into a constant; a function of one
 geometric quantity that is affine in it (channels may mix: an extract, a dot product with a constant) folds
-into its mapping; a function of a single texture that is affine in it (checked numerically with probe values, so channel-mixing functions are
-not mistaken for affine ones) folds into the lookup's remap, keeping the original texture (its wrap modes,
-UDIM tiles and mip levels); anything else over textures that share one uv mapping is *baked*: evaluated on the
-texel grid of the largest of them (at most ``BAKE_MAX`` texels a side) into a new texture. What cannot be
-represented warns once, naming the node, and takes the nearest supported value (a texture's mean).
+into its mapping; a function of a single texture that is affine in it (checked numerically with probe values, so
+channel-mixing functions are not mistaken for affine ones) folds into the lookup's remap, keeping the original
+texture (its wrap modes, UDIM tiles and mip levels); anything else over textures that share one uv mapping is
+*baked*: evaluated on the texel grid of the largest of them (at most ``BAKE_MAX`` texels a side) into a new
+texture. What cannot be represented warns once, naming the node, and takes the nearest supported value (a
+texture's mean).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
-from pxr import Sdf, UsdShade
+from pxr import UsdShade
 
 from renderer.scene.model import Texture, TextureInput
-from renderer.shading.textures import image_bilinear_np
 from renderer.usd.color import AttributeColors, attribute_colors
+from renderer.usd.shading_nodes import (ADDRESS, GEO_NODES, MATH, NODE_KINDS, SEPARATE_OUTPUTS, SPACES, SRGB_NAMES,
+                                        RAW_NAMES, TYPES, node_kind, shader_id)
+from renderer.usd.signals import (UV, Const, Display, Geo, Signal, Tex, affine, affine_matrix, const, fold, geo,
+                                  geo_default, numeric, tex_mean, tex_values)
 from renderer.usd.texture_files import TextureFiles, resolve_asset
 
 BAKE_MAX = 1024  # texels on the longest side of a baked texture
 MAX_DEPTH = 64  # nodes on one path through a network (guards against connection cycles)
-
-_TYPES = {"float": 1, "integer": 1, "boolean": 1, "vector2": 2, "float2": 2, "color3": 3, "vector3": 3,
-          "float3": 3, "normal": 3, "normal3": 3, "point": 3, "point3": 3, "color4": 4, "vector4": 4, "float4": 4,
-          "string": 0, "filename": 0, "token": 0, "surfaceshader": 0, "int": 1, "matrix33": 0, "matrix44": 0}
-_ADDRESS = {"periodic": "repeat", "clamp": "clamp", "mirror": "mirror", "constant": "black"}
-SRGB_NAMES = ("srgb", "srgb_texture", "srgb_rec709_scene", "srgb_rec709_display", "srgb_display", "gamma22",
-               "srgb_tx", "utility - srgb - texture", "g22_rec709")
-RAW_NAMES = ("raw", "linear", "lin_rec709", "lin_rec709_scene", "lin_srgb", "scene_linear", "data",
-              "lin_rec709_display", "utility - raw", "non-color", "identity")
-LUMA = np.array([0.2126, 0.7152, 0.0722])  # Rec.709 luminance coefficients (MaterialX lumacoeffs default)
-
-
-@dataclass(frozen=True, eq=False)
-class Const:
-    value: np.ndarray  # (n,) float64
-
-
-@dataclass(frozen=True, eq=False)
-class UV:
-    primvar: str | None  # None: the constant ``fallback``
-    fallback: tuple[float, float]
-    matrix: np.ndarray  # (2, 2)
-    translation: np.ndarray  # (2,)
-
-
-@dataclass(frozen=True, eq=False)
-class Tex:
-    ti: TextureInput
-    n: int  # components delivered: 1 (a channel), 3 (rgb) or 4 (rgba)
-
-
-@dataclass(frozen=True, eq=False)
-class Display:
-    fallback: np.ndarray  # (3,) the reader's fallback where the prim has no displayColor
-    scale: np.ndarray = field(default_factory=lambda: np.ones(3))  # (3,) network gain applied to it
-
-
-@dataclass(frozen=True, eq=False)
-class Geo:
-    """A geometric quantity of the hit mapped affinely: value = matrix @ g + offset, g the hit's position, normal or
-    tangent (``source`` "P", "N", "T") in ``space`` "object" or "world" (MaterialX position / normal / tangent)."""
-    source: str
-    space: str
-    matrix: np.ndarray  # (k, 3)
-    offset: np.ndarray  # (k,)
-
-
-Signal = Const | UV | Tex | Display | Geo
-
-# MaterialX's default outputs of its geometric nodes (where a value is needed without a hit)
-GEO_DEFAULTS = {"P": (0.0, 0.0, 0.0), "N": (0.0, 1.0, 0.0), "T": (1.0, 0.0, 0.0)}
-_GEO_NODES = {"position": "P", "normal": "N", "tangent": "T"}
-_SPACES = {"object": "object", "model": "object", "world": "world"}
-
-
-def geo(source: str, space: str = "object") -> Geo:
-    return Geo(source, space, np.eye(3), np.zeros(3))
-
-
-def geo_default(g: Geo) -> Const:
-    """The value of a geometric signal where there is no hit: the node's default output, mapped."""
-    return Const(g.matrix @ np.asarray(GEO_DEFAULTS[g.source], np.float64) + g.offset)
-
-
-def geo_texture_input(g: Geo) -> TextureInput:
-    """A geometric signal as a surface input's binding ("value"): rgb = its (up to 3) components at the hit; the
-    fallback (and the input's constant) is its value without a hit."""
-    m = np.zeros((3, 4))
-    k = min(len(g.offset), 3)
-    m[:k, :3], m[:k, 3] = g.matrix[:k], g.offset[:k]
-    if k == 1:  # a scalar feeding a colour: replicated
-        m[1:] = m[0]
-    d = np.resize(geo_default(g).value, 3) if k > 1 else np.repeat(geo_default(g).value[:1], 3)
-    return TextureInput(texture=None, output="rgb", fallback=(float(d[0]), float(d[1]), float(d[2]), 1.0),
-                        projection="value", geometry=g.source, space=g.space,
-                        geo_matrix=tuple(float(x) for x in m.reshape(-1)))
-
-
-def const(v) -> Const:
-    return Const(np.atleast_1d(np.asarray(v, np.float64)).reshape(-1))
-
-
-def node_kind(sid: str) -> tuple[str, str | None]:
-    """(category, output type) of a shader id: ND_multiply_color3FA -> ("multiply", "color3"),
-    UsdPrimvarReader_float2 -> ("UsdPrimvarReader", "float2"), arnold:standard_surface -> (same, None)."""
-    body = sid[3:] if sid.startswith("ND_") else sid
-    parts = body.split("_")
-    for i in range(1, len(parts)):
-        base = parts[i].rstrip("FAI") if parts[i] not in _TYPES else parts[i]
-        if base in _TYPES:
-            return "_".join(parts[:i]), base
-    return body, None
-
-
-def shader_id(prim) -> str:
-    sid = UsdShade.Shader(prim).GetShaderId()
-    return str(sid) if sid else str(prim.GetTypeName())
-
-
-# ---------------------------------------------------------------------------------------------------------------
-# NumPy values of textures (means, baking)
-
-
-def expand_rgba(c: np.ndarray) -> np.ndarray:
-    """Channel expansion of UsdUVTexture: (..., C) -> (..., 4)."""
-    n = c.shape[-1]
-    one = np.ones(c.shape[:-1] + (1,))
-    if n == 1:
-        return np.concatenate([c, c, c, one], -1)
-    if n == 2:
-        return np.concatenate([c[..., :1]] * 3 + [c[..., 1:2]], -1)
-    if n == 3:
-        return np.concatenate([c, one], -1)
-    return c[..., :4]
-
-
-def select_post(rgba: np.ndarray, ti: TextureInput, n: int) -> np.ndarray:
-    """The output channels of RGBA values (..., 4), then the post remap: (..., n)."""
-    if ti.output in ("rgb", "rgba"):
-        v = rgba[..., :4] if n == 4 else rgba[..., :3]
-    else:
-        k = "rgba".index(ti.output)
-        v = rgba[..., k:k + 1]
-        if n >= 3:  # a channel replicated to a colour (then remapped per channel)
-            v = np.repeat(v, 3, -1)
-    ps, pb = np.asarray(ti.post_scale, np.float64), np.asarray(ti.post_bias, np.float64)
-    if v.shape[-1] == 1:
-        return v * ps[0] + pb[0]
-    out = v.copy()
-    out[..., :3] = v[..., :3] * ps + pb
-    return out
-
-
-def _texture_mean(texture: Texture | None, fallback) -> np.ndarray:
-    """Mean RGBA (4,) of a texture's texels (area-weighted over UDIM tiles); ``fallback`` without one."""
-    if texture is None:
-        return np.asarray(fallback, np.float64)
-    total, area = np.zeros(4), 0.0
-    for im in texture.images:
-        im = np.asarray(im, np.float32)
-        c = im.reshape(-1, im.shape[-1]).mean(0, dtype=np.float64)
-        total += expand_rgba(c[None])[0] * (im.shape[0] * im.shape[1])
-        area += im.shape[0] * im.shape[1]
-    return total / max(area, 1.0)
-
-
-def tex_mean(ti: TextureInput, n: int = 3) -> np.ndarray:
-    """Mean value (n,) of a textured input over its texture (area-weighted over UDIM tiles; a triplanar
-    projection's three textures equally; a geometric value's value without a hit)."""
-    if ti.texture is None and ti.projection != "triplanar":
-        return select_post(np.asarray(ti.fallback, np.float64), ti, n)
-    mean = _texture_mean(ti.texture, ti.fallback)
-    if ti.projection == "triplanar":
-        mean = np.mean([mean] + [_texture_mean(t, ti.fallback) for t in ti.triplanar_textures], axis=0)
-    return select_post(mean * np.asarray(ti.scale) + np.asarray(ti.bias), ti, n)
-
-
-def tex_values(ti: TextureInput, n: int, st: np.ndarray, grid: tuple[int, int] | None = None) -> np.ndarray:
-    """Values (N, n) of a single-image textured input at texture-space coordinates st (N, 2) (after its uv
-    transform); ``grid`` (h, w): st are the texel centres of that grid, row by row from the bottom."""
-    if ti.texture is None:
-        fb = select_post(np.asarray(ti.fallback, np.float64), ti, n)
-        return np.broadcast_to(fb, (len(st), len(fb))).copy()
-    im = ti.texture.images[0]
-    if grid is not None and im.shape[:2] == grid:  # a texture on the bake grid itself: its texels
-        rgba = expand_rgba(np.asarray(im, np.float64).reshape(-1, im.shape[-1]))
-    else:
-        rgba = image_bilinear_np(im, st, ti.wrap_s, ti.wrap_t).astype(np.float64)
-    return select_post(rgba * np.asarray(ti.scale) + np.asarray(ti.bias), ti, n)
-
-
-# ---------------------------------------------------------------------------------------------------------------
-# Math nodes: (input names with defaults, function of NumPy values). Values broadcast like MaterialX's
-# "FA" variants (a float against a colour).
-
-
-def _safe_div(a, b):
-    return a / np.where(np.abs(b) > 1e-12, b, 1e-12)
-
-
-def _rgb_to_hsv(c):
-    """Vectorised colorsys.rgb_to_hsv over the last axis (hue in [0, 1))."""
-    c = np.asarray(c, np.float64)[..., :3]
-    r, g, b = c[..., 0], c[..., 1], c[..., 2]
-    mx_, mn = c.max(-1), c.min(-1)
-    d = mx_ - mn
-    s = np.where(mx_ > 0, _safe_div(d, mx_), 0.0)
-    rc, gc, bc = (_safe_div(mx_ - x, d) for x in (r, g, b))
-    h = np.where(r == mx_, bc - gc, np.where(g == mx_, 2.0 + rc - bc, 4.0 + gc - rc))
-    h = np.where(d > 0, (h / 6.0) % 1.0, 0.0)
-    return np.stack([h, s, mx_], -1)
-
-
-def _hsv_to_rgb(c):
-    """Vectorised colorsys.hsv_to_rgb over the last axis."""
-    c = np.asarray(c, np.float64)[..., :3]
-    h, s, v = c[..., 0] % 1.0, c[..., 1], c[..., 2]
-    i = np.floor(h * 6.0)
-    f = h * 6.0 - i
-    p, q, t = v * (1.0 - s), v * (1.0 - s * f), v * (1.0 - s * (1.0 - f))
-    i = i.astype(np.int64) % 6
-    r = np.choose(i, [v, q, p, p, t, v])
-    g = np.choose(i, [t, v, v, q, p, p])
-    b = np.choose(i, [p, p, t, v, v, q])
-    return np.stack([r, g, b], -1)
-
-
-def _combine(*a):
-    a = [np.asarray(x, np.float64) for x in a]
-    lead = np.broadcast_shapes(*[x.shape[:-1] for x in a])
-    return np.concatenate([np.broadcast_to(x[..., :1], lead + (1,)) for x in a], -1)
-
-
-def _smoothstep(x, lo, hi):
-    t = np.clip(_safe_div(x - lo, hi - lo), 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
-
-
-MATH = {
-    "multiply": ((("in1", 0.0), ("in2", 1.0)), lambda a, b: a * b),
-    "add": ((("in1", 0.0), ("in2", 0.0)), lambda a, b: a + b),
-    "subtract": ((("in1", 0.0), ("in2", 0.0)), lambda a, b: a - b),
-    "divide": ((("in1", 0.0), ("in2", 1.0)), _safe_div),
-    "mix": ((("fg", 0.0), ("bg", 0.0), ("mix", 0.0)), lambda fg, bg, m: bg + (fg - bg) * m),
-    "invert": ((("in", 0.0), ("amount", 1.0)), lambda x, a: a - x),
-    "clamp": ((("in", 0.0), ("low", 0.0), ("high", 1.0)), lambda x, lo, hi: np.minimum(np.maximum(x, lo), hi)),
-    "min": ((("in1", 0.0), ("in2", 0.0)), np.minimum),
-    "max": ((("in1", 0.0), ("in2", 0.0)), np.maximum),
-    "power": ((("in1", 0.0), ("in2", 1.0)), lambda a, b: np.power(np.maximum(a, 0.0), b)),
-    "absval": ((("in", 0.0),), np.abs),
-    "remap": ((("in", 0.0), ("inlow", 0.0), ("inhigh", 1.0), ("outlow", 0.0), ("outhigh", 1.0)),
-              lambda x, il, ih, ol, oh: ol + _safe_div(x - il, ih - il) * (oh - ol)),
-    "smoothstep": ((("in", 0.0), ("low", 0.0), ("high", 1.0)), _smoothstep),
-    "luminance": ((("in", 0.0),), lambda c: np.repeat((c[..., :3] * LUMA).sum(-1, keepdims=True), 3, -1)),
-    "rgbtohsv": ((("in", 0.0),), _rgb_to_hsv),
-    "hsvtorgb": ((("in", 0.0),), _hsv_to_rgb),
-    "dot": ((("in", 0.0),), lambda x: x),
-    "dotproduct": ((("in1", 0.0), ("in2", 0.0)), lambda a, b: (a * b).sum(-1, keepdims=True)),
-    "crossproduct": ((("in1", 0.0), ("in2", 0.0)), lambda a, b: np.cross(np.resize(a, a.shape[:-1] + (3,)),
-                                                                          np.resize(b, b.shape[:-1] + (3,)))),
-    "normalize": ((("in", 0.0),), lambda x: _safe_div(x, np.linalg.norm(x, axis=-1, keepdims=True))),
-    "constant": ((("value", 0.0),), lambda x: x),
-    "convert": ((("in", 0.0),), lambda x: x),
-    "combine2": ((("in1", 0.0), ("in2", 0.0)), _combine),
-    "combine3": ((("in1", 0.0), ("in2", 0.0), ("in3", 0.0)), _combine),
-    "combine4": ((("in1", 0.0), ("in2", 0.0), ("in3", 0.0), ("in4", 0.0)), _combine),
-    # MaterialX normalmap: a tangent-space normal from [0, 1] texel values, xy scaled by ``scale``
-    "normalmap": ((("in", (0.5, 0.5, 1.0)), ("scale", 1.0)),
-                  lambda c, s: (c[..., :3] * 2.0 - 1.0) * np.concatenate([np.broadcast_to(s[..., :1], c[..., :1].shape)] * 2 + [np.ones_like(c[..., :1])], -1)),
-}
-# Node categories evaluated by ``Network._evaluate`` besides MATH (and the extra ``nodes`` it is given)
-_NODE_KINDS = {"UsdUVTexture": "texture", "image": "texture", "tiledimage": "texture", "UsdPrimvarReader": "primvar",
-               "geompropvalue": "primvar", "texcoord": "texcoord", "UsdTransform2d": "transform2d",
-               "place2d": "transform2d", "separate2": "channels", "separate3": "channels", "separate4": "channels",
-               "extract": "channels", "swizzle": "channels", "position": "geometric", "normal": "geometric",
-               "tangent": "geometric", "triplanarprojection": "triplanar"}
-_SEPARATE_OUTPUTS = {"outr": 0, "outg": 1, "outb": 2, "outa": 3, "outx": 0, "outy": 1, "outz": 2, "outw": 3}
-
-
-_PROBES = (np.array([0.3, 0.71, 0.13, 0.57]), np.array([-1.7, 2.9, 0.45, 3.3]))  # irregular: no channel symmetry
-
-
-def _affine(fn, n: int) -> tuple[np.ndarray, np.ndarray] | None:
-    """(a, b) with fn(x) == a * x + b for x of n components (a, b broadcast per output channel), else None.
-
-    Probed at 0, 1 and two irregular vectors, so functions mixing channels (luminance, hsv) are not affine."""
-    try:
-        with np.errstate(all="ignore"):
-            b = np.asarray(fn(np.zeros(n)), np.float64)
-            a = np.asarray(fn(np.ones(n)), np.float64) - b
-            for probe in (p[:n] for p in _PROBES):
-                got = np.asarray(fn(probe), np.float64)
-                want = a * (probe if n > 1 else probe[0]) + b
-                if got.shape != np.broadcast(a, b).shape or want.shape != got.shape:
-                    return None
-                if not np.allclose(got, want, rtol=1e-6, atol=1e-9):
-                    return None
-    except (ValueError, IndexError):
-        return None
-    return _finite_pair(a, b)
-
-
-def _affine_matrix(fn, n: int) -> tuple[np.ndarray, np.ndarray] | None:
-    """(M (k, n), c (k,)) with fn(x) == M @ x + c for x of n components (channels may mix), else None.
-
-    Columns from the unit vectors, checked at two irregular vectors."""
-    try:
-        with np.errstate(all="ignore"):
-            c = np.asarray(fn(np.zeros(n)), np.float64).reshape(-1)
-            cols = [np.asarray(fn(e), np.float64).reshape(-1) - c for e in np.eye(n)]
-            if any(col.shape != c.shape for col in cols) or c.size == 0:
-                return None
-            m = np.stack(cols, axis=1)
-            for probe in (p[:n] for p in _PROBES):
-                got = np.asarray(fn(probe), np.float64).reshape(-1)
-                if got.shape != c.shape or not np.allclose(got, m @ probe + c, rtol=1e-6, atol=1e-9):
-                    return None
-    except (ValueError, IndexError):
-        return None
-    return _finite_pair(m, c)
-
-
-def _finite_pair(a: np.ndarray, b: np.ndarray):
-    return (a, b) if np.all(np.isfinite(a)) and np.all(np.isfinite(b)) else None
-
-
-def _fold(tex: Tex, a: np.ndarray, b: np.ndarray) -> Tex:
-    """Tex followed by x -> a x + b (per output channel)."""
-    ps, pb = np.asarray(tex.ti.post_scale, np.float64), np.asarray(tex.ti.post_bias, np.float64)
-    m = max(a.size, b.size)
-    a3 = np.resize(np.broadcast_to(a, (m,)), 3) if m < 3 else np.broadcast_to(a, (m,))[:3]
-    b3 = np.resize(np.broadcast_to(b, (m,)), 3) if m < 3 else np.broadcast_to(b, (m,))[:3]
-    if tex.n == 1:  # one channel, replicated to a colour by the kernels: its remap is uniform so far
-        ps, pb = np.full(3, ps[0]), np.full(3, pb[0])
-    ti = replace(tex.ti, post_scale=tuple(float(x) for x in ps * a3), post_bias=tuple(float(x) for x in pb * a3 + b3))
-    return Tex(ti, tex.n if m == 1 else m)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -431,10 +110,10 @@ class Network:
                         return sig
                     break
                 if UsdShade.Input.IsInput(attr):
-                    c = _numeric(attribute_colors(self.colors, attr, attr.Get(self.frame)))
+                    c = numeric(attribute_colors(self.colors, attr, attr.Get(self.frame)))
                     if c is not None:
                         return c
-        c = _numeric(attribute_colors(self.colors, inp.GetAttr(), inp.Get(self.frame))) if inp else None
+        c = numeric(attribute_colors(self.colors, inp.GetAttr(), inp.Get(self.frame))) if inp else None
         if c is not None:
             return c
         return None if default is None else const(default)
@@ -461,7 +140,7 @@ class Network:
         if sid in self.nodes:
             return True
         cat, _ = node_kind(sid)
-        return cat in _NODE_KINDS or cat in MATH
+        return cat in NODE_KINDS or cat in MATH
 
     def unimplemented(self, prim) -> list[str]:
         """Shader ids of the nodes feeding a shader's inputs (through NodeGraphs, upstream) that ``output`` does
@@ -492,7 +171,7 @@ class Network:
             return extra(self, prim, output)
         cat, typ = node_kind(sid)
         where = f"{prim.GetPath()} ({sid})"
-        kind = _NODE_KINDS.get(cat)
+        kind = NODE_KINDS.get(cat)
         if kind == "texture":
             return self._texture(prim, cat, typ, output)
         if kind == "primvar":
@@ -513,23 +192,23 @@ class Network:
             return None
         names, fn = spec
         args = [self.input(prim, nm, d) for nm, d in names]
-        return self.apply(fn, args, where, _TYPES.get(typ or "", 0))
+        return self.apply(fn, args, where, TYPES.get(typ or "", 0))
 
     # -- node kinds -----------------------------------------------------------------------------------------
     def _geometric(self, prim, cat: str, where: str) -> Geo:
         """MaterialX position / normal / tangent: the hit's, in object (also "model") or world space."""
         space = str(self.value(prim, "space", "object") or "object")
-        if space not in _SPACES:
+        if space not in SPACES:
             self.warn("geometric nodes in spaces other than model, object and world read in object space",
                       f"{where} ({space})")
-        return geo(_GEO_NODES[cat], _SPACES.get(space, "object"))
+        return geo(GEO_NODES[cat], SPACES.get(space, "object"))
 
     def _image_output(self, prim, typ: str | None):
         """(components, TextureInput output, fallback RGBA, the authored default or None) of a MaterialX image
         node of output type ``typ`` (its ``default`` where there is no file or tile)."""
-        n = _TYPES.get(typ or "color3", 3) or 3
+        n = TYPES.get(typ or "color3", 3) or 3
         output = {1: "r", 2: "rgb", 3: "rgb", 4: "rgba"}[n]
-        default = _numeric(self.value(prim, "default", None))
+        default = numeric(self.value(prim, "default", None))
         d = np.resize(default.value, 4) if default is not None else np.zeros(4)
         fallback = (tuple(float(x) for x in d) if n == 4 else (float(d[0]),) * 4 if n == 1
                     else (float(d[0]), float(d[1]), float(d[2 % len(d)]), 1.0))
@@ -584,8 +263,8 @@ class Network:
         name = "geomprop" if cat == "geompropvalue" else "varname"
         var = self.value(prim, name, None)
         var = str(var) if var is not None else None
-        n = _TYPES.get(typ or "", 3) or 3
-        fb = _numeric(self.value(prim, "fallback" if cat == "UsdPrimvarReader" else "default", None))
+        n = TYPES.get(typ or "", 3) or 3
+        fb = numeric(self.value(prim, "fallback" if cat == "UsdPrimvarReader" else "default", None))
         if var == "displayColor":
             return Display(np.resize(fb.value, 3) if fb is not None else np.full(3, 0.18))
         if n == 2:
@@ -639,7 +318,7 @@ class Network:
                 return src
             idx = [m[ch] for ch in chans]
         else:
-            k = _SEPARATE_OUTPUTS.get(output)
+            k = SEPARATE_OUTPUTS.get(output)
             if k is None:
                 self.warn("unknown outputs of separate nodes read as the first channel", where)
                 k = 0
@@ -675,9 +354,9 @@ class Network:
                 self.warn("unknown UsdUVTexture outputs read as rgb", f"{where} ({output})")
                 output = "rgb"
             n = 1 if len(output) == 1 else (4 if output == "rgba" else 3)
-            scale = _vec(self.value(prim, "scale", None), 4, (1.0, 1.0, 1.0, 1.0))
-            bias = _vec(self.value(prim, "bias", None), 4, (0.0, 0.0, 0.0, 0.0))
-            fallback = _vec(self.value(prim, "fallback", None), 4, (0.0, 0.0, 0.0, 1.0))
+            scale = vector(self.value(prim, "scale", None), 4, (1.0, 1.0, 1.0, 1.0))
+            bias = vector(self.value(prim, "bias", None), 4, (0.0, 0.0, 0.0, 0.0))
+            fallback = vector(self.value(prim, "fallback", None), 4, (0.0, 0.0, 0.0, 1.0))
             wrap_names = [str(self.value(prim, w, "useMetadata")) for w in ("wrapS", "wrapT")]
         else:
             n, output, fallback, default = self._image_output(prim, typ)
@@ -698,7 +377,7 @@ class Network:
                             k @ (tiling * uv.translation - offset))
             # MaterialX colour-manages colour images only; "auto" decodes 8-bit ones (Arnold's reading)
             colorspace = self._colorspace(prim, attr, "auto8" if n >= 3 and typ in ("color3", "color4") else "raw")
-            wrap_names = [_ADDRESS.get(str(self.value(prim, w, "periodic")), "repeat")
+            wrap_names = [ADDRESS.get(str(self.value(prim, w, "periodic")), "repeat")
                           for w in ("uaddressmode", "vaddressmode")]
             if not path:
                 return Tex(TextureInput(None, output, fallback=fallback), n) if default is not None else None
@@ -772,7 +451,7 @@ class Network:
         if len(disp) == 1 and all(isinstance(a, Const) for j, a in enumerate(args) if j != disp[0]):
             i = disp[0]
             f1 = lambda x: fn(*[x if j == i else a.value for j, a in enumerate(args)])  # noqa: E731
-            ab = _affine(f1, 3)
+            ab = affine(f1, 3)
             if ab is not None and np.allclose(ab[1], 0.0) and np.broadcast(*ab).shape == (3,):
                 a = np.broadcast_to(ab[0], (3,))
                 return Display(args[i].fallback, args[i].scale * a)  # displayColor x gain, per prim
@@ -801,9 +480,9 @@ class Network:
                 i = texs[0]
                 tex = args[i]
                 f1 = lambda x: fn(*[x if j == i else a.value for j, a in enumerate(args)])  # noqa
-                ab = _affine(f1, tex.n)
+                ab = affine(f1, tex.n)
                 if ab is not None:
-                    return _fold(tex, *ab)
+                    return fold(tex, *ab)
             baked = self._bake(fn, args, where)
             if baked is not None:
                 return baked
@@ -822,7 +501,7 @@ class Network:
                       "of them): their value without a hit used", where)
             return None
         f = lambda g: fn(*[a.matrix @ g + a.offset if isinstance(a, Geo) else a.value for a in args])  # noqa: E731
-        mc = _affine_matrix(f, 3)
+        mc = affine_matrix(f, 3)
         if mc is None or len(mc[1]) > 4:
             self.warn("position, normal or tangent through math that is not affine in them: their value without a "
                       "hit used", where)
@@ -832,7 +511,7 @@ class Network:
     def _uv_math(self, fn, args, i: int, where: str) -> Signal:
         uv = args[i]
         f1 = lambda x: fn(*[x if j == i else a.value for j, a in enumerate(args)])  # noqa
-        ab = _affine(f1, 2)
+        ab = affine(f1, 2)
         if ab is None or np.broadcast(*ab).shape not in ((2,), (1,)):
             self.warn("texture coordinates through non-affine math: a constant st is used", where)
             return const(f1(np.asarray(uv.fallback)))
@@ -877,20 +556,7 @@ class Network:
         return Tex(ti, c)
 
 
-def _numeric(v) -> Const | None:
-    """A Const of a numeric USD value (bool/int/float/vectors), else None (strings, assets, None)."""
-    if v is None or isinstance(v, (str, Sdf.AssetPath)):
-        return None
-    try:
-        a = np.asarray(v, np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        return None
-    if a.size == 0 or a.size > 4 or not np.all(np.isfinite(a)):
-        return None
-    return Const(a)
-
-
-def _vec(value, n: int, default) -> tuple:
+def vector(value, n: int, default) -> tuple:
     try:
         a = np.asarray(value, np.float64).reshape(-1)
         if a.size >= n and np.all(np.isfinite(a[:n])):

@@ -25,7 +25,9 @@ from __future__ import annotations
 import numpy as np
 
 from renderer.usd import arnold_nodes
-from renderer.usd.shading_network import Const, Network, Tex, const, node_kind, shader_id
+from renderer.usd.shading_network import Network
+from renderer.usd.shading_nodes import node_kind, shader_id
+from renderer.usd.signals import Const, Tex, const
 
 PREVIEW = "UsdPreviewSurface"
 STANDARD = "standard_surface"

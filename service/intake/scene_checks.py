@@ -114,7 +114,7 @@ def _present(target: str, entries: set[str]) -> bool:
 
 
 def _parse_failure(name: str, err: Exception, directory: Path) -> UploadError:
-    from renderer.usd.importer import malformed_usd_message
+    from renderer.usd.stage import malformed_usd_message
 
     return UploadError(malformed_usd_message(name, Exception(hide_dir(str(err), directory))))
 
