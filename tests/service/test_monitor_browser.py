@@ -204,7 +204,7 @@ def test_a_failed_job_shows_its_error_and_warnings_as_text(server, tab, tmp_path
     scene = write_card(tmp_path / "warn.usda")
     stage = Usd.Stage.Open(str(scene))
     stage.GetPrimAtPath("/World/Cam").GetAttribute("projection").Set(HTML)  # the renderer's warning quotes it
-    stage.DefinePrim("/World/Smoke", "Volume")  # not rendered: a warning names it
+    stage.DefinePrim("/World/Patch", "NurbsPatch")  # not rendered: a warning names it
     stage.Save()
     monkeypatch.setattr(service.farm.dispatcher, "render_tile_task", _explode)
     r = submit(server.http, scene, {"width": 16, "height": 16, "spp": 1, "tile": 8}, name=f"{HTML}.usda")
@@ -217,7 +217,7 @@ def test_a_failed_job_shows_its_error_and_warnings_as_text(server, tab, tmp_path
     assert HTML in tab.page.locator(".error-text").inner_text()
     warnings = tab.page.locator(".warning-list li").all_inner_texts()
     assert warnings == job["warnings"] and any(HTML in w for w in warnings)
-    assert any("/World/Smoke (Volume)" in w for w in warnings)
+    assert any("/World/Patch (NurbsPatch)" in w for w in warnings)
     assert tab.page.locator("h1.scene").inner_text() == job["scene"]["filename"] == "scene.usda"
     assert tab.js("() => document.querySelectorAll('img[src=x], b').length") == 0  # nothing became markup
     assert tab.page.locator("button[data-action=retry]").is_enabled()
