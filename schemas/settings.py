@@ -113,8 +113,9 @@ class _SettingsBase(_Strict):
     def _dependent_defaults(self):
         # The time-limit rule of renderer.options.resolve_given: a time-limited job's spp, if not given, is the cap.
         given = {k: getattr(self, k) for k in self.model_fields_set if k in SETTINGS}
-        if "spp" not in given and resolve_given(given).get("spp") is not None:
-            self.spp = resolve_given(given)["spp"]
+        spp = resolve_given(given).get("spp")
+        if "spp" not in given and spp is not None:
+            self.spp = spp
         return self
 
     def frame_times(self) -> list[float] | None:
