@@ -67,9 +67,13 @@ def _parse_as(setting: Setting):
 
 
 class _AppendChoices(argparse.Action):
-    """A repeatable flag of a list of choices that also takes them comma-separated (husk's ``--purpose a,b``)."""
+    """A repeatable flag of a list of choices that also takes them comma-separated (husk's ``--purpose a,b``), or of
+    free-form items, one per flag."""
 
     def __call__(self, parser, namespace, values, option_string=None):
+        if not self.choices_list:  # free-form items (an LPE may hold commas): one per flag
+            setattr(namespace, self.dest, list(getattr(namespace, self.dest, None) or []) + [values])
+            return
         items = [v.strip() for v in values.split(",") if v.strip()]
         for v in items:
             if v not in self.choices_list:

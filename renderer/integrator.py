@@ -44,6 +44,22 @@ from renderer.lights.sample import (
 from renderer.lights.linking import lit_by, shadow_factor
 from renderer.lights.select import infinite_light, select_light, select_pdf
 from renderer.lights.table import Lights
+from renderer.lpe.kernel import (
+    LpeTable,
+    clamp_factor,
+    emission_symbol,
+    light_symbol,
+    lpe_begin,
+    lpe_event,
+    lpe_finish,
+    lpe_light,
+    lpe_light_after,
+    sampled_scatter,
+    surface_symbol,
+    volume_symbol,
+    SCATTER_D,
+    SCATTER_G,
+)
 from renderer.media.phase import hg_pdf, hg_sample
 from renderer.media.tracking import (
     MEDIUM_ABSORB,
@@ -76,7 +92,15 @@ from renderer.sampling.sobol import (
 from renderer.sampling.warps import sample_tent
 from renderer.scene.model import LIGHT_DOME
 from renderer.lights.multipliers import diffuse_fraction, nee_bsdf, sampled_weight
-from renderer.shading.bsdf import SurfaceParams, bsdf_albedo_hint, bsdf_setup, lobes_eval, lobes_pdf, lobes_sample
+from renderer.shading.bsdf import (
+    SurfaceParams,
+    bsdf_albedo_hint,
+    bsdf_setup,
+    lobes_eval,
+    lobes_eval_split,
+    lobes_pdf,
+    lobes_sample,
+)
 from renderer.shading.materials import HitGeometry, Materials, MaterialSample, beer_lambert, eval_material_cone
 from renderer.shading.raycone import bounce_spread, camera_cone, uv_footprint
 from renderer.shading.textures import Textures
@@ -157,7 +181,7 @@ def clamp_contribution(c: wp.vec3, limit: float):
 @wp.func(inline=True)  # no copy of the big structs
 def add_area_light(L: wp.vec3, lights: Lights, li: int, origin: wp.vec3, rd: wp.vec3, t_hit: float, s: float,
                    prev_inst: int, prev_delta: int, prev_pdf: float, prev_p: wp.vec3, lobe_frac: wp.vec3,
-                   beta: wp.vec3, hit_clamp: float):
+                   beta: wp.vec3, hit_clamp: float, lpe: LpeTable, buf: SampleBuffer, sample: int):
     """L plus what area light li sends along the scattered ray (origin, rd) before the surface at t_hit, with its
     multiple importance weight against sampling the light."""
     t_l, Le, pdf_l = area_light_hit(lights, li, origin, rd, t_hit, s)
@@ -167,14 +191,17 @@ def add_area_light(L: wp.vec3, lights: Lights, li: int, origin: wp.vec3, rd: wp.
             w = power_heuristic(prev_pdf, select_pdf(lights.select, li, prev_p) * pdf_l)
         if lights.lobe_mults != 0:
             Le = wp.cw_mul(Le, sampled_weight(lights, li, lobe_frac))
-        return L + clamp_contribution(wp.cw_mul(beta, Le) * w, hit_clamp)
+        c = clamp_contribution(wp.cw_mul(beta, Le) * w, hit_clamp)
+        if lpe.count > 0:
+            lpe_light(lpe, buf.lpe_state, buf.extra, sample, light_symbol(lpe, li), c)
+        return L + c
     return L
 
 
 @wp.func(inline=True)  # one call site: no copy of the big structs
 def add_area_lights(L: wp.vec3, lights: Lights, origin: wp.vec3, rd: wp.vec3, t_hit: float, s: float,
                     prev_inst: int, prev_delta: int, prev_pdf: float, prev_p: wp.vec3, lobe_frac: wp.vec3,
-                    beta: wp.vec3, hit_clamp: float):
+                    beta: wp.vec3, hit_clamp: float, lpe: LpeTable, buf: SampleBuffer, sample: int):
     """L plus every area light the scattered ray reaches before t_hit (``lights.reach``): the still ones of a tree
     found by walking it, then the others (all of them without a tree) in light order. One loop, so that the light
     test is inlined once: a second copy cost a Cornell box 1.5-2.5 %."""
@@ -211,7 +238,7 @@ def add_area_lights(L: wp.vec3, lights: Lights, origin: wp.vec3, rd: wp.vec3, t_
             k += 1
         if li >= 0:
             L = add_area_light(L, lights, li, origin, rd, t_hit, s, prev_inst, prev_delta, prev_pdf, prev_p,
-                               lobe_frac, beta, hit_clamp)
+                               lobe_frac, beta, hit_clamp, lpe, buf, sample)
     return L
 
 
@@ -254,7 +281,7 @@ def media_shadow(geo: Geometry, mats: Materials, media: Media, ro: wp.vec3, rd: 
 def volume_direct(L: wp.vec3, geo: Geometry, mats: Materials, tex: Textures, lights: Lights, media: Media,
                   p: wp.vec3, rd: wp.vec3, g: float, s: float, in_sa: wp.vec3, in_ss: wp.vec3, beta: wp.vec3,
                   u_light: wp.vec3, nee_clamp: float, seed: wp.uint32, pixel: wp.uint32, index: wp.uint32,
-                  bounce: int):
+                  bounce: int, lpe: LpeTable, buf: SampleBuffer, sample: int):
     """L plus the light sampled at a scattering point p of a medium (each infinite light and one finite light,
     as at a surface), weighted against phase sampling by the power heuristic; and the shadow rays traced. The
     phase function takes the place of BSDF x cosine; ``rd`` (the direction of travel) is the axis constant domes
@@ -293,8 +320,12 @@ def volume_direct(L: wp.vec3, geo: Geometry, mats: Materials, tex: Textures, lig
                     w = power_heuristic(p_sel * pdf_l, ph)
                 if lights.lobe_mults != 0:  # a medium responds as a diffuse surface does
                     Le_l = wp.cw_mul(Le_l, sampled_weight(lights, li, wp.vec3(1.0)))
-                L += clamp_contribution(wp.cw_mul(wp.cw_mul(beta, Le_l), tr) * (ph * w / (p_sel * pdf_l)),
-                                        nee_clamp)
+                c = clamp_contribution(wp.cw_mul(wp.cw_mul(beta, Le_l), tr) * (ph * w / (p_sel * pdf_l)),
+                                       nee_clamp)
+                if lpe.count > 0:
+                    lpe_light_after(lpe, buf.lpe_state, buf.extra, sample, volume_symbol(lpe),
+                                    light_symbol(lpe, li), c)
+                L += c
     return L, rays
 
 
@@ -369,6 +400,7 @@ def trace_wave_kernel(
     buf: SampleBuffer,
     settings: PathSettings,
     wave: Wave,
+    lpe: LpeTable,
 ):
     tid = wp.tid()
     j = tid % wave.count
@@ -414,6 +446,8 @@ def trace_wave_kernel(
     alive = int(1)
     path_roughness = float(0.0)  # the roughest direction sampled so far (glossy filter)
     lobe_frac = wp.vec3(0.0)  # diffuse share of the last sampled direction (per-light diffuse/specular multipliers)
+    if lpe.count > 0:
+        lpe_begin(lpe, buf.lpe_state, buf.extra, tid)
     while alive != 0:
         rays += 1
         # light reached along this ray has been scattered `bounce` times; direct light is 0 or 1 bounce
@@ -434,7 +468,10 @@ def trace_wave_kernel(
         if media.count > 0 or in_medium:
             walk = sample_media(media, origin, rd, hit.t, s, sigma, in_ss, in_g, seed, pixel, index,
                                 wp.uint32(DIM_MEDIUM + bounce * MEDIUM_DIMS_PER_BOUNCE))
-            L += clamp_contribution(wp.cw_mul(beta, walk.emitted), hit_clamp)
+            c_walk = clamp_contribution(wp.cw_mul(beta, walk.emitted), hit_clamp)
+            if lpe.count > 0:
+                lpe_light(lpe, buf.lpe_state, buf.extra, tid, emission_symbol(lpe), c_walk)
+            L += c_walk
             beta = wp.cw_mul(beta, walk.weight)
             event = walk.event
             t_seg = walk.t_end
@@ -442,7 +479,7 @@ def trace_wave_kernel(
         # UsdLux area lights are not in the scene's hierarchy: rays after the first bounce may reach them directly
         if bounce > 0:
             L = add_area_lights(L, lights, origin, rd, t_seg, s, prev_inst, prev_delta, prev_pdf, prev_p, lobe_frac,
-                                beta, hit_clamp)
+                                beta, hit_clamp, lpe, buf, tid)
         if event != MEDIUM_NONE:  # a volume vertex: absorbed, or scattered by the phase function
             p = origin + rd * t_seg
             cone_w = cone_w + cone_spread * t_seg
@@ -455,7 +492,7 @@ def trace_wave_kernel(
                 dim = wp.uint32(DIM_LIGHT_BASE + bounce * DIMS_PER_BOUNCE)
                 u_light = sample_3d(seed, pixel, index, dim + wp.uint32(BOUNCE_LIGHT_CHOICE))
                 L, nee_rays = volume_direct(L, geo, mats, tex, lights, media, p, rd, g_event, s, sigma, in_ss, beta,
-                                            u_light, nee_clamp, seed, pixel, index, bounce)
+                                            u_light, nee_clamp, seed, pixel, index, bounce, lpe, buf, tid)
                 rays += nee_rays
                 u_phase = sample_3d(seed, pixel, index, dim + wp.uint32(BOUNCE_LOBE))
                 wi, pdf = hg_sample(g_event, rd, wp.vec2(u_phase[0], u_phase[1]))
@@ -470,6 +507,8 @@ def trace_wave_kernel(
                 prev_p = p
                 prev_event = FLAG_VOLUME
                 see_through = 0
+                if lpe.count > 0:
+                    lpe_event(lpe, buf.lpe_state, tid, volume_symbol(lpe))
                 origin = p
                 rd = wi
                 t_far = float(BIG)
@@ -489,7 +528,10 @@ def trace_wave_kernel(
                         w = power_heuristic(prev_pdf, select_pdf(lights.select, li, prev_p) * pdf_l)
                     if lights.lobe_mults != 0 and bounce > 0:
                         Le = wp.cw_mul(Le, sampled_weight(lights, li, lobe_frac))
-                    L += clamp_contribution(wp.cw_mul(beta, Le) * w, hit_clamp)
+                    c_inf = clamp_contribution(wp.cw_mul(beta, Le) * w, hit_clamp)
+                    if lpe.count > 0:
+                        lpe_light(lpe, buf.lpe_state, buf.extra, tid, light_symbol(lpe, li), c_inf)
+                    L += c_inf
             if bounce == 0 and lights.dome_visible != 0:
                 alpha = 1.0
             alive = 0
@@ -533,7 +575,13 @@ def trace_wave_kernel(
                 if lights.lobe_mults != 0 and bounce > 0 and li >= 0:
                     Le = wp.cw_mul(Le, sampled_weight(lights, li, lobe_frac))
                 # emission covers what the surface covers
-                L += clamp_contribution(wp.cw_mul(beta, Le) * (w * ms.opacity), hit_clamp)
+                c_em = clamp_contribution(wp.cw_mul(beta, Le) * (w * ms.opacity), hit_clamp)
+                if lpe.count > 0:
+                    sym = emission_symbol(lpe)
+                    if li >= 0:  # emission sampled as a light: its event and group
+                        sym = light_symbol(lpe, li)
+                    lpe_light(lpe, buf.lpe_state, buf.extra, tid, sym, c_em)
+                L += c_em
             if bounce >= settings.max_depth:
                 alive = 0
             else:
@@ -594,9 +642,25 @@ def trace_wave_kernel(
                                 if not delta:
                                     w = power_heuristic(p_sel * pdf_l, lobes_pdf(lobes, wi))
                                 cos_i = wp.abs(wp.dot(ns, wi))
-                                L += clamp_contribution(
-                                    wp.cw_mul(wp.cw_mul(wp.cw_mul(beta, f), Le_l), tr) * (cos_i * w / (p_sel * pdf_l)),
-                                    nee_clamp)
+                                raw = wp.cw_mul(wp.cw_mul(wp.cw_mul(beta, f), Le_l), tr) * (cos_i * w / (p_sel * pdf_l))
+                                L += clamp_contribution(raw, nee_clamp)
+                                if lpe.count > 0:
+                                    # the diffuse and glossy lobes' shares, scaled as the sum was
+                                    scale = clamp_factor(raw, nee_clamp) * (cos_i * w / (p_sel * pdf_l))
+                                    fd, fs = lobes_eval_split(lobes, wi)
+                                    if lights.lobe_mults != 0:
+                                        mult = lights.lobe_mult[li]
+                                        fd = fd * mult[0]
+                                        fs = fs * mult[1]
+                                    through = wp.dot(wi, sp.ng) * wp.dot(wo, sp.ng) < 0.0
+                                    light_sym = light_symbol(lpe, li)
+                                    lit = wp.cw_mul(wp.cw_mul(beta, Le_l), tr) * scale
+                                    lpe_light_after(lpe, buf.lpe_state, buf.extra, tid,
+                                                    surface_symbol(lpe, through, SCATTER_D), light_sym,
+                                                    wp.cw_mul(lit, fd))
+                                    lpe_light_after(lpe, buf.lpe_state, buf.extra, tid,
+                                                    surface_symbol(lpe, through, SCATTER_G), light_sym,
+                                                    wp.cw_mul(lit, fs))
                 # --- the BSDF's own direction continues the path
                 # the lobe and the direction from one 3D sample, so that each lobe's share keeps spread directions
                 u_bsdf = sample_3d(seed, pixel, index, dim + wp.uint32(BOUNCE_LOBE))
@@ -628,6 +692,12 @@ def trace_wave_kernel(
                     passthrough = (flags & FLAG_TRANSMISSION) != 0 and thin != 0 and (flags & FLAG_DELTA) != 0
                     if not passthrough:
                         see_through = 0
+                    # a light path event, unless a straight pass through a sheet or into a medium
+                    if lpe.count > 0 and not passthrough and not medium_boundary(media, sp.material, flags):
+                        lobe_diffuse = wp.clamp(u_bsdf[2], 0.0, 0.99999994) >= (lobes.p_coat + lobes.p_spec
+                                                                                 + lobes.p_trans)
+                        lpe_event(lpe, buf.lpe_state, tid, surface_symbol(
+                            lpe, (flags & FLAG_TRANSMISSION) != 0, sampled_scatter(flags & FLAG_DELTA, lobe_diffuse)))
                     if (flags & FLAG_TRANSMISSION) != 0:
                         origin = offset_origin(sp.p, -sp.ng)
                         if thin == 0:  # into or out of a solid
@@ -647,12 +717,21 @@ def trace_wave_kernel(
                     bounce += 1
                     if bounce >= RR_START:
                         alive, beta = roulette(beta, sample_1d(seed, pixel, index, dim + wp.uint32(BOUNCE_ROULETTE)))
+    L_sum = L
     if settings.clamp > 0.0:
         L = wp.vec3(wp.min(L[0], settings.clamp), wp.min(L[1], settings.clamp), wp.min(L[2], settings.clamp))
     sample = wp.vec4(L[0], L[1], L[2], alpha)
     if not finite3(L):
         sample = wp.vec4(0.0, 0.0, 0.0, alpha)
         wp.atomic_add(wave.counters, 1, wp.int64(1))
+    if lpe.count > 0:  # the vars take what the beauty took: the sample clamp's share, nothing of a non-finite sample
+        keep = wp.vec3(0.0)
+        if finite3(L_sum):
+            for i in range(3):
+                keep[i] = 1.0
+                if L_sum[i] > L[i]:
+                    keep[i] = L[i] / L_sum[i]
+        lpe_finish(lpe, buf.extra, tid, keep)
     buf.film[tid] = film_u
     buf.rgba[tid] = sample
     buf.depth[tid] = depth_aov

@@ -41,6 +41,22 @@ def _ocio_config(v: str) -> str | None:
     return None if ok else f"ocio config must be an ocio:// URI or an absolute path, got {v!r}"
 
 
+CRYPTOMATTE_KINDS = ("object", "material", "asset")  # Cryptomatte layers: CryptoObject, CryptoMaterial, CryptoAsset
+MAX_LPES = 64  # LPE vars of one render
+
+
+def _lpe_var(items: tuple[str, ...]) -> str | None:
+    """``NAME=EXPRESSION`` items: a layer name and a light path expression that compiles."""
+    from renderer.lpe.vars import LpeError, parse_lpe_var
+
+    for item in items:
+        try:
+            parse_lpe_var(item)
+        except LpeError as e:
+            return str(e)
+    return None
+
+
 def _ordered_shutter(v: tuple[float, float]) -> str | None:
     return None if v[0] <= v[1] else f"shutter open ({v[0]:g}) is after close ({v[1]:g})"
 
@@ -73,6 +89,7 @@ class Setting:
     metavar: str | None = None
     scene: bool = False  # the prepared scene depends on it; else it steers sampling and output only
     check: Callable[[Any], str | None] | None = None  # a rule beyond the bounds: the problem, or None
+    example: Any = None  # a valid value of a free-form list (tests and docs)
 
     @property
     def cli_flag(self) -> str:
@@ -175,6 +192,15 @@ SETTINGS_TABLE: tuple[Setting, ...] = (
             "then the cap); not bit-reproducible", unit="seconds", ge=0, le=_WEEK, metavar="SECONDS"),
     Setting("aovs", str, (), "extra channels: depth (depth.Z), normal (N.X/Y/Z), albedo (albedo.R/G/B), spp "
             "(spp.Y); repeatable", choices=AOV_NAMES, shape="many", flag="--aov", metavar="NAME"),
+    Setting("lpe", str, (), "a layer of light path expression NAME=EXPR (OSL grammar, e.g. diffuse=C<RD>.*L); "
+            "repeatable", shape="many", metavar="NAME=EXPR", max_length=512, check=_lpe_var,
+            example=("direct=C.L",)),
+    Setting("light_groups", bool, False, "a layer RGBA_<group> per light group (C.*<L.'group'>): lights' "
+            "karma:light:lpetag, ri:light:lightGroup or primvars:arnold:aov, else the light's name"),
+    Setting("cryptomatte", str, (), "Cryptomatte layers: object (prim paths), material (bound materials), asset "
+            "(model-kind ancestors); comma-separated or repeated", choices=CRYPTOMATTE_KINDS, shape="many",
+            metavar="KINDS"),
+    Setting("cryptomatte_ranks", int, 6, "Cryptomatte id/coverage pairs per pixel", ge=1, le=16, metavar="N"),
     Setting("denoise", bool, False, "add an Open Image Denoise layer denoised.R/G/B (the beauty stays raw); needs "
             "pip install 'drt[denoise]'"),
     Setting("half", bool, False, "store colour and AOVs as 16-bit HALF (depth stays FLOAT)"),
@@ -237,6 +263,10 @@ class RenderOptions:
     min_spp: int = default_of("min_spp")
     time_limit: float = default_of("time_limit")
     denoise: bool = default_of("denoise")
+    lpe: tuple[str, ...] = default_of("lpe")  # NAME=EXPR light path expression layers
+    light_groups: bool = default_of("light_groups")
+    cryptomatte: tuple[str, ...] = default_of("cryptomatte")
+    cryptomatte_ranks: int = default_of("cryptomatte_ranks")
 
     @property
     def path_indirect_clamp(self) -> float:

@@ -81,6 +81,13 @@ class PreparedScene:
     geometry_key: bytes = b""
     flat: Scene | None = None
     materials_key: bytes = b""
+    # light path expression vars (``renderer.lpe.vars.CompiledVars``, None: none) and their kernel table
+    lpe_vars: object | None = None
+    lpe: object | None = None
+
+    @property
+    def lpe_count(self) -> int:
+        return len(self.lpe_vars.names) if self.lpe_vars is not None else 0
 
 
 def resolve_resolution(scene: Scene, options: RenderOptions) -> tuple[int, int]:
@@ -125,6 +132,19 @@ def _flatten(scene: Scene, key: bytes, reuse: PreparedScene | None) -> Scene:
     return replace(scene, meshes=old.meshes, instances=old.instances, lights=lights)
 
 
+def _lpe_tables(flat: Scene, options: RenderOptions, device: str) -> tuple[object | None, object]:
+    """The LPE vars the options ask for, compiled for the scene's lights, and their kernel table (empty without)."""
+    from renderer.lpe.kernel import empty_table, upload_table
+    from renderer.lpe.vars import compile_vars, render_vars
+
+    vars_ = render_vars(options.lpe, options.light_groups, flat.lights)
+    if not vars_:
+        return None, empty_table(device)
+    compiled = compile_vars(vars_, flat.lights)
+    return compiled, upload_table(compiled.packed, compiled.after_camera, compiled.light_label,
+                                  compiled.light_event, device)
+
+
 def prepare(scene: Scene, options: RenderOptions, device: str = "cpu",
             reuse: PreparedScene | None = None) -> PreparedScene:
     """Build the hierarchy and upload lights, materials and camera: once per (scene, frame).
@@ -163,10 +183,12 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu",
                        device=device)
     if cam.warning:
         warnings.append(cam.warning)
+    lpe_vars, lpe = _lpe_tables(flat, options, device)
     return PreparedScene(scene=scene, options=options, width=width, height=height, framing=framing,
                          geometry=geometry, materials=materials, textures=textures, lights=lights,
                          light_count=light_count, camera=cam, stats=stats, device=device, warnings=warnings,
-                         media=media, geometry_key=geometry_key, flat=flat, materials_key=materials_key)
+                         media=media, geometry_key=geometry_key, flat=flat, materials_key=materials_key,
+                         lpe_vars=lpe_vars, lpe=lpe)
 
 
 def with_options(prep: PreparedScene, options: RenderOptions) -> PreparedScene:
@@ -181,7 +203,10 @@ def with_options(prep: PreparedScene, options: RenderOptions) -> PreparedScene:
     options.validate()
     if options.denoise:
         denoise.require()
-    return replace(prep, options=options)
+    lpe_vars, lpe = prep.lpe_vars, prep.lpe
+    if (options.lpe, options.light_groups) != (old.lpe, old.light_groups):
+        lpe_vars, lpe = _lpe_tables(prep.flat or prep.scene, options, prep.device)
+    return replace(prep, options=options, lpe_vars=lpe_vars, lpe=lpe)
 
 
 def render_tile(prep: PreparedScene, tile: Tile,
@@ -224,8 +249,11 @@ def render_tile(prep: PreparedScene, tile: Tile,
     waves = film.wave_schedule(opts.spp, progressive=conv.enabled or time_budget is not None)
     max_wave = max(e - s for s, e in waves)
     dev = prep.device
-    buf = film.new_sample_buffer(sw * sh * max_wave, dev)
-    acc = film.new_tile_accum(directions * targets, dev, aovs=bool(aov_sums))
+    n_lpe = prep.lpe_count
+    extra = 3 * n_lpe  # the LPE vars' RGB, filtered as the colour
+    buf = film.new_sample_buffer(sw * sh * max_wave, dev, extra=extra, lpe_vars=n_lpe)
+    acc = film.new_tile_accum(directions * targets, dev, aovs=bool(aov_sums), extra=extra)
+
     counters = wp.zeros(2, dtype=wp.int64, device=dev)  # rays traced, non-finite samples zeroed
     settings = PathSettings()
     settings.max_depth = int(opts.max_depth)
@@ -262,12 +290,15 @@ def render_tile(prep: PreparedScene, tile: Tile,
         wp.launch(trace_wave_kernel, dim=pixels.size * wave, device=dev,
                   inputs=[prep.geometry, prep.materials, prep.textures, prep.lights, prep.media.media,
                           prep.camera.params, buf,
-                          settings, launch])
+                          settings, launch, prep.lpe])
         wp.launch(film.axis_weights_kernel, dim=pixels.size * wave, device=dev,
                   inputs=[buf, kind, float(film.FILTER_RADIUS[kind])])
+        slot_array = wp.array(slot_of, dtype=wp.int32, device=dev)
         wp.launch(film.gather_kernel, dim=sw * sh, device=dev,
-                  inputs=[buf, acc, wave, sx0, sy0, sw, wp.array(slot_of, dtype=wp.int32, device=dev),
-                          ex0, ey0, ex1 - ex0, ey1 - ey0, margin, aov_sums, 1])
+                  inputs=[buf, acc, wave, sx0, sy0, sw, slot_array, ex0, ey0, ex1 - ex0, ey1 - ey0, margin, aov_sums, 1])
+        if extra:
+            wp.launch(film.gather_extra_kernel, dim=sw * sh, device=dev,
+                      inputs=[buf, acc, extra, wave, sx0, sy0, sw, slot_array, ex0, ey0, ex1 - ex0, ey1 - ey0, margin])
         rgb = None
         if conv.enabled:
             rgb = buf.rgba.numpy()[:pixels.size * wave].reshape(pixels.size, wave, 4)[..., :3]
@@ -275,7 +306,7 @@ def render_tile(prep: PreparedScene, tile: Tile,
         conv.update()
         if on_wave is not None:
             on_wave(min(total, int(conv.count[mine].sum())), total)
-    partials = film.accum_partials(acc, directions, ey1 - ey0, ex1 - ex0, aovs=bool(aov_sums))
+    partials = film.accum_partials(acc, directions, ey1 - ey0, ex1 - ex0, aovs=bool(aov_sums), extra=extra)
     if shared_borders:
         arrays = borders.split_tile(partials, own, margin, W, H)
     else:
@@ -377,7 +408,19 @@ def frame_channels(prep: PreparedScene, sums: dict[str, np.ndarray]) -> dict[str
     if "albedo" in prep.options.aovs:
         ch.update({"albedo.R": r["albedo"][..., 0], "albedo.G": r["albedo"][..., 1],
                    "albedo.B": r["albedo"][..., 2]})
+    ch.update(lpe_channels(prep, r))
     return ch
+
+
+def lpe_channels(prep: PreparedScene, resolved: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``NAME.R, NAME.G, NAME.B`` of each LPE var (``resolved``: ``film.resolve``'s output)."""
+    if prep.lpe_vars is None or "extra" not in resolved:
+        return {}
+    out = {}
+    for v, name in enumerate(prep.lpe_vars.names):
+        for c, channel in enumerate("RGB"):
+            out[f"{name}.{channel}"] = resolved["extra"][..., 3 * v + c]
+    return out
 
 
 def frame_attributes(prep: PreparedScene) -> dict:

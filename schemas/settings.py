@@ -16,7 +16,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, create_model, field_validator, model_validator
 
-from renderer.options import SETTINGS, SETTINGS_TABLE, Setting, resolve_given
+from renderer.options import MAX_LPES, SETTINGS, SETTINGS_TABLE, Setting, resolve_given
 
 MAX_FRAMES = 100_000
 MAX_TIME = 1.0e9  # |time code| bound: keeps frame arithmetic exact enough and rejects nonsense early
@@ -70,7 +70,7 @@ def _field(s: Setting) -> tuple[Any, Any]:
     """A pydantic field from a row of the settings table: its bounds become JSON Schema bounds in OpenAPI."""
     numbers = s.kind in (int, float) and s.shape == "one"
     bounds = {k: getattr(s, k) for k in ("ge", "le", "gt", "lt") if numbers and getattr(s, k) is not None}
-    extra = {"max_length": len(s.choices)} if s.shape == "many" else {}
+    extra = {"max_length": len(s.choices) or MAX_LPES} if s.shape == "many" else {}
     if s.kind is str and s.shape == "one" and not s.choices:
         extra = {"min_length": 1, "max_length": s.max_length}
     default = list(s.default) if s.shape == "many" else s.default

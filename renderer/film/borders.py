@@ -65,6 +65,11 @@ def combine(partials: np.ndarray) -> np.ndarray:
     return total
 
 
+def banded_names(arrays: dict[str, np.ndarray]) -> list[str]:
+    """The channels whose band partials a tile's arrays hold (``CHANNELS``, and "extra" when present)."""
+    return [k[len(BAND):] for k in arrays if k.startswith(BAND)]
+
+
 def zero_sums(name: str, shape: tuple[int, ...]) -> np.ndarray:
     """Sums of channel ``name`` that no sample reached, over ``shape`` (pixels, or directions x pixels)."""
     return np.zeros(shape + ((CHANNELS[name],) if CHANNELS[name] > 1 else ()), np.float32)
@@ -138,7 +143,7 @@ def assemble(tiles: list[tuple[tuple[int, int, int, int], dict[str, np.ndarray]]
         flat.append((ys + ey0) * width + xs + ex0)
     pixels, where = np.unique(np.concatenate(flat), return_inverse=True)
     starts = np.cumsum([0] + [len(f) for f in flat])
-    for name in CHANNELS:
+    for name in banded_names(tiles[0][1]):
         first = tiles[0][1][BAND + name]
         partials = np.zeros((len(pixels),) + (first.shape[0],) + first.shape[2:], np.float32)
         for i, (_, arrays) in enumerate(tiles):

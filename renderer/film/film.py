@@ -128,6 +128,10 @@ class SampleBuffer:
     depth: wp.array(dtype=wp.float32)  # camera depth of the first hit (0 when nothing was hit)
     normal: wp.array(dtype=wp.vec3)  # world shading normal of the first hit
     albedo: wp.array(dtype=wp.vec3)
+    # per sample, ``extra`` floats of further channels filtered as the colour is (the LPE vars' RGB sums; one
+    # element when there are none), and the LPE vars' automaton states (``renderer.lpe.kernel``)
+    extra: wp.array(dtype=wp.float32)
+    lpe_state: wp.array(dtype=wp.int32)
     wx: wp.array(dtype=wp.vec3)  # filter weights along x toward the pixels at offsets -1, 0, +1 (``axis_weights``)
     wy: wp.array(dtype=wp.vec3)
 
@@ -144,12 +148,16 @@ class TileAccum:
     hit_weight: wp.array(dtype=wp.float32)  # sum(w) over samples that hit
     normal: wp.array(dtype=wp.vec3)
     albedo: wp.array(dtype=wp.vec3)
+    extra: wp.array(dtype=wp.float32)  # sum(w * value) of each further channel: (partial, channel), flat
 
 
-def new_sample_buffer(n: int, device: str) -> SampleBuffer:
-    """Room for n samples, not cleared: a wave writes every sample it later reads (the path tracing kernel its
-    values, ``axis_weights_kernel`` its weights) before the gather reads them."""
+def new_sample_buffer(n: int, device: str, extra: int = 0, lpe_vars: int = 0) -> SampleBuffer:
+    """Room for n samples with ``extra`` further channels and ``lpe_vars`` automaton states each, not cleared: a
+    wave writes every sample it later reads (the path tracing kernel its values, ``axis_weights_kernel`` its
+    weights) before the gather reads them."""
     b = SampleBuffer()
+    b.extra = wp.empty(max(1, n * extra), dtype=wp.float32, device=device)
+    b.lpe_state = wp.empty(max(1, n * lpe_vars), dtype=wp.int32, device=device)
     b.film = wp.empty(n, dtype=wp.vec2, device=device)
     b.rgba = wp.empty(n, dtype=wp.vec4, device=device)
     b.depth = wp.empty(n, dtype=wp.float32, device=device)
@@ -170,11 +178,12 @@ def needs_aov_sums(aovs, denoise: bool) -> bool:
     return denoise or any(a in AOV_SUMS for a in aovs)
 
 
-def new_tile_accum(n: int, device: str, aovs: bool = True) -> TileAccum:
-    """n partial sums of each channel, zeroed; without ``aovs`` the depth, normal and albedo sums (which the
-    gather then leaves alone) are one each."""
+def new_tile_accum(n: int, device: str, aovs: bool = True, extra: int = 0) -> TileAccum:
+    """n partial sums of each channel, and of ``extra`` further ones, zeroed; without ``aovs`` the depth, normal
+    and albedo sums (which the gather then leaves alone) are one each."""
     m = n if aovs else 1
     a = TileAccum()
+    a.extra = wp.zeros(max(1, n * extra), dtype=wp.float32, device=device)
     a.rgba = wp.zeros(n, dtype=wp.vec4, device=device)
     a.weight = wp.zeros(n, dtype=wp.float32, device=device)
     a.depth = wp.zeros(m, dtype=wp.float32, device=device)
@@ -378,18 +387,63 @@ def gather_kernel(
                     acc.albedo[k] = asum
 
 
+@wp.kernel
+def gather_extra_kernel(
+    buf: SampleBuffer,
+    acc: TileAccum,
+    extra: int,  # channels per sample
+    wave: int,
+    tile_x0: int,
+    tile_y0: int,
+    tile_w: int,
+    slot_of: wp.array(dtype=wp.int32),
+    ext_x0: int,
+    ext_y0: int,
+    ext_w: int,
+    ext_h: int,
+    margin: int,
+):
+    """``gather_kernel`` for the further channels (``SampleBuffer.extra``): the same weights, targets, partials
+    and order, so that they are filtered exactly as the colour is. A launch of its own, made only when there are
+    such channels: the colour's gather stays as it is."""
+    tid = wp.tid()
+    slot = slot_of[tid]
+    if slot < 0:
+        return
+    sx = tile_x0 + tid % tile_w
+    sy = tile_y0 + tid // tile_w
+    side = 2 * margin + 1
+    base = slot * wave
+    for oy in range(-margin, margin + 1):
+        ty = sy - oy - ext_y0
+        for ox in range(-margin, margin + 1):
+            tx = sx - ox - ext_x0
+            if ty >= 0 and ty < ext_h and tx >= 0 and tx < ext_w:
+                k = (ty * ext_w + tx) * side * side + (oy + margin) * side + ox + margin
+                for c in range(extra):
+                    total = acc.extra[k * extra + c]
+                    for j in range(wave):
+                        w = buf.wx[base + j][1 - ox] * buf.wy[base + j][1 - oy]
+                        if w != 0.0:
+                            total = total + buf.extra[(base + j) * extra + c] * w
+                    acc.extra[k * extra + c] = total
+
+
 def accum_partials(acc: TileAccum, directions: int, rows: int, columns: int,
-                   aovs: bool = True) -> dict[str, np.ndarray | None]:
+                   aovs: bool = True, extra: int = 0) -> dict[str, np.ndarray | None]:
     """The partial sums as (directions, rows, columns[, c]) arrays (``borders.split_tile``'s input); without
-    ``aovs`` the depth, normal and albedo sums are None (all zero)."""
+    ``aovs`` the depth, normal and albedo sums are None (all zero); ``extra`` further channels under "extra"."""
     shape = (rows, columns, directions)
     arrays = {"rgba": acc.rgba.numpy().reshape(shape + (4,)), "weight": acc.weight.numpy().reshape(shape)}
+    if extra:
+        arrays["extra"] = acc.extra.numpy()[:rows * columns * directions * extra].reshape(shape + (extra,))
     if aovs:
         arrays.update({"depth": acc.depth.numpy().reshape(shape), "hit_weight": acc.hit_weight.numpy().reshape(shape),
                        "normal": acc.normal.numpy().reshape(shape + (3,)),
                        "albedo": acc.albedo.numpy().reshape(shape + (3,))})
     out = {k: np.moveaxis(a, 2, 0) for k, a in arrays.items()}
-    return {k: out.get(k) for k in ("rgba", "weight", "depth", "hit_weight", "normal", "albedo")}
+    names = ("rgba", "weight", "depth", "hit_weight", "normal", "albedo") + (("extra",) if extra else ())
+    return {k: out.get(k) for k in names}
 
 
 def resolve(sums: dict[str, np.ndarray], exposure_scale: float = 1.0) -> dict[str, np.ndarray]:
@@ -405,4 +459,7 @@ def resolve(sums: dict[str, np.ndarray], exposure_scale: float = 1.0) -> dict[st
         normal = np.where(nlen > 0, n / nlen, 0.0)
     rgba[..., :3] *= exposure_scale
     out = {"rgba": rgba, "depth": depth, "normal": normal, "albedo": albedo}
+    if sums.get("extra") is not None:  # filtered as the colour: divided by the same weights, exposed alike
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out["extra"] = np.where(w[..., None] > 0, sums["extra"] / w[..., None], 0.0) * exposure_scale
     return {k: np.nan_to_num(v, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32) for k, v in out.items()}

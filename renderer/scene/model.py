@@ -348,6 +348,10 @@ class Light:
     visible_to_camera: bool = True  # dome lights seen by camera rays
     # radiance (RGB) at evenly spaced times over the shutter when the emission is animated in it; None: constant
     radiance_keys: tuple | None = None
+    # light path expressions: the light group its events carry ("": none; ``usd.light_groups``), and whether it is
+    # emissive geometry sampled as a light (its events are O, an emissive object's, not L)
+    group: str = ""
+    emissive_object: bool = False
     diffuse: float = 1.0  # inputs:diffuse: multiplier of this light's effect on the diffuse response of materials
     specular: float = 1.0  # inputs:specular: ... on their specular response (specular, coat, transmission lobes)
     # LIGHT_DOME with a lat-long texture: (H, W, 3) float32 linear emitted radiance (already multiplied by

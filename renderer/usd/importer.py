@@ -48,6 +48,7 @@ from renderer.usd.motion import TransformSampler, collapse_keys, motion_transfor
 from renderer.usd.point_instancers import PointInstancing
 from renderer.usd.primitives import PRIMITIVE_TYPES, primitive_signature, read_primitive
 from renderer.usd.primvars import default_uv_name, read_display_colors, read_named_uvs
+from renderer.usd.light_groups import assign_light_groups
 from renderer.usd.reads import reads, report_unread
 from renderer.usd.skel import Skinning
 from renderer.usd.stage import WarningLog, _open_stage, _pxr_message
@@ -213,6 +214,7 @@ class _Importer(PointInstancing):
         if not self.lights:
             self.lights.append(usd_lights.default_light(cam_row, self._up_axis()))
             warn(usd_lights.default_light_warning())
+        assign_light_groups(stage, self.lights)
         report_unread(stage, warn, self._skipped)
 
         return realize_tessellations(sc.Scene(
@@ -623,7 +625,7 @@ class _Importer(PointInstancing):
             if em is not None:
                 self.lights.append(sc.Light(kind=sc.LIGHT_MESH, name=inst.name or self.meshes[inst.mesh].name,
                                             radiance=tuple(float(x) for x in em), transform=inst.transform,
-                                            instance=i))
+                                            instance=i, emissive_object=True))
 
 
 __all__ = ["load_scene"]
