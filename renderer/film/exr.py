@@ -7,7 +7,8 @@ ZIP-compressed by default; the library sorts the channel list alphabetically, as
 Conventions at the boundary (the OpenEXR 3.x Python binding decides most attribute types from the Python type):
 
 - **Pixel types.** FLOAT by default. ``half=True`` stores every channel as HALF except depth (``Z`` and ``depth.*``),
-  which stays FLOAT because half precision cannot hold scene distances.
+  which stays FLOAT because half precision cannot hold scene distances, and Cryptomatte ranks (``CryptoObject00.R``
+  ...), whose ids are float32 bit patterns (``renderer.film.cryptomatte.is_rank_channel``).
 - **Non-finite pixels** are never written: NaN and +-Inf become 0 and ``write_exr`` returns how many it replaced.
   Finite values beyond the stored type's range are clamped to its largest finite value (65504 for HALF), not
   counted.
@@ -34,6 +35,7 @@ from fractions import Fraction
 import numpy as np
 import OpenEXR
 
+from renderer.film.cryptomatte import is_rank_channel
 from renderer.files import replacing
 
 HALF_MAX = 65504.0
@@ -215,7 +217,7 @@ def _prepare_channels(channels: Mapping[str, np.ndarray], half) -> tuple[dict[st
             shape = src.shape
         elif src.shape != shape:
             raise ValueError(f"channel {name!r} has shape {src.shape}, others have {shape}")
-        as_half = name in half if isinstance(half, frozenset) else half and not _is_depth(name)
+        as_half = name in half if isinstance(half, frozenset) else half and not _stays_float(name)
         limit = HALF_MAX if as_half else FLOAT_MAX
         bad = ~np.isfinite(src)
         replaced += int(np.count_nonzero(bad))
@@ -224,8 +226,8 @@ def _prepare_channels(channels: Mapping[str, np.ndarray], half) -> tuple[dict[st
     return out, replaced
 
 
-def _is_depth(name: str) -> bool:
-    return name == "Z" or name.startswith("depth.")
+def _stays_float(name: str) -> bool:
+    return name == "Z" or name.startswith("depth.") or is_rank_channel(name)
 
 
 def _window(what: str, box: Sequence[int]) -> tuple[int, int, int, int]:

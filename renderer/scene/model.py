@@ -116,6 +116,8 @@ class Instance:
 
     mesh: int  # index into Scene.meshes
     transform: MotionTransform
+    # The prim path; a PointInstancer's instance: "<instancer path>[<index in protoIndices>]<path of the geometry
+    # under its prototype's parent>" (unique per placement). Cryptomatte's object name.
     name: str = ""
     # Visible part of the shutter, in normalised time (time-sampled visibility). Outside it the instance is
     # absent for camera, shadow and light rays alike.
@@ -125,6 +127,8 @@ class Instance:
     # this closed mesh belongs to (0 is the one others are subtracted from in a difference).
     csg_group: int = -1
     csg_operand: int = 0
+    # The prim path of the asset it belongs to, by model kinds (``renderer.usd.assets``); Cryptomatte's asset name.
+    asset: str = ""
 
 
 @dataclass(eq=False)

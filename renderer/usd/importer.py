@@ -38,6 +38,7 @@ from renderer.usd import camera as usd_camera
 from renderer.usd import csg as usd_csg
 from renderer.usd import curves as usd_curves
 from renderer.usd import lights as usd_lights
+from renderer.usd.assets import AssetNames
 from renderer.usd.color import AttributeColors
 from renderer.usd.linking import apply_linking
 from renderer.usd.materials import MaterialTable
@@ -152,6 +153,7 @@ class _Importer(PointInstancing):
         self._density_camera = None  # (camera row matrix, aperture, focal length, width px, ortho) for curves
         self._in_prototype = 0  # > 0 while reading PointInstancer prototypes (no single view)
         self.csg = usd_csg.CsgGroups(self.warn)
+        self.assets = AssetNames()
         self._skipped: set[str] = set()  # prims skipped with a warning of their own (not checked for unread data)
         self.settings_path: str | None = None
         self.product_path: str | None = None
@@ -377,7 +379,7 @@ class _Importer(PointInstancing):
             return
         times, rows = self.xf.motion(prim)
         first = len(self.instances)
-        self._add_instances([mesh], [str(prim.GetPath())], times, rows[None], interval)
+        self._add_instances([mesh], [str(prim.GetPath())], times, rows[None], interval, [self.assets.of(prim)])
         self.csg.place(prim, range(first, len(self.instances)))
 
     def _skinned(self, prim, skin, interval) -> bool:
@@ -399,7 +401,7 @@ class _Importer(PointInstancing):
                                     skin=skin)
             if mesh is not None:
                 xf_times, rows = self.xf.motion(skin.skeleton)
-                self._add_instances([mesh], [path], xf_times, rows[None], interval)
+                self._add_instances([mesh], [path], xf_times, rows[None], interval, [self.assets.of(prim)])
             return True
         try:
             rel = self.skinning.skinned_transforms(skin, times)
@@ -412,7 +414,7 @@ class _Importer(PointInstancing):
         mesh = self._mesh_index(prim)
         if mesh is not None:
             rows = rel @ self.xf.world(skin.skeleton, times)
-            self._add_instances([mesh], [path], times, rows[None], interval)
+            self._add_instances([mesh], [path], times, rows[None], interval, [self.assets.of(prim)])
         return True
 
     # -- visibility -----------------------------------------------------------------------------------------------
@@ -547,8 +549,9 @@ class _Importer(PointInstancing):
             return None
         return usd_curves.view_in_object_space(*self._density_camera, self.xf.world(prim, [self.frame])[0])
 
-    def _add_instances(self, meshes, names, times, rows, interval) -> None:
-        """Instances of meshes[i] with row-vector world matrices rows[i] (N, K, 4, 4) at absolute times (K,).
+    def _add_instances(self, meshes, names, times, rows, interval, assets) -> None:
+        """Instances of meshes[i], named names[i], of asset assets[i], with row-vector world matrices rows[i]
+        (N, K, 4, 4) at absolute times (K,).
 
         Their transforms are decomposed later, all at once (``_place_instances``): one vectorised call per set
         of key times instead of one per gprim (a stage of 10^4 spheres spent 5 of its 10 s of import here)."""
@@ -560,8 +563,10 @@ class _Importer(PointInstancing):
         first = len(self.instances)
         kept = np.asarray(meshes, np.int64)[finite].tolist()
         kept_names = list(names) if finite.all() else [nm for nm, ok in zip(names, finite) if ok]
+        kept_assets = list(assets) if finite.all() else [a for a, ok in zip(assets, finite) if ok]
         instance = sc.Instance  # positional arguments: a PointInstancer may make a million of them
-        self.instances += [instance(m, None, nm, s0, s1) for m, nm in zip(kept, kept_names)]
+        self.instances += [instance(m, None, nm, s0, s1, -1, 0, a)
+                           for m, nm, a in zip(kept, kept_names, kept_assets)]
         if kept:
             norm = np.asarray(self.shutter.normalise(times), np.float64)
             group = self._pending.setdefault((len(norm), norm.tobytes()), (norm, []))

@@ -266,12 +266,14 @@ class MaterialTable:
             return self._add(("display", color), Material(name=f"displayColor {color}", diffuse_color=color,
                                                           display_scale=(1.0, 1.0, 1.0)))
         mprim = mat.GetPrim()
-        # Instance proxies of one prototype share its material.
+        # Instance proxies of one prototype share its material, named by the first proxy met: prototype paths
+        # (/__Prototype_1/...) are not stable from one load to the next, and the name is Cryptomatte's.
         path = str((mprim.GetPrimInPrototype() if mprim.IsInstanceProxy() else mprim).GetPath())
+        name = str(mprim.GetPath())
         kind, fields, uses_display = self._surface(mat, path)
         if kind == "preview":
             if not uses_display:
-                return self._add(("usd", path), Material(name=path, **fields))
+                return self._add(("usd", path), Material(name=name, **fields))
             color = display_color(prim, self.frame, self.colors)
             f = dict(fields)
             for name, fallback, scale in uses_display:  # displayColor (or the reader's fallback) x network scale
@@ -280,9 +282,9 @@ class MaterialTable:
                     else float(np.resize(c, 1)[0]) * scale[0]
                 if name == "diffuse_color" and color is not None:
                     f["display_scale"] = tuple(float(k) for k in np.resize(scale, 3))
-            return self._add(("usd", path, color), Material(name=path, **f))
+            return self._add(("usd", path, color), Material(name=name, **f))
         color = display_color(prim, self.frame, self.colors)
-        return self._add(("fallback", path, color), Material(name=path, diffuse_color=color or GREY,
+        return self._add(("fallback", path, color), Material(name=name, diffuse_color=color or GREY,
                                                              display_scale=None if color is None else (1.0, 1.0, 1.0)))
 
     def _surface(self, mat: UsdShade.Material, path: str) -> tuple:

@@ -26,7 +26,7 @@ class PointInstancing:
 
     def _point_instancer(self, prim, interval) -> None:
         times = self._pi_key_times(prim)
-        meshes, names, rows = self._pi_placements(prim, times)
+        meshes, names, rows, assets = self._pi_placements(prim, times)
         if not meshes:
             return
         if len(times) > 1:
@@ -42,7 +42,9 @@ class PointInstancing:
         keep = np.nonzero(~is_light)[0]
         if len(keep):
             first = len(self.instances)
-            self._add_instances([meshes[j] for j in keep], [names[j] for j in keep], times, rows[keep], interval)
+            own = self.assets.of(prim)  # the asset of placements whose prototype holds no component
+            self._add_instances([meshes[j] for j in keep], [names[j] for j in keep], times, rows[keep], interval,
+                                [assets[j] or own for j in keep])
             emitters: dict = {}  # MeshLightAPI prim path -> (prim, its placements' instance indices)
             for i in range(first, len(self.instances)):
                 light_prim = self._placement_mesh_lights.get(self.instances[i].name)
@@ -83,15 +85,16 @@ class PointInstancing:
 
     @reads("PointInstancer", "positions", "orientations", "orientationsf", "scales", "velocities",
            "angularVelocities", "accelerations", "protoIndices", "ids", "invisibleIds")  # ids: the mask
-    def _pi_placements(self, prim, times) -> tuple[list[int], list[str], np.ndarray]:
-        """(mesh per placement, names, row-vector world matrices (M, K, 4, 4)) of every instance's geometry."""
+    def _pi_placements(self, prim, times) -> tuple[list[int], list[str], np.ndarray, list[str | None]]:
+        """(mesh per placement, names, row-vector world matrices (M, K, 4, 4), assets) of every instance's geometry;
+        an asset is the component inside the prototype (``AssetNames.within``), None where there is none."""
         pi = UsdGeom.PointInstancer(prim)
         path = str(prim.GetPath())
         frame = self.frame
         targets = pi.GetPrototypesRel().GetForwardedTargets()
         proto_idx = pi.GetProtoIndicesAttr().Get(frame)
         k = len(times)
-        empty = ([], [], np.zeros((0, k, 4, 4)))
+        empty = ([], [], np.zeros((0, k, 4, 4)), [])
         if proto_idx is None or len(proto_idx) == 0 or not targets:
             return empty
         proto_idx = np.asarray(proto_idx, np.int64)
@@ -119,12 +122,13 @@ class PointInstancing:
         meshes: list[int] = []
         names: list[str] = []
         rows: list[np.ndarray] = []
+        assets: list[str | None] = []
         for j, target in enumerate(targets):
             sel = np.nonzero((proto_idx == j) & mask)[0]
             proto = self.stage.GetPrimAtPath(target)
             if len(sel) == 0 or not proto:
                 continue
-            sub_meshes, sub_names, sub_rows = self._subtree_placements(proto, times)
+            sub_meshes, sub_names, sub_rows, sub_assets = self._subtree_placements(proto, times)
             if not sub_meshes:
                 continue
             parent = np.linalg.inv(self.xf.world(proto.GetParent(), times))  # (K, 4, 4)
@@ -135,15 +139,16 @@ class PointInstancing:
             base = str(proto.GetParent().GetPath()).rstrip("/")
             rel_names = [nm[len(base):] if nm.startswith(base + "/") else "/" + nm.lstrip("/") for nm in sub_names]
             names += [f"{path}[{i}]{nm}" for i in sel for nm in rel_names]
+            assets += sub_assets * len(sel)
             for nm, rel in zip(sub_names, rel_names):  # placements of MeshLightAPI prims, by their names
                 if nm in self._proto_mesh_lights:
                     for i in sel:
                         self._placement_mesh_lights[f"{path}[{i}]{rel}"] = self._proto_mesh_lights[nm]
         if not rows:
             return empty
-        return meshes, names, np.concatenate(rows)
+        return meshes, names, np.concatenate(rows), assets
 
-    def _subtree_placements(self, root, times) -> tuple[list[int], list[str], np.ndarray]:
+    def _subtree_placements(self, root, times) -> tuple[list[int], list[str], np.ndarray, list[str | None]]:
         """Geometry under a prototype root (visibility and purpose at the frame, nested instancers expanded)."""
         self._in_prototype += 1
         try:
@@ -151,10 +156,11 @@ class PointInstancing:
         finally:
             self._in_prototype -= 1
 
-    def _subtree_placements_in(self, root, times) -> tuple[list[int], list[str], np.ndarray]:
+    def _subtree_placements_in(self, root, times) -> tuple[list[int], list[str], np.ndarray, list[str | None]]:
         meshes: list[int] = []
         names: list[str] = []
         rows: list[np.ndarray] = []
+        assets: list[str | None] = []
         it = iter(Usd.PrimRange(root, Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)))
         for prim in it:
             img = UsdGeom.Imageable(prim)
@@ -173,10 +179,12 @@ class PointInstancing:
                 continue
             if prim.IsA(UsdGeom.PointInstancer):
                 it.PruneChildren()
-                m, nm, r = self._pi_placements(prim, times)
+                m, nm, r, a = self._pi_placements(prim, times)
                 meshes += m
                 names += nm
                 rows.append(r)
+                inner = self.assets.within(prim, root)
+                assets += [x if x is not None else inner for x in a]
             elif prim.IsA(UsdGeom.Mesh) or prim.GetTypeName() in PRIMITIVE_TYPES or usd_curves.handles(prim):
                 it.PruneChildren()
                 mesh = self._mesh_index(prim)
@@ -186,6 +194,7 @@ class PointInstancing:
                     meshes.append(mesh)
                     names.append(str(prim.GetPath()))
                     rows.append(self.xf.world(prim, times)[None])
+                    assets.append(self.assets.within(prim, root))
             elif usd_volumes.is_volume(prim):
                 it.PruneChildren()
                 self.warn("volumes inside PointInstancer prototypes skipped", str(prim.GetPath()))
@@ -196,6 +205,7 @@ class PointInstancing:
                 meshes.append(-1 - self._proto_lights[key][0])
                 names.append(str(prim.GetPath()))
                 rows.append(self.xf.world(prim, times)[None])
+                assets.append(None)
         if not meshes:
-            return [], [], np.zeros((0, len(times), 4, 4))
-        return meshes, names, np.concatenate(rows)
+            return [], [], np.zeros((0, len(times), 4, 4)), []
+        return meshes, names, np.concatenate(rows), assets
