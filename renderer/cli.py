@@ -72,6 +72,9 @@ class _AppendChoices(argparse.Action):
 
     def __call__(self, parser, namespace, values, option_string=None):
         if not self.choices_list:  # free-form items (an LPE may hold commas): one per flag
+            problem = self.setting.problem((values,))
+            if problem:
+                parser.error(f"argument {option_string}: {problem}")
             setattr(namespace, self.dest, list(getattr(namespace, self.dest, None) or []) + [values])
             return
         items = [v.strip() for v in values.split(",") if v.strip()]
@@ -96,6 +99,7 @@ def add_setting_flags(p: argparse.ArgumentParser, exclude: tuple[str, ...] = ())
         elif s.shape == "many":
             action = p.add_argument(*flags, action=_AppendChoices, metavar=s.metavar, **common)
             action.choices_list = list(s.choices)
+            action.setting = s
         elif s.choices:
             p.add_argument(*flags, choices=list(s.choices), **common)
         else:

@@ -371,6 +371,7 @@ class PathSettings:
     time_filter: int
     frame_s: float  # the frame time in normalised shutter time (strobe)
     seed: wp.uint32
+    record_hits: int  # 1: each sample's first surface (``SampleBuffer.hit_inst``, ``hit_tri``) for Cryptomatte
 
 
 @by_reference
@@ -448,6 +449,8 @@ def trace_wave_kernel(
     lobe_frac = wp.vec3(0.0)  # diffuse share of the last sampled direction (per-light diffuse/specular multipliers)
     if lpe.count > 0:
         lpe_begin(lpe, buf.lpe_state, buf.extra, tid)
+    if settings.record_hits != 0:
+        buf.hit_inst[tid] = -1  # until a surface is seen
     while alive != 0:
         rays += 1
         # light reached along this ray has been scattered `bounce` times; direct light is 0 or 1 bounce
@@ -554,6 +557,9 @@ def trace_wave_kernel(
             wo = -rd
             lobes = bsdf_setup(params, ns, sp.ng, wo, sp.front)  # once per hit: eval, pdf and sample share it
             if bounce == 0:
+                if settings.record_hits != 0:
+                    buf.hit_inst[tid] = hit.inst
+                    buf.hit_tri[tid] = hit.tri
                 depth_aov = wp.dot(sp.p - cam_origin, fwd)
                 normal_aov = ns
                 albedo_aov = bsdf_albedo_hint(params)

@@ -47,12 +47,12 @@ MAX_LPES = 64  # LPE vars of one render
 
 def _lpe_var(items: tuple[str, ...]) -> str | None:
     """``NAME=EXPRESSION`` items: a layer name and a light path expression that compiles."""
-    from renderer.lpe.vars import LpeError, parse_lpe_var
+    from renderer.lpe.vars import parse_lpe_var
 
     for item in items:
         try:
             parse_lpe_var(item)
-        except LpeError as e:
+        except ValueError as e:  # the layer name's problem, or the expression's (``grammar.LpeError``)
             return str(e)
     return None
 
@@ -199,7 +199,7 @@ SETTINGS_TABLE: tuple[Setting, ...] = (
             "karma:light:lpetag, ri:light:lightGroup or primvars:arnold:aov, else the light's name"),
     Setting("cryptomatte", str, (), "Cryptomatte layers: object (prim paths), material (bound materials), asset "
             "(model-kind ancestors); comma-separated or repeated", choices=CRYPTOMATTE_KINDS, shape="many",
-            metavar="KINDS"),
+            metavar="KINDS", scene=True),
     Setting("cryptomatte_ranks", int, 6, "Cryptomatte id/coverage pairs per pixel", ge=1, le=16, metavar="N"),
     Setting("denoise", bool, False, "add an Open Image Denoise layer denoised.R/G/B (the beauty stays raw); needs "
             "pip install 'drt[denoise]'"),

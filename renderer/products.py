@@ -137,8 +137,10 @@ def product_channels(prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = ()
 def write_product(path, prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = (), half: bool = False) -> int:
     """Write a product's EXR atomically (``product_channels``). Returns the number of non-finite values zeroed."""
     from renderer.film.exr import write_exr
-    from renderer.render import frame_attributes, frame_windows
+    from renderer.render import cryptomatte_channels, frame_attributes, frame_windows
 
     channels, halves = product_channels(prep, sums, vars_, user_aovs=user_aovs, half=half)
-    return write_exr(path, channels, half=frozenset(halves), attributes=frame_attributes(prep),
+    crypto, manifests = cryptomatte_channels(prep, sums)
+    return write_exr(path, {**channels, **crypto}, half=frozenset(halves), attributes={**frame_attributes(prep),
+                                                                                       **manifests},
                      **frame_windows(prep))

@@ -31,7 +31,7 @@ from renderer.camera import CameraSetup, ndc_matrix, setup_camera
 from renderer.color import ColorSpaces
 from renderer.device import init_warp
 from renderer.errors import Cancelled, SettingsError
-from renderer.film import borders, denoise, film
+from renderer.film import borders, coverage, denoise, film, id_tables
 from renderer.film.adaptive import Convergence
 from renderer.film.exr import timecode_fields, write_exr
 from renderer.film.tiles import Tile, auto_tile_size, split_tiles
@@ -83,7 +83,7 @@ class PreparedScene:
     materials_key: bytes = b""
     # light path expression vars (``renderer.lpe.vars.CompiledVars``, None: none) and their kernel table
     lpe_vars: object | None = None
-    lpe: object | None = None
+    lpe_table: object | None = None
 
     @property
     def lpe_count(self) -> int:
@@ -97,7 +97,7 @@ def resolve_resolution(scene: Scene, options: RenderOptions) -> tuple[int, int]:
 
 
 # every Warp module a render launches kernels of (hierarchy build, integrator, film)
-RENDER_MODULES = (build_kernels, triangle_kernels, wide, quantize, integrator, film, media_upload)
+RENDER_MODULES = (build_kernels, triangle_kernels, wide, quantize, integrator, film, coverage, media_upload)
 
 
 def load_kernels(device: str = "cpu") -> dict[str, str]:
@@ -120,12 +120,13 @@ def _geometry_key(scene: Scene) -> bytes:
     return _fingerprint(scene.meshes, scene.instances, scene.csg_operations, lights)
 
 
-def _flatten(scene: Scene, key: bytes, reuse: PreparedScene | None) -> Scene:
-    """The scene with its still instances merged and its meshes laid out for quads, or the earlier frame's when
-    its geometry is the same (``_geometry_key``): then only the lights are this frame's (a mesh light keeps the
-    instance and triangles flattening gave it)."""
+def _flatten(scene: Scene, key: bytes, reuse: PreparedScene | None, merge: bool = True) -> Scene:
+    """The scene with its still instances merged (unless not ``merge``) and its meshes laid out for quads, or the
+    earlier frame's when its geometry is the same (``_geometry_key``): then only the lights are this frame's (a mesh
+    light keeps the instance and triangles flattening gave it)."""
     if reuse is None or reuse.geometry_key != key or reuse.flat is None:
-        return order_for_quads(flatten_still_instances(scene))  # before anything reads triangle indices
+        merged = flatten_still_instances(scene) if merge else scene
+        return order_for_quads(merged)  # before anything reads triangle indices
     old = reuse.flat
     lights = [replace(lt, instance=was.instance, triangles=was.triangles) if lt.kind == LIGHT_MESH else lt
               for lt, was in zip(scene.lights, old.lights)]
@@ -164,8 +165,10 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu",
     dof = options.dof and not scene.render_settings.disable_depth_of_field
     warnings = list(scene.warnings)
     reuse = reuse if reuse is not None and reuse.device == device else None
-    geometry_key = _geometry_key(scene)
-    flat = _flatten(scene, geometry_key, reuse)
+    # Cryptomatte names each instance: still ones are not merged then (their frames differ in bits, not in sense)
+    merge = not options.cryptomatte
+    geometry_key = _fingerprint(_geometry_key(scene), merge)
+    flat = _flatten(scene, geometry_key, reuse, merge)
     if reuse is not None and reuse.geometry_key == geometry_key:
         geometry, stats = reuse.geometry, reuse.stats
     else:
@@ -188,7 +191,7 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu",
                          geometry=geometry, materials=materials, textures=textures, lights=lights,
                          light_count=light_count, camera=cam, stats=stats, device=device, warnings=warnings,
                          media=media, geometry_key=geometry_key, flat=flat, materials_key=materials_key,
-                         lpe_vars=lpe_vars, lpe=lpe)
+                         lpe_vars=lpe_vars, lpe_table=lpe)
 
 
 def with_options(prep: PreparedScene, options: RenderOptions) -> PreparedScene:
@@ -198,15 +201,16 @@ def with_options(prep: PreparedScene, options: RenderOptions) -> PreparedScene:
     ``RenderRequest.load`` drops motion keys for a strobe time filter.) A service renders many jobs of one scene
     that differ in nothing else."""
     old = prep.options
-    if (options.width, options.height, options.dof) != (old.width, old.height, old.dof):
-        raise ValueError("with_options keeps the resolution and depth of field of the prepared scene")
+    if (options.width, options.height, options.dof, bool(options.cryptomatte)) != (old.width, old.height, old.dof,
+                                                                                     bool(old.cryptomatte)):
+        raise ValueError("with_options keeps the resolution, depth of field and Cryptomatte of the prepared scene")
     options.validate()
     if options.denoise:
         denoise.require()
-    lpe_vars, lpe = prep.lpe_vars, prep.lpe
+    lpe_vars, lpe = prep.lpe_vars, prep.lpe_table
     if (options.lpe, options.light_groups) != (old.lpe, old.light_groups):
         lpe_vars, lpe = _lpe_tables(prep.flat or prep.scene, options, prep.device)
-    return replace(prep, options=options, lpe_vars=lpe_vars, lpe=lpe)
+    return replace(prep, options=options, lpe_vars=lpe_vars, lpe_table=lpe)
 
 
 def render_tile(prep: PreparedScene, tile: Tile,
@@ -251,7 +255,11 @@ def render_tile(prep: PreparedScene, tile: Tile,
     dev = prep.device
     n_lpe = prep.lpe_count
     extra = 3 * n_lpe  # the LPE vars' RGB, filtered as the colour
-    buf = film.new_sample_buffer(sw * sh * max_wave, dev, extra=extra, lpe_vars=n_lpe)
+    tables = coverage_kinds(opts)  # id tables: {kind: (ids, weights)} per (target, direction, slot)
+    buf = film.new_sample_buffer(sw * sh * max_wave, dev, extra=extra, lpe_vars=n_lpe, hits=bool(tables))
+    tables = {k: (wp.full(targets * directions * coverage.SLOTS, -1, dtype=wp.int32, device=dev),
+                  wp.zeros(targets * directions * coverage.SLOTS, dtype=wp.float32, device=dev)) for k in tables}
+    sample_ids = wp.empty(sw * sh * max_wave if tables else 1, dtype=wp.int32, device=dev)
     acc = film.new_tile_accum(directions * targets, dev, aovs=bool(aov_sums), extra=extra)
 
     counters = wp.zeros(2, dtype=wp.int64, device=dev)  # rays traced, non-finite samples zeroed
@@ -263,6 +271,7 @@ def render_tile(prep: PreparedScene, tile: Tile,
     settings.time_filter = TIME_FILTERS[opts.time_filter]
     settings.frame_s = prep.scene.shutter.frame_s
     settings.seed = wp.uint32(opts.seed)
+    settings.record_hits = int(bool(tables))
     slot_of = np.full(sw * sh, -1, np.int32)
     # the tile's own pixels among the sample pixels (its samples-per-pixel count and progress)
     mine = np.zeros((sh, sw), bool)
@@ -290,12 +299,18 @@ def render_tile(prep: PreparedScene, tile: Tile,
         wp.launch(trace_wave_kernel, dim=pixels.size * wave, device=dev,
                   inputs=[prep.geometry, prep.materials, prep.textures, prep.lights, prep.media.media,
                           prep.camera.params, buf,
-                          settings, launch, prep.lpe])
+                          settings, launch, prep.lpe_table])
         wp.launch(film.axis_weights_kernel, dim=pixels.size * wave, device=dev,
                   inputs=[buf, kind, float(film.FILTER_RADIUS[kind])])
         slot_array = wp.array(slot_of, dtype=wp.int32, device=dev)
         wp.launch(film.gather_kernel, dim=sw * sh, device=dev,
                   inputs=[buf, acc, wave, sx0, sy0, sw, slot_array, ex0, ey0, ex1 - ex0, ey1 - ey0, margin, aov_sums, 1])
+        for kind, (ids, weights) in tables.items():
+            wp.launch(coverage.sample_ids_kernel, dim=pixels.size * wave, device=dev,
+                      inputs=[buf, prep.geometry.tri_material, kind, sample_ids])
+            wp.launch(coverage.coverage_gather_kernel, dim=sw * sh, device=dev,
+                      inputs=[buf, sample_ids, ids, weights, wave, sx0, sy0, sw, slot_array, ex0, ey0, ex1 - ex0,
+                              ey1 - ey0, margin])
         if extra:
             wp.launch(film.gather_extra_kernel, dim=sw * sh, device=dev,
                       inputs=[buf, acc, extra, wave, sx0, sy0, sw, slot_array, ex0, ey0, ex1 - ex0, ey1 - ey0, margin])
@@ -312,10 +327,31 @@ def render_tile(prep: PreparedScene, tile: Tile,
     else:
         arrays = {name: borders.combine(p) if p is not None else borders.zero_sums(name, (ey1 - ey0, ex1 - ex0))
                   for name, p in partials.items()}
+    band = borders.band_mask(tile.x0, tile.y0, tile.x1, tile.y1, margin, W, H) if shared_borders and margin else None
+    for kind, (ids, weights) in tables.items():
+        shape = (ey1 - ey0, ex1 - ex0, directions, coverage.SLOTS)
+        per_direction = [np.moveaxis(a.numpy().reshape(shape), 2, 0) for a in (ids, weights)]
+        mine, banded = id_tables.tile_tables(COVERAGE_NAMES[kind], *per_direction,
+                                             own if shared_borders else (ex0, ey0, ex1, ey1), (ex0, ey0), band)
+        arrays.update(mine)
+        arrays.update((borders.BAND + k, a) for k, a in banded.items())
     arrays["spp"] = conv.count.reshape(sh, sw)[tile.y0 - sy0:tile.y1 - sy0, tile.x0 - sx0:tile.x1 - sx0] \
         .astype(np.float32)
     c = counters.numpy()
     return TileSums(tile=tile, arrays=arrays, rays=int(c[0]), nonfinite=int(c[1]))
+
+
+COVERAGE_NAMES = {coverage.KIND_OBJECT: "object", coverage.KIND_MATERIAL: "material"}
+
+
+def coverage_kinds(options: RenderOptions) -> tuple[int, ...]:
+    """The id tables a render keeps: objects (for the object and asset layers), materials."""
+    kinds = []
+    if {"object", "asset"} & set(options.cryptomatte):
+        kinds.append(coverage.KIND_OBJECT)
+    if "material" in options.cryptomatte:
+        kinds.append(coverage.KIND_MATERIAL)
+    return tuple(kinds)
 
 
 def tile_time_budget(options: RenderOptions, tile: Tile, width: int, height: int, threads: int = 1) -> float | None:
@@ -412,6 +448,25 @@ def frame_channels(prep: PreparedScene, sums: dict[str, np.ndarray]) -> dict[str
     return ch
 
 
+def cryptomatte_channels(prep: PreparedScene, sums: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], dict]:
+    """The Cryptomatte layers the options ask for and their header attributes (``film.cryptomatte``)."""
+    from renderer.film import cryptomatte
+
+    channels, attributes = {}, {}
+    scene = prep.flat or prep.scene
+    names = cryptomatte.scene_names(scene)
+    for kind in prep.options.cryptomatte:
+        table = "material" if kind == "material" else "object"
+        ids_name, weights_name = id_tables.names(table)
+        if ids_name not in sums:
+            continue
+        c, a = cryptomatte.encode(kind, names[kind], sums[ids_name], sums[weights_name], sums["weight"],
+                                  ranks=prep.options.cryptomatte_ranks)
+        channels.update(c)
+        attributes.update(a)
+    return channels, attributes
+
+
 def lpe_channels(prep: PreparedScene, resolved: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """``NAME.R, NAME.G, NAME.B`` of each LPE var (``resolved``: ``film.resolve``'s output)."""
     if prep.lpe_vars is None or "extra" not in resolved:
@@ -474,8 +529,11 @@ class FrameImage:
 
 
 def frame_image(prep: PreparedScene, sums: dict[str, np.ndarray]) -> FrameImage:
-    """The frame's channels, header attributes and windows from its assembled sums."""
-    return FrameImage(channels=frame_channels(prep, sums), attributes=frame_attributes(prep), **frame_windows(prep))
+    """The frame's channels (Cryptomatte's included), header attributes and windows from its assembled sums."""
+    channels = frame_channels(prep, sums)
+    crypto, manifests = cryptomatte_channels(prep, sums)
+    return FrameImage(channels={**channels, **crypto}, attributes={**frame_attributes(prep), **manifests},
+                      **frame_windows(prep))
 
 
 def write_frame(path, prep: PreparedScene, sums: dict[str, np.ndarray], *, half: bool = False) -> int:

@@ -243,6 +243,8 @@ def _edge_values(s):
         inside = [(s.choices[-1],) if s.shape == "many" else s.choices[-1]]
         outside = [("bogus",) if s.shape == "many" else "bogus"]
         return inside, outside
+    if s.kind is str and s.shape == "many":  # a free-form list: the table's example, and a malformed item
+        return [tuple(s.example)], [("no equals sign",)] if s.check else []
     if s.kind is str:
         return ["/World/Cam"], ["World/Cam"] if s.check else []
     step = 1 if s.kind is int else 0.5

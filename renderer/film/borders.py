@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from renderer.film import id_tables
+
 # The filtered sums of a pixel (channel counts): premultiplied RGBA, filter weight, depth and the weight of
 # the samples that hit something, shading normal, albedo.
 CHANNELS = {"rgba": 4, "weight": 1, "depth": 1, "hit_weight": 1, "normal": 3, "albedo": 3}
@@ -125,7 +127,9 @@ def assemble(tiles: list[tuple[tuple[int, int, int, int], dict[str, np.ndarray]]
             if k.startswith(BAND):
                 continue
             if k not in full:
-                full[k] = np.zeros((height, width) + a.shape[2:], np.float32)
+                full[k] = np.zeros((height, width) + a.shape[2:], a.dtype if id_tables.is_table(k) else np.float32)
+                if k.endswith(".ids"):
+                    full[k][:] = -1
             full[k][y0:y1, x0:x1] = a
     banded = [BAND + "rgba" in arrays for _, arrays in tiles]
     if not any(banded):
@@ -144,6 +148,15 @@ def assemble(tiles: list[tuple[tuple[int, int, int, int], dict[str, np.ndarray]]
     pixels, where = np.unique(np.concatenate(flat), return_inverse=True)
     starts = np.cumsum([0] + [len(f) for f in flat])
     for name in banded_names(tiles[0][1]):
+        if id_tables.is_table(name):  # id tables merge rather than add
+            if name.endswith(".ids"):
+                weights = name[:-len(".ids")] + ".weights"
+                ids_, w_ = id_tables.assemble_band(
+                    [a[BAND + name] for _, a in tiles], [a[BAND + weights] for _, a in tiles],
+                    [where[starts[i]:starts[i + 1]] for i in range(len(tiles))], len(pixels))
+                full[name].reshape((height * width, -1))[pixels] = ids_
+                full[weights].reshape((height * width, -1))[pixels] = w_
+            continue
         first = tiles[0][1][BAND + name]
         partials = np.zeros((len(pixels),) + (first.shape[0],) + first.shape[2:], np.float32)
         for i, (_, arrays) in enumerate(tiles):

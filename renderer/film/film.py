@@ -132,6 +132,9 @@ class SampleBuffer:
     # element when there are none), and the LPE vars' automaton states (``renderer.lpe.kernel``)
     extra: wp.array(dtype=wp.float32)
     lpe_state: wp.array(dtype=wp.int32)
+    # the instance and global triangle each sample saw first (-1: none), when a render records them (Cryptomatte)
+    hit_inst: wp.array(dtype=wp.int32)
+    hit_tri: wp.array(dtype=wp.int32)
     wx: wp.array(dtype=wp.vec3)  # filter weights along x toward the pixels at offsets -1, 0, +1 (``axis_weights``)
     wy: wp.array(dtype=wp.vec3)
 
@@ -151,13 +154,15 @@ class TileAccum:
     extra: wp.array(dtype=wp.float32)  # sum(w * value) of each further channel: (partial, channel), flat
 
 
-def new_sample_buffer(n: int, device: str, extra: int = 0, lpe_vars: int = 0) -> SampleBuffer:
+def new_sample_buffer(n: int, device: str, extra: int = 0, lpe_vars: int = 0, hits: bool = False) -> SampleBuffer:
     """Room for n samples with ``extra`` further channels and ``lpe_vars`` automaton states each, not cleared: a
     wave writes every sample it later reads (the path tracing kernel its values, ``axis_weights_kernel`` its
     weights) before the gather reads them."""
     b = SampleBuffer()
     b.extra = wp.empty(max(1, n * extra), dtype=wp.float32, device=device)
     b.lpe_state = wp.empty(max(1, n * lpe_vars), dtype=wp.int32, device=device)
+    b.hit_inst = wp.empty(n if hits else 1, dtype=wp.int32, device=device)
+    b.hit_tri = wp.empty(n if hits else 1, dtype=wp.int32, device=device)
     b.film = wp.empty(n, dtype=wp.vec2, device=device)
     b.rgba = wp.empty(n, dtype=wp.vec4, device=device)
     b.depth = wp.empty(n, dtype=wp.float32, device=device)

@@ -12,22 +12,25 @@ from dataclasses import dataclass
 import numpy as np
 
 from renderer.lpe import events
-from renderer.lpe.grammar import LpeError
 
 LAYER_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 GROUP_PREFIX = "RGBA_"  # light group layers, as Arnold names them
 
 
+class LpeVarError(ValueError):
+    """A malformed ``NAME=EXPR`` item (its expression's own errors are ``grammar.LpeError``, a ValueError too)."""
+
+
 def parse_lpe_var(item: str) -> tuple[str, str]:
-    """``NAME=EXPR`` as (layer name, expression); LpeError (a ValueError) naming the problem."""
+    """``NAME=EXPR`` as (layer name, expression); a ValueError naming the problem."""
     from renderer.lpe.grammar import parse
 
     name, sep, expr = item.partition("=")
     name, expr = name.strip(), expr.strip()
     if not sep or not name or not expr:
-        raise LpeError(f"an LPE layer is NAME=EXPRESSION, got {item!r}")
+        raise LpeVarError(f"an LPE layer is NAME=EXPRESSION, got {item!r}")
     if not LAYER_NAME.match(name):
-        raise LpeError(f"LPE layer name {name!r} must be letters, digits and _ (not starting with a digit)")
+        raise LpeVarError(f"LPE layer name {name!r} must be letters, digits and _ (not starting with a digit)")
     parse(expr)
     return name, expr
 
