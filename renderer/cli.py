@@ -417,7 +417,7 @@ class _Run:
         sums = assemble(tiles, prep.width, prep.height)
         for path, name, product in members:
             write_product(path, prep, sums, product.vars if product else (), user_aovs=self.base.options.aovs,
-                          half=self.base.half)
+                          user_cryptomatte=self.base.options.cryptomatte, half=self.base.half)
             sys.stderr.write(f"drt: snapshot of {len(tiles)} tiles written to {name}\n")
         sys.stderr.flush()
 
@@ -443,7 +443,7 @@ class _Run:
     def frame(self, frame: float) -> None:
         from dataclasses import replace
 
-        from renderer.products import needed_aovs, unwritten, write_product
+        from renderer.products import needed_aovs, needed_cryptomatte, needed_lpes, unwritten, write_product
         from renderer.render import auto_tile_size, render_frame
         from renderer.usd.products import read_products
 
@@ -454,8 +454,8 @@ class _Run:
                    for name, product in _targets(args, products, frame, self.warn)]
         skipped = unwritten([v for _, _, p in targets if p for v in p.vars])
         if skipped:
-            self.warn("render vars not written (drt renders no LPEs but the beauty, no primvars, and the raw "
-                      "sources of docs/rendering.md's table)", ", ".join(dict.fromkeys(skipped)))
+            self.warn("render vars not written (drt renders no primvars, and the raw sources of docs/rendering.md's "
+                      "table)", ", ".join(dict.fromkeys(skipped)))
         groups: dict = {}  # products with the same overrides render once
         for path, name, product in targets:
             groups.setdefault(product.override_key if product else None, []).append((path, name, product))
@@ -463,9 +463,11 @@ class _Run:
         for g, (key, members) in enumerate(groups.items()):
             first = members[0][2]
             vars_ = [v for _, _, p in members if p for v in p.vars]
-            aovs = tuple(dict.fromkeys(base.options.aovs + needed_aovs(vars_)))
-            request = replace(base, frame=frame, product=first.path if first else None,
-                              options=replace(base.options, aovs=aovs))
+            o = base.options
+            options = replace(o, aovs=tuple(dict.fromkeys(o.aovs + needed_aovs(vars_))),
+                              lpe=tuple(dict.fromkeys(o.lpe + needed_lpes(vars_))),
+                              cryptomatte=tuple(dict.fromkeys(o.cryptomatte + needed_cryptomatte(vars_))))
+            request = replace(base, frame=frame, product=first.path if first else None, options=options)
             t_prep = time.perf_counter()
             prep = request.prepare(stage=self.stage, reuse=self.prepared.get(key))
             load = time.perf_counter() - t_prep + (t_prep - t0 if g == 0 else 0.0)
@@ -493,7 +495,8 @@ class _Run:
                 self.warn(f"{result.nonfinite} samples had NaN/Inf radiance and were zeroed")
             for path, name, product in members:
                 zeroed = write_product(path, prep, result.sums, product.vars if product else (),
-                                       user_aovs=base.options.aovs, half=base.half)
+                                       user_aovs=base.options.aovs, user_cryptomatte=base.options.cryptomatte,
+                                       half=base.half)
                 if zeroed:
                     self.warn(f"{zeroed} non-finite pixel values were zeroed in {name}")
                 self._report(name, prep, result, load)

@@ -8,14 +8,19 @@ sums into its channels:
 * any other var is the layer named after it (``VarSpec.layer``) with the channels of its ``dataType``
   (``DATA_TYPES``): ``N.X, N.Y, N.Z`` for a normal3f, ``albedo.R, albedo.G, albedo.B`` for a color3f, one
   channel ``depth.Z`` (``.A`` for alpha, ``.Y`` otherwise) for a float;
-* sources the renderer does not produce (``lpe`` vars other than the beauty, ``primvar`` vars, raw names outside
-  ``RAW_SOURCES``) are returned by name, for one warning, and write nothing.
+* an ``lpe`` var is the layer of its expression (``renderer.lpe``), RGB;
+* a Cryptomatte var (raw ``CryptoObject``, ``crypto_object``, ``cryptomatte:object``, and so for material and
+  asset: ``CRYPTO_SOURCES``) asks for that Cryptomatte layer set (``CryptoObject00..``, named by the spec, not by
+  the var), with ``--cryptomatte-ranks`` ranks;
+* sources the renderer does not produce (``primvar`` vars, raw names outside ``RAW_SOURCES``) are returned by
+  name, for one warning, and write nothing.
 
 Precision: the var's ``driver:parameters:aov:format`` (``half``/``float``), else ``--half``; depth stays FLOAT
 unless its var asks for half.
 """
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -32,6 +37,9 @@ RAW_SOURCES = {
     "spp": "spp", "samples": "spp",
 }
 BEAUTY_LPES = {"c.*", "c.*[<l.>o]", "c<.*>", "c[dg]*[<l.>o]"}  # LPEs of all the light: the beauty itself
+# raw source names (lower case) of Cryptomatte layers: Arnold's, Karma's and the layer names themselves
+CRYPTO_SOURCES = {f"{prefix}{kind}": kind for kind in ("object", "material", "asset")
+                  for prefix in ("crypto_", "crypto", "cryptomatte:", "cryptomatte_", "cryptomatte")}
 # the renderer's AOV (``options.AOV_NAMES``) each source needs rendered
 SOURCE_AOVS = {"depth": "depth", "normal": "normal", "albedo": "albedo", "spp": "spp"}
 # dataType -> channel suffixes (one channel: see ``_single``) and whether the type itself is half
@@ -53,10 +61,31 @@ def source_kind(var) -> str | None:
     """What the renderer makes of a var's source (a value of ``RAW_SOURCES``), or None if it makes nothing of it."""
     name = var.source.strip().lower()
     if var.source_type == "lpe":
-        return "rgba" if name in BEAUTY_LPES else None
+        return "rgba" if name.replace(" ", "") in BEAUTY_LPES else "lpe"
     if var.source_type != "raw":
         return None
+    if name in CRYPTO_SOURCES:
+        return "crypto"
     return RAW_SOURCES.get(name)
+
+
+VAR_LAYER = "__var_"  # prefix of the renderer's layers of product vars (not written under that name)
+
+
+def lpe_layer(var) -> str:
+    """The renderer's layer name of an ``lpe`` var (``renderer.lpe.vars.LAYER_NAME``; the EXR keeps ``var.layer``)."""
+    return VAR_LAYER + re.sub(r"[^A-Za-z0-9_]", "_", var.layer)
+
+
+def needed_lpes(vars_) -> tuple[str, ...]:
+    """``NAME=EXPR`` items of the ``lpe`` vars (the renderer's ``lpe`` setting)."""
+    return tuple(dict.fromkeys(f"{lpe_layer(v)}={v.source.strip()}" for v in vars_ if source_kind(v) == "lpe"))
+
+
+def needed_cryptomatte(vars_) -> tuple[str, ...]:
+    """Cryptomatte kinds the vars ask for (the renderer's ``cryptomatte`` setting)."""
+    return tuple(dict.fromkeys(CRYPTO_SOURCES[v.source.strip().lower()] for v in vars_
+                               if source_kind(v) == "crypto"))
 
 
 def needed_aovs(vars_) -> tuple[str, ...]:
@@ -69,8 +98,11 @@ def unwritten(vars_) -> list[str]:
     return [f"{v.path} ({v.source_type} {v.source})" for v in vars_ if source_kind(v) is None]
 
 
-def _values(kind: str, r: dict, sums: dict) -> np.ndarray:
+def _values(kind: str, r: dict, sums: dict, prep=None, var=None) -> np.ndarray:
     """(H, W, C) values of a source kind."""
+    if kind == "lpe":
+        v = prep.lpe_vars.names.index(lpe_layer(var))
+        return r["extra"][..., 3 * v:3 * v + 3]
     if kind == "rgba":
         return r["rgba"]
     if kind == "alpha":
@@ -103,6 +135,7 @@ def product_channels(prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = ()
     from renderer.render import frame_channels
 
     plain = frame_channels(replace(prep, options=replace(prep.options, aovs=tuple(user_aovs))), sums)
+    plain = {n: a for n, a in plain.items() if not n.startswith(VAR_LAYER)}  # other products' vars
     if not vars_:
         names = {n for n in plain if half and not (n == "Z" or n.startswith("depth."))}
         return plain, names
@@ -111,10 +144,12 @@ def product_channels(prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = ()
     halves: set[str] = set()
     for var in vars_:
         kind = source_kind(var)
-        if kind is None:
+        if kind is None or kind == "crypto":  # Cryptomatte's layers are written whole (``write_product``)
             continue
         suffixes, data_half = DATA_TYPES.get(var.data_type.lower(), ("RGB", False))
-        values = _values(kind, r, sums)
+        if kind == "lpe":
+            suffixes = "RGB"
+        values = _values(kind, r, sums, prep, var)
         if suffixes == "1":
             suffixes = _single(kind)
         if kind == "rgba":
@@ -127,20 +162,23 @@ def product_channels(prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = ()
             if as_half:
                 halves.add(name)
     for name, values in plain.items():
-        if name not in ("R", "G", "B", "A") and name not in out:
+        if name not in ("R", "G", "B", "A") and name not in out and not name.startswith(VAR_LAYER):
             out[name] = values
             if half and not name.startswith("depth."):
                 halves.add(name)
     return out, halves
 
 
-def write_product(path, prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = (), half: bool = False) -> int:
-    """Write a product's EXR atomically (``product_channels``). Returns the number of non-finite values zeroed."""
+def write_product(path, prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = (),
+                  user_cryptomatte: tuple[str, ...] = (), half: bool = False) -> int:
+    """Write a product's EXR atomically (``product_channels``, and the Cryptomatte layers its vars or the command
+    line ask for). Returns the number of non-finite values zeroed."""
     from renderer.film.exr import write_exr
     from renderer.render import cryptomatte_channels, frame_attributes, frame_windows
 
     channels, halves = product_channels(prep, sums, vars_, user_aovs=user_aovs, half=half)
-    crypto, manifests = cryptomatte_channels(prep, sums)
+    kinds = needed_cryptomatte(vars_) + tuple(user_cryptomatte) if vars_ else None  # None: all asked for
+    crypto, manifests = cryptomatte_channels(prep, sums, kinds)
     return write_exr(path, {**channels, **crypto}, half=frozenset(halves), attributes={**frame_attributes(prep),
                                                                                        **manifests},
                      **frame_windows(prep))

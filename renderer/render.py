@@ -448,14 +448,18 @@ def frame_channels(prep: PreparedScene, sums: dict[str, np.ndarray]) -> dict[str
     return ch
 
 
-def cryptomatte_channels(prep: PreparedScene, sums: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], dict]:
-    """The Cryptomatte layers the options ask for and their header attributes (``film.cryptomatte``)."""
+def cryptomatte_channels(prep: PreparedScene, sums: dict[str, np.ndarray],
+                         kinds: tuple[str, ...] | None = None) -> tuple[dict[str, np.ndarray], dict]:
+    """The Cryptomatte layers of ``kinds`` (default: all the options ask for) and their header attributes
+    (``film.cryptomatte``)."""
     from renderer.film import cryptomatte
 
     channels, attributes = {}, {}
     scene = prep.flat or prep.scene
     names = cryptomatte.scene_names(scene)
-    for kind in prep.options.cryptomatte:
+    for kind in dict.fromkeys(prep.options.cryptomatte if kinds is None else kinds):
+        if kind not in prep.options.cryptomatte:
+            continue
         table = "material" if kind == "material" else "object"
         ids_name, weights_name = id_tables.names(table)
         if ids_name not in sums:

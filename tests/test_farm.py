@@ -69,7 +69,7 @@ def shot(tmp_path_factory):
     z = _var(stage, "/Render/Vars/depth", "depth", "float")
     alb = _var(stage, "/Render/Vars/alb", "albedo", "color3f", aov_name="diffuse_albedo", fmt="half")
     p = _var(stage, "/Render/Vars/P", "P", "point3f")
-    lg = _var(stage, "/Render/Vars/key", "C.*<L.'key'>", "color3f", kind="lpe")
+    lg = _var(stage, "/Render/Vars/key", "C.*<L.'key'>", "color3f", kind="lpe")  # no light of group key
     _product(stage, beauty, "/Render/Beauty/beauty", {1: "beauty.0001.exr", 2: "beauty.0002.exr",
                                                       3: "beauty.0003.exr"}, (c, n, z, alb, lg))
     _product(stage, beauty, "/Render/Beauty/util", "util.$F4.exr", (z, p), resolution=(20, 15))
@@ -88,7 +88,7 @@ def test_a_range_writes_every_product_with_its_vars(shot, tmp_path):
     ch, header = read_exr(tmp_path / "beauty.0002.exr")
     # the beauty var is the unprefixed RGBA; the others are layers named after the var (or its aov:name)
     assert set(ch) == {"R", "G", "B", "A", "N.X", "N.Y", "N.Z", "depth.Z", "diffuse_albedo.R", "diffuse_albedo.G",
-                       "diffuse_albedo.B"}
+                       "diffuse_albedo.B", "key.R", "key.G", "key.B"}
     assert ch["R"].shape == (30, 40)
     assert header["channels"]["diffuse_albedo.R"] == "HALF" and header["channels"]["R"] == "FLOAT"
     assert abs(ch["depth.Z"][15, 20] - 3.0) < 1e-3 and ch["N.Z"][15, 20] > 0.99
@@ -98,7 +98,9 @@ def test_a_range_writes_every_product_with_its_vars(shot, tmp_path):
     assert set(util) == {"depth.Z"} and util["depth.Z"].shape == (15, 20)  # the product's own resolution
     # the vars drt does not produce are named once, for the whole range
     warned = [line for line in r.stderr.splitlines() if "render vars not written" in line]
-    assert len(warned) == 1 and "/Render/Vars/P (raw P)" in warned[0] and "/Render/Vars/key (lpe" in warned[0]
+    assert len(warned) == 1 and "/Render/Vars/P (raw P)" in warned[0] and "/Render/Vars/key" not in warned[0]
+    # the LPE var is the light group 'key': the only light is the prim Sun, whose group is its name
+    assert not ch["key.R"].any() and ch["R"][15, 20] > 0
 
 
 def test_several_settings_and_none_named_take_the_first_with_a_warning(shot, tmp_path):
