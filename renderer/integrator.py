@@ -661,12 +661,14 @@ def trace_wave_kernel(
                                     through = wp.dot(wi, sp.ng) * wp.dot(wo, sp.ng) < 0.0
                                     light_sym = light_symbol(lpe, li)
                                     lit = wp.cw_mul(wp.cw_mul(beta, Le_l), tr) * scale
-                                    lpe_light_after(lpe, buf.lpe_state, buf.extra, tid,
-                                                    surface_symbol(lpe, through, SCATTER_D), light_sym,
-                                                    wp.cw_mul(lit, fd))
-                                    lpe_light_after(lpe, buf.lpe_state, buf.extra, tid,
-                                                    surface_symbol(lpe, through, SCATTER_G), light_sym,
-                                                    wp.cw_mul(lit, fs))
+                                    if fd[0] > 0.0 or fd[1] > 0.0 or fd[2] > 0.0:
+                                        lpe_light_after(lpe, buf.lpe_state, buf.extra, tid,
+                                                        surface_symbol(lpe, through, SCATTER_D), light_sym,
+                                                        wp.cw_mul(lit, fd))
+                                    if fs[0] > 0.0 or fs[1] > 0.0 or fs[2] > 0.0:
+                                        lpe_light_after(lpe, buf.lpe_state, buf.extra, tid,
+                                                        surface_symbol(lpe, through, SCATTER_G), light_sym,
+                                                        wp.cw_mul(lit, fs))
                 # --- the BSDF's own direction continues the path
                 # the lobe and the direction from one 3D sample, so that each lobe's share keeps spread directions
                 u_bsdf = sample_3d(seed, pixel, index, dim + wp.uint32(BOUNCE_LOBE))

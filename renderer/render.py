@@ -254,7 +254,7 @@ def render_tile(prep: PreparedScene, tile: Tile,
     max_wave = max(e - s for s, e in waves)
     dev = prep.device
     n_lpe = prep.lpe_count
-    extra = 3 * n_lpe  # the LPE vars' RGB, filtered as the colour
+    extra = n_lpe  # RGB triples filtered as the colour: the LPE vars'
     tables = coverage_kinds(opts)  # id tables: {kind: (ids, weights)} per (target, direction, slot)
     buf = film.new_sample_buffer(sw * sh * max_wave, dev, extra=extra, lpe_vars=n_lpe, hits=bool(tables))
     tables = {k: (wp.full(targets * directions * coverage.SLOTS, -1, dtype=wp.int32, device=dev),

@@ -128,9 +128,9 @@ class SampleBuffer:
     depth: wp.array(dtype=wp.float32)  # camera depth of the first hit (0 when nothing was hit)
     normal: wp.array(dtype=wp.vec3)  # world shading normal of the first hit
     albedo: wp.array(dtype=wp.vec3)
-    # per sample, ``extra`` floats of further channels filtered as the colour is (the LPE vars' RGB sums; one
+    # per sample, ``extra`` RGB triples of further channels filtered as the colour is (the LPE vars' sums; one
     # element when there are none), and the LPE vars' automaton states (``renderer.lpe.kernel``)
-    extra: wp.array(dtype=wp.float32)
+    extra: wp.array(dtype=wp.vec3)
     lpe_state: wp.array(dtype=wp.int32)
     # the instance and global triangle each sample saw first (-1: none), when a render records them (Cryptomatte)
     hit_inst: wp.array(dtype=wp.int32)
@@ -151,15 +151,15 @@ class TileAccum:
     hit_weight: wp.array(dtype=wp.float32)  # sum(w) over samples that hit
     normal: wp.array(dtype=wp.vec3)
     albedo: wp.array(dtype=wp.vec3)
-    extra: wp.array(dtype=wp.float32)  # sum(w * value) of each further channel: (partial, channel), flat
+    extra: wp.array(dtype=wp.vec3)  # sum(w * value) of each further RGB triple: (partial, triple), flat
 
 
 def new_sample_buffer(n: int, device: str, extra: int = 0, lpe_vars: int = 0, hits: bool = False) -> SampleBuffer:
-    """Room for n samples with ``extra`` further channels and ``lpe_vars`` automaton states each, not cleared: a
+    """Room for n samples with ``extra`` further RGB triples and ``lpe_vars`` automaton states each, not cleared: a
     wave writes every sample it later reads (the path tracing kernel its values, ``axis_weights_kernel`` its
     weights) before the gather reads them."""
     b = SampleBuffer()
-    b.extra = wp.empty(max(1, n * extra), dtype=wp.float32, device=device)
+    b.extra = wp.empty(max(1, n * extra), dtype=wp.vec3, device=device)
     b.lpe_state = wp.empty(max(1, n * lpe_vars), dtype=wp.int32, device=device)
     b.hit_inst = wp.empty(n if hits else 1, dtype=wp.int32, device=device)
     b.hit_tri = wp.empty(n if hits else 1, dtype=wp.int32, device=device)
@@ -184,11 +184,11 @@ def needs_aov_sums(aovs, denoise: bool) -> bool:
 
 
 def new_tile_accum(n: int, device: str, aovs: bool = True, extra: int = 0) -> TileAccum:
-    """n partial sums of each channel, and of ``extra`` further ones, zeroed; without ``aovs`` the depth, normal
+    """n partial sums of each channel, and of ``extra`` further RGB triples, zeroed; without ``aovs`` the depth, normal
     and albedo sums (which the gather then leaves alone) are one each."""
     m = n if aovs else 1
     a = TileAccum()
-    a.extra = wp.zeros(max(1, n * extra), dtype=wp.float32, device=device)
+    a.extra = wp.zeros(max(1, n * extra), dtype=wp.vec3, device=device)
     a.rgba = wp.zeros(n, dtype=wp.vec4, device=device)
     a.weight = wp.zeros(n, dtype=wp.float32, device=device)
     a.depth = wp.zeros(m, dtype=wp.float32, device=device)
@@ -392,11 +392,30 @@ def gather_kernel(
                     acc.albedo[k] = asum
 
 
+# acc[k .. k + n) += w * src[at .. at + n) over RGB triples, as one loop over floats that the compiler vectorizes
+# (element by element in Warp's code it was 14 % of a render with eight LPE layers); the product and the sum are
+# statements of their own, so never fused: the same bits on every CPU.
+_ADD_SCALED_CPP = r"""
+    float* a = reinterpret_cast<float*>(acc.data) + 3 * k;
+    const float* x = reinterpret_cast<const float*>(src.data) + 3 * at;
+    for (int i = 0; i < 3 * n; ++i) {
+        const float p = x[i] * w;
+        a[i] = a[i] + p;
+    }
+"""
+
+
+@wp.func_native(_ADD_SCALED_CPP)
+def add_scaled(acc: wp.array(dtype=wp.vec3), k: int, src: wp.array(dtype=wp.vec3), at: int, n: int, w: float):
+    """``gather_extra_kernel``'s inner loop: n triples of src from ``at``, times w, added to acc from ``k``."""
+    ...
+
+
 @wp.kernel
 def gather_extra_kernel(
     buf: SampleBuffer,
     acc: TileAccum,
-    extra: int,  # channels per sample
+    extra: int,  # RGB triples per sample
     wave: int,
     tile_x0: int,
     tile_y0: int,
@@ -424,24 +443,22 @@ def gather_extra_kernel(
         for ox in range(-margin, margin + 1):
             tx = sx - ox - ext_x0
             if ty >= 0 and ty < ext_h and tx >= 0 and tx < ext_w:
-                k = (ty * ext_w + tx) * side * side + (oy + margin) * side + ox + margin
-                for c in range(extra):
-                    total = acc.extra[k * extra + c]
-                    for j in range(wave):
-                        w = buf.wx[base + j][1 - ox] * buf.wy[base + j][1 - oy]
-                        if w != 0.0:
-                            total = total + buf.extra[(base + j) * extra + c] * w
-                    acc.extra[k * extra + c] = total
+                k = ((ty * ext_w + tx) * side * side + (oy + margin) * side + ox + margin) * extra
+                for j in range(wave):
+                    w = buf.wx[base + j][1 - ox] * buf.wy[base + j][1 - oy]
+                    if w != 0.0:
+                        add_scaled(acc.extra, k, buf.extra, (base + j) * extra, extra, w)
 
 
 def accum_partials(acc: TileAccum, directions: int, rows: int, columns: int,
                    aovs: bool = True, extra: int = 0) -> dict[str, np.ndarray | None]:
     """The partial sums as (directions, rows, columns[, c]) arrays (``borders.split_tile``'s input); without
-    ``aovs`` the depth, normal and albedo sums are None (all zero); ``extra`` further channels under "extra"."""
+    ``aovs`` the depth, normal and albedo sums are None (all zero); ``extra`` further RGB triples under "extra"
+    (3 x extra channels)."""
     shape = (rows, columns, directions)
     arrays = {"rgba": acc.rgba.numpy().reshape(shape + (4,)), "weight": acc.weight.numpy().reshape(shape)}
     if extra:
-        arrays["extra"] = acc.extra.numpy()[:rows * columns * directions * extra].reshape(shape + (extra,))
+        arrays["extra"] = acc.extra.numpy()[:rows * columns * directions * extra].reshape(shape + (3 * extra,))
     if aovs:
         arrays.update({"depth": acc.depth.numpy().reshape(shape), "hit_weight": acc.hit_weight.numpy().reshape(shape),
                        "normal": acc.normal.numpy().reshape(shape + (3,)),

@@ -1,8 +1,7 @@
 """Light path expressions in the path tracing kernel: every var's automaton stepped as the path grows.
 
 A render with LPE vars uploads their automata as one flat table (``renderer.lpe.automaton.compile_set``) and keeps,
-per sample, one state per var (``SampleBuffer.lpe_state``) and one RGB sum per var (``SampleBuffer.extra``, three
-floats per var). The integrator steps every state by the symbol of each scattering event (``lpe_event``) and, for
+per sample, one state per var (``SampleBuffer.lpe_state``) and one RGB sum per var (``SampleBuffer.extra``). The integrator steps every state by the symbol of each scattering event (``lpe_event``) and, for
 each contribution it adds to the beauty, adds the same value to every var whose automaton accepts the path closed
 by that contribution's last event(s) (``lpe_light``, ``lpe_light_after``). No strings, no per-path allocation: a
 table lookup per var and event. With no var (``count`` 0) the integrator calls none of this.
@@ -51,12 +50,11 @@ def lpe_symbol(lpe: LpeTable, kind: int, scatter: int, label: int):
 
 
 @wp.func
-def lpe_begin(lpe: LpeTable, state: wp.array(dtype=wp.int32), extra: wp.array(dtype=wp.float32), sample: int):
+def lpe_begin(lpe: LpeTable, state: wp.array(dtype=wp.int32), extra: wp.array(dtype=wp.vec3), sample: int):
     """The sample's states after the camera event, its sums zeroed."""
     for v in range(lpe.count):
         state[sample * lpe.count + v] = lpe.start[v]
-        for c in range(3):
-            extra[(sample * lpe.count + v) * 3 + c] = 0.0
+        extra[sample * lpe.count + v] = wp.vec3(0.0)
 
 
 @wp.func
@@ -68,36 +66,33 @@ def lpe_event(lpe: LpeTable, state: wp.array(dtype=wp.int32), sample: int, symbo
 
 
 @wp.func
-def lpe_light(lpe: LpeTable, state: wp.array(dtype=wp.int32), extra: wp.array(dtype=wp.float32), sample: int,
+def lpe_light(lpe: LpeTable, state: wp.array(dtype=wp.int32), extra: wp.array(dtype=wp.vec3), sample: int,
               symbol: int, c: wp.vec3):
     """``c`` added to every var that accepts the path closed by the emission event ``symbol``."""
     for v in range(lpe.count):
         k = sample * lpe.count + v
         s = lpe.table[state[k] * lpe.n_symbols + symbol]
         if lpe.accepting[s] != 0:
-            for i in range(3):
-                extra[k * 3 + i] += c[i]
+            extra[k] = extra[k] + c
 
 
 @wp.func
-def lpe_light_after(lpe: LpeTable, state: wp.array(dtype=wp.int32), extra: wp.array(dtype=wp.float32),
+def lpe_light_after(lpe: LpeTable, state: wp.array(dtype=wp.int32), extra: wp.array(dtype=wp.vec3),
                     sample: int, vertex: int, symbol: int, c: wp.vec3):
     """``lpe_light`` for light reached through one more vertex (a shadow ray's: its event ``vertex`` first)."""
     for v in range(lpe.count):
         k = sample * lpe.count + v
         s = lpe.table[lpe.table[state[k] * lpe.n_symbols + vertex] * lpe.n_symbols + symbol]
         if lpe.accepting[s] != 0:
-            for i in range(3):
-                extra[k * 3 + i] += c[i]
+            extra[k] = extra[k] + c
 
 
 @wp.func
-def lpe_finish(lpe: LpeTable, extra: wp.array(dtype=wp.float32), sample: int, scale: wp.vec3):
+def lpe_finish(lpe: LpeTable, extra: wp.array(dtype=wp.vec3), sample: int, scale: wp.vec3):
     """The sums scaled per channel as the beauty was at the end (the sample clamp; 0 for a non-finite sample)."""
     for v in range(lpe.count):
         k = sample * lpe.count + v
-        for i in range(3):
-            extra[k * 3 + i] = extra[k * 3 + i] * scale[i]
+        extra[k] = wp.cw_mul(extra[k], scale)
 
 
 @wp.func
