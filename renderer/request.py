@@ -77,9 +77,9 @@ class RenderRequest:
         check_settings(values)
         if values.get("shutter") is not None:
             values["shutter"] = tuple(float(t) for t in values["shutter"])
-        for name in ("aovs", "purposes"):
-            if name in values:
-                values[name] = tuple(dict.fromkeys(values[name]))  # a repeated name means the same thing
+        for name in values:
+            if SETTINGS[name].shape == "many":  # a repeated item means the same thing
+                values[name] = tuple(dict.fromkeys(values[name]))
 
         def take(record) -> dict:
             return {f.name: values[f.name] for f in dataclasses.fields(record) if f.name in values}

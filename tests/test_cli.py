@@ -59,6 +59,27 @@ def test_render_writes_exr_with_aovs_and_reports_speed(scene_file, tmp_path):
     assert channels["A"][15, 20] == 1.0 and channels["A"][0, 0] == 0.0
 
 
+def test_render_writes_lpe_light_group_and_cryptomatte_layers(scene_file, tmp_path):
+    from renderer.film import cryptomatte
+
+    out = tmp_path / "out.exr"
+    r = drt("render", scene_file, "-o", out, "--res", 40, 30, "--spp", 4, "--lpe", "direct=C<RD>L",
+            "--lpe", "indirect=C<RD>.+L", "--light-groups", "--cryptomatte", "object,material", "--half")
+    assert r.returncode == 0, r.stderr
+    ch, header = read_exr(out)
+    beauty = np.stack([ch[c] for c in "RGB"], -1).astype(np.float64)
+    direct = np.stack([ch[f"direct.{c}"] for c in "RGB"], -1).astype(np.float64)
+    indirect = np.stack([ch[f"indirect.{c}"] for c in "RGB"], -1).astype(np.float64)
+    group = np.stack([ch[f"RGBA_Sun.{c}"] for c in "RGB"], -1).astype(np.float64)  # the light prim's name
+    # a diffuse card lit by one distant light: all its light is diffuse, and the sun's (within HALF's rounding)
+    assert np.allclose(direct + indirect, beauty, rtol=2e-3, atol=1e-4) and direct[15, 20].min() > 0
+    assert np.allclose(group, beauty, rtol=2e-3, atol=1e-4)
+    assert header["channels"]["CryptoObject00.R"] == "FLOAT"  # ids stay exact under --half
+    mattes = cryptomatte.decode(ch, header, "CryptoObject")
+    assert set(mattes) == {"/World/Card"} and np.allclose(mattes["/World/Card"], ch["A"], atol=1e-3)
+    assert set(cryptomatte.decode(ch, header, "CryptoMaterial")) == {"/World/Looks/W"}
+
+
 def test_cli_render_matches_library_render_bit_for_bit(scene_file, tmp_path):
     a, b = tmp_path / "a.exr", tmp_path / "b.exr"
     assert drt("render", scene_file, "-o", a, "--width", 24, "--height", 16, "--spp", 3, "--tile", 5,

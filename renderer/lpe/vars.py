@@ -2,7 +2,7 @@
 
 A var is an EXR layer ``NAME.R/G/B`` holding the light of every path its expression accepts, filtered as the
 beauty. ``--light-groups`` adds the layer ``RGBA_<group>`` of each light group ``g`` the scene's lights carry
-(``renderer.usd.light_groups``): ``C.*<L.'g'>`` and the emissive geometry of that group, ``C.*<O.'g'>``.
+(``renderer.usd.light_groups``): ``(C.*<L.'g'>)|(C.*<O.'g'>)``, its lights' light and its emissive geometry's.
 """
 from __future__ import annotations
 
@@ -41,7 +41,7 @@ def light_group_names(lights) -> list[str]:
 
 
 def group_expression(group: str) -> str:
-    return f"C.*<L.'{group}'>|C.*<O.'{group}'>"
+    return f"(C.*<L.'{group}'>)|(C.*<O.'{group}'>)"  # OSL's | joins single items: whole alternatives in parentheses
 
 
 def render_vars(lpe: tuple[str, ...], light_groups: bool, lights) -> list[tuple[str, str]]:
