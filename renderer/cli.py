@@ -443,7 +443,14 @@ class _Run:
     def frame(self, frame: float) -> None:
         from dataclasses import replace
 
-        from renderer.products import needed_aovs, needed_cryptomatte, needed_lpes, unwritten, write_product
+        from renderer.products import (
+            needed_aovs,
+            needed_cryptomatte,
+            needed_hit_vars,
+            needed_lpes,
+            unwritten,
+            write_product,
+        )
         from renderer.render import auto_tile_size, render_frame
         from renderer.usd.products import read_products
 
@@ -454,8 +461,8 @@ class _Run:
                    for name, product in _targets(args, products, frame, self.warn)]
         skipped = unwritten([v for _, _, p in targets if p for v in p.vars])
         if skipped:
-            self.warn("render vars not written (drt renders no primvars, and the raw sources of docs/rendering.md's "
-                      "table)", ", ".join(dict.fromkeys(skipped)))
+            self.warn("render vars not written (drt renders the raw sources of docs/rendering.md's table, primvars "
+                      "and LPEs)", ", ".join(dict.fromkeys(skipped)))
         groups: dict = {}  # products with the same overrides render once
         for path, name, product in targets:
             groups.setdefault(product.override_key if product else None, []).append((path, name, product))
@@ -466,7 +473,8 @@ class _Run:
             o = base.options
             options = replace(o, aovs=tuple(dict.fromkeys(o.aovs + needed_aovs(vars_))),
                               lpe=tuple(dict.fromkeys(o.lpe + needed_lpes(vars_))),
-                              cryptomatte=tuple(dict.fromkeys(o.cryptomatte + needed_cryptomatte(vars_))))
+                              cryptomatte=tuple(dict.fromkeys(o.cryptomatte + needed_cryptomatte(vars_))),
+                              hit_vars=needed_hit_vars(vars_))
             request = replace(base, frame=frame, product=first.path if first else None, options=options)
             t_prep = time.perf_counter()
             prep = request.prepare(stage=self.stage, reuse=self.prepared.get(key))

@@ -371,7 +371,7 @@ class PathSettings:
     time_filter: int
     frame_s: float  # the frame time in normalised shutter time (strobe)
     seed: wp.uint32
-    record_hits: int  # 1: each sample's first surface (``SampleBuffer.hit_inst``, ``hit_tri``) for Cryptomatte
+    record_hits: int  # 1: each sample's first surface (``SampleBuffer.hit_*``): Cryptomatte, primvar and id vars
 
 
 @by_reference
@@ -560,6 +560,8 @@ def trace_wave_kernel(
                 if settings.record_hits != 0:
                     buf.hit_inst[tid] = hit.inst
                     buf.hit_tri[tid] = hit.tri
+                    buf.hit_uv[tid] = wp.vec2(hit.b1, hit.b2)
+                    buf.hit_p[tid] = sp.p
                 depth_aov = wp.dot(sp.p - cam_origin, fwd)
                 normal_aov = ns
                 albedo_aov = bsdf_albedo_hint(params)

@@ -267,6 +267,9 @@ class RenderOptions:
     light_groups: bool = default_of("light_groups")
     cryptomatte: tuple[str, ...] = default_of("cryptomatte")
     cryptomatte_ranks: int = default_of("cryptomatte_ranks")
+    # what each sample saw first, as RenderVars ask (``film.hit_vars``): "P", "primvar:<name>", "primId",
+    # "instanceId"; not a setting of its own (a product's vars set it)
+    hit_vars: tuple[str, ...] = ()
 
     @property
     def path_indirect_clamp(self) -> float:

@@ -12,8 +12,11 @@ sums into its channels:
 * a Cryptomatte var (raw ``CryptoObject``, ``crypto_object``, ``cryptomatte:object``, and so for material and
   asset: ``CRYPTO_SOURCES``) asks for that Cryptomatte layer set (``CryptoObject00..``, named by the spec, not by
   the var), with ``--cryptomatte-ranks`` ranks;
-* sources the renderer does not produce (``primvar`` vars, raw names outside ``RAW_SOURCES``) are returned by
-  name, for one warning, and write nothing.
+* what each sample saw first (``renderer.film.hit_vars``): raw ``P`` (world position), a ``primvar`` var (the
+  primvar interpolated at the hit, 0 where the prim has none), filtered over the samples that hit; raw ``primId``
+  and ``instanceId``, the id covering most of the pixel (-1: nothing);
+* sources the renderer does not produce (raw names outside ``RAW_SOURCES``, ``HIT_SOURCES`` and
+  ``CRYPTO_SOURCES``; ``intrinsic`` vars) are returned by name, for one warning, and write nothing.
 
 Precision: the var's ``driver:parameters:aov:format`` (``half``/``float``), else ``--half``; depth stays FLOAT
 unless its var asks for half.
@@ -25,7 +28,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from renderer.film import film
+from renderer.film import film, hit_vars, id_tables
 
 # raw source names (lower case) -> what the renderer makes of them: the name Hydra, Karma and RenderMan use
 RAW_SOURCES = {
@@ -37,6 +40,7 @@ RAW_SOURCES = {
     "spp": "spp", "samples": "spp",
 }
 BEAUTY_LPES = {"c.*", "c.*[<l.>o]", "c<.*>", "c[dg]*[<l.>o]"}  # LPEs of all the light: the beauty itself
+HIT_SOURCES = {"p": "P", "primid": "primId", "instanceid": "instanceId"}  # raw names of ``film.hit_vars``' vars
 # raw source names (lower case) of Cryptomatte layers: Arnold's, Karma's and the layer names themselves
 CRYPTO_SOURCES = {f"{prefix}{kind}": kind for kind in ("object", "material", "asset")
                   for prefix in ("crypto_", "crypto", "cryptomatte:", "cryptomatte_", "cryptomatte")}
@@ -62,11 +66,27 @@ def source_kind(var) -> str | None:
     name = var.source.strip().lower()
     if var.source_type == "lpe":
         return "rgba" if name.replace(" ", "") in BEAUTY_LPES else "lpe"
+    if var.source_type == "primvar":
+        return "hit" if var.source.strip() else None
     if var.source_type != "raw":
         return None
     if name in CRYPTO_SOURCES:
         return "crypto"
+    if name in HIT_SOURCES:
+        return "id" if HIT_SOURCES[name] in hit_vars.ID_SOURCES else "hit"
     return RAW_SOURCES.get(name)
+
+
+def hit_key(var) -> str:
+    """The ``RenderOptions.hit_vars`` key of a var of kind hit or id."""
+    if var.source_type == "primvar":
+        return hit_vars.PRIMVAR + var.source.strip()
+    return HIT_SOURCES[var.source.strip().lower()]
+
+
+def needed_hit_vars(vars_) -> tuple[str, ...]:
+    """The hit vars (``RenderOptions.hit_vars``) the vars ask for."""
+    return tuple(dict.fromkeys(hit_key(v) for v in vars_ if source_kind(v) in ("hit", "id")))
 
 
 VAR_LAYER = "__var_"  # prefix of the renderer's layers of product vars (not written under that name)
@@ -100,6 +120,12 @@ def unwritten(vars_) -> list[str]:
 
 def _values(kind: str, r: dict, sums: dict, prep=None, var=None) -> np.ndarray:
     """(H, W, C) values of a source kind."""
+    if kind == "hit":
+        return hit_vars.resolve(prep.hit_layout, r["hits"])[hit_key(var)]
+    if kind == "id":
+        ids_name, weights_name = id_tables.names("object")
+        top = np.where(sums[weights_name][..., 0] > 0, sums[ids_name][..., 0], -1)
+        return hit_vars.id_values(hit_key(var), top, prep.flat or prep.scene)[..., None]
     if kind == "lpe":
         v = prep.lpe_vars.names.index(lpe_layer(var))
         return r["extra"][..., 3 * v:3 * v + 3]

@@ -31,7 +31,7 @@ from renderer.camera import CameraSetup, ndc_matrix, setup_camera
 from renderer.color import ColorSpaces
 from renderer.device import init_warp
 from renderer.errors import Cancelled, SettingsError
-from renderer.film import borders, coverage, denoise, film, id_tables
+from renderer.film import borders, coverage, denoise, film, hit_vars, id_tables
 from renderer.film.adaptive import Convergence
 from renderer.film.exr import timecode_fields, write_exr
 from renderer.film.tiles import Tile, auto_tile_size, split_tiles
@@ -84,6 +84,8 @@ class PreparedScene:
     # light path expression vars (``renderer.lpe.vars.CompiledVars``, None: none) and their kernel table
     lpe_vars: object | None = None
     lpe_table: object | None = None
+    hit_layout: hit_vars.HitLayout | None = None  # P and primvar vars among the further triples (after the LPEs')
+    hit_index: tuple[np.ndarray, np.ndarray] | None = None  # instance -> mesh, mesh -> first global triangle
 
     @property
     def lpe_count(self) -> int:
@@ -165,8 +167,9 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu",
     dof = options.dof and not scene.render_settings.disable_depth_of_field
     warnings = list(scene.warnings)
     reuse = reuse if reuse is not None and reuse.device == device else None
-    # Cryptomatte names each instance: still ones are not merged then (their frames differ in bits, not in sense)
-    merge = not options.cryptomatte
+    # Cryptomatte and the vars of what a sample hit name each instance: still ones are not merged then (their
+    # frames differ in bits, not in sense)
+    merge = not (options.cryptomatte or options.hit_vars)
     geometry_key = _fingerprint(_geometry_key(scene), merge)
     flat = _flatten(scene, geometry_key, reuse, merge)
     if reuse is not None and reuse.geometry_key == geometry_key:
@@ -187,11 +190,23 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu",
     if cam.warning:
         warnings.append(cam.warning)
     lpe_vars, lpe = _lpe_tables(flat, options, device)
-    return PreparedScene(scene=scene, options=options, width=width, height=height, framing=framing,
+    prep = PreparedScene(scene=scene, options=options, width=width, height=height, framing=framing,
                          geometry=geometry, materials=materials, textures=textures, lights=lights,
                          light_count=light_count, camera=cam, stats=stats, device=device, warnings=warnings,
                          media=media, geometry_key=geometry_key, flat=flat, materials_key=materials_key,
                          lpe_vars=lpe_vars, lpe_table=lpe)
+    return _with_hit_layout(prep)
+
+
+def _with_hit_layout(prep: PreparedScene) -> PreparedScene:
+    """``prep`` with the layout of its P and primvar vars (their widths from the meshes' primvars)."""
+    keys = tuple(k for k in prep.options.hit_vars if k not in hit_vars.ID_SOURCES)
+    flat = prep.flat or prep.scene
+    widths = {hit_vars.PRIMVAR + name: max((m.primvars[name].shape[-1] for m in flat.meshes if name in m.primvars),
+                                           default=1) for name in hit_vars.primvar_names(keys)}
+    plan = hit_vars.layout(keys, widths)
+    index = (prep.geometry.inst_mesh.numpy(), prep.geometry.mesh_tri_off.numpy()) if keys else None
+    return replace(prep, hit_layout=plan, hit_index=index)
 
 
 def with_options(prep: PreparedScene, options: RenderOptions) -> PreparedScene:
@@ -201,16 +216,18 @@ def with_options(prep: PreparedScene, options: RenderOptions) -> PreparedScene:
     ``RenderRequest.load`` drops motion keys for a strobe time filter.) A service renders many jobs of one scene
     that differ in nothing else."""
     old = prep.options
-    if (options.width, options.height, options.dof, bool(options.cryptomatte)) != (old.width, old.height, old.dof,
-                                                                                     bool(old.cryptomatte)):
-        raise ValueError("with_options keeps the resolution, depth of field and Cryptomatte of the prepared scene")
+    def kept(o: RenderOptions) -> tuple:
+        return o.width, o.height, o.dof, bool(o.cryptomatte or o.hit_vars), hit_vars.primvar_names(o.hit_vars)
+    if kept(options) != kept(old):
+        raise ValueError("with_options keeps the resolution, depth of field, Cryptomatte and hit vars of the prepared "
+                         "scene")
     options.validate()
     if options.denoise:
         denoise.require()
     lpe_vars, lpe = prep.lpe_vars, prep.lpe_table
     if (options.lpe, options.light_groups) != (old.lpe, old.light_groups):
         lpe_vars, lpe = _lpe_tables(prep.flat or prep.scene, options, prep.device)
-    return replace(prep, options=options, lpe_vars=lpe_vars, lpe_table=lpe)
+    return _with_hit_layout(replace(prep, options=options, lpe_vars=lpe_vars, lpe_table=lpe))
 
 
 def render_tile(prep: PreparedScene, tile: Tile,
@@ -255,12 +272,16 @@ def render_tile(prep: PreparedScene, tile: Tile,
     dev = prep.device
     n_lpe = prep.lpe_count
     extra = n_lpe  # RGB triples filtered as the colour: the LPE vars'
+    plan = prep.hit_layout
+    hit_triples = plan.triples if plan else 0  # ... and the vars of what each sample hit
     tables = coverage_kinds(opts)  # id tables: {kind: (ids, weights)} per (target, direction, slot)
-    buf = film.new_sample_buffer(sw * sh * max_wave, dev, extra=extra, lpe_vars=n_lpe, hits=bool(tables))
+    records = bool(tables) or bool(plan and plan.keys)
+    buf = film.new_sample_buffer(sw * sh * max_wave, dev, extra=extra, lpe_vars=n_lpe, hits=records,
+                                 hit_triples=hit_triples)
     tables = {k: (wp.full(targets * directions * coverage.SLOTS, -1, dtype=wp.int32, device=dev),
                   wp.zeros(targets * directions * coverage.SLOTS, dtype=wp.float32, device=dev)) for k in tables}
     sample_ids = wp.empty(sw * sh * max_wave if tables else 1, dtype=wp.int32, device=dev)
-    acc = film.new_tile_accum(directions * targets, dev, aovs=bool(aov_sums), extra=extra)
+    acc = film.new_tile_accum(directions * targets, dev, aovs=bool(aov_sums), extra=extra, hit_triples=hit_triples)
 
     counters = wp.zeros(2, dtype=wp.int64, device=dev)  # rays traced, non-finite samples zeroed
     settings = PathSettings()
@@ -271,7 +292,7 @@ def render_tile(prep: PreparedScene, tile: Tile,
     settings.time_filter = TIME_FILTERS[opts.time_filter]
     settings.frame_s = prep.scene.shutter.frame_s
     settings.seed = wp.uint32(opts.seed)
-    settings.record_hits = int(bool(tables))
+    settings.record_hits = int(records)
     slot_of = np.full(sw * sh, -1, np.int32)
     # the tile's own pixels among the sample pixels (its samples-per-pixel count and progress)
     mine = np.zeros((sh, sw), bool)
@@ -305,15 +326,22 @@ def render_tile(prep: PreparedScene, tile: Tile,
         slot_array = wp.array(slot_of, dtype=wp.int32, device=dev)
         wp.launch(film.gather_kernel, dim=sw * sh, device=dev,
                   inputs=[buf, acc, wave, sx0, sy0, sw, slot_array, ex0, ey0, ex1 - ex0, ey1 - ey0, margin, aov_sums, 1])
+        if plan and plan.keys:
+            n = pixels.size * wave
+            hit_vars.fill(plan, prep.flat or prep.scene, *prep.hit_index, buf.hit_inst.numpy()[:n],
+                          buf.hit_tri.numpy()[:n], buf.hit_uv.numpy()[:n], buf.hit_p.numpy()[:n],
+                          buf.hits.numpy()[:n * hit_triples].reshape(n, hit_triples, 3))
         for kind, (ids, weights) in tables.items():
             wp.launch(coverage.sample_ids_kernel, dim=pixels.size * wave, device=dev,
                       inputs=[buf, prep.geometry.tri_material, kind, sample_ids])
             wp.launch(coverage.coverage_gather_kernel, dim=sw * sh, device=dev,
                       inputs=[buf, sample_ids, ids, weights, wave, sx0, sy0, sw, slot_array, ex0, ey0, ex1 - ex0,
                               ey1 - ey0, margin])
-        if extra:
-            wp.launch(film.gather_extra_kernel, dim=sw * sh, device=dev,
-                      inputs=[buf, acc, extra, wave, sx0, sy0, sw, slot_array, ex0, ey0, ex1 - ex0, ey1 - ey0, margin])
+        for src, dst, count in ((buf.extra, acc.extra, extra), (buf.hits, acc.hits, hit_triples)):
+            if count:
+                wp.launch(film.gather_extra_kernel, dim=sw * sh, device=dev,
+                          inputs=[buf, src, dst, count, wave, sx0, sy0, sw, slot_array, ex0, ey0, ex1 - ex0, ey1 - ey0,
+                                  margin])
         rgb = None
         if conv.enabled:
             rgb = buf.rgba.numpy()[:pixels.size * wave].reshape(pixels.size, wave, 4)[..., :3]
@@ -321,7 +349,8 @@ def render_tile(prep: PreparedScene, tile: Tile,
         conv.update()
         if on_wave is not None:
             on_wave(min(total, int(conv.count[mine].sum())), total)
-    partials = film.accum_partials(acc, directions, ey1 - ey0, ex1 - ex0, aovs=bool(aov_sums), extra=extra)
+    partials = film.accum_partials(acc, directions, ey1 - ey0, ex1 - ex0, aovs=bool(aov_sums), extra=extra,
+                                   hit_triples=hit_triples)
     if shared_borders:
         arrays = borders.split_tile(partials, own, margin, W, H)
     else:
@@ -347,7 +376,7 @@ COVERAGE_NAMES = {coverage.KIND_OBJECT: "object", coverage.KIND_MATERIAL: "mater
 def coverage_kinds(options: RenderOptions) -> tuple[int, ...]:
     """The id tables a render keeps: objects (for the object and asset layers), materials."""
     kinds = []
-    if {"object", "asset"} & set(options.cryptomatte):
+    if {"object", "asset"} & set(options.cryptomatte) or set(hit_vars.ID_SOURCES) & set(options.hit_vars):
         kinds.append(coverage.KIND_OBJECT)
     if "material" in options.cryptomatte:
         kinds.append(coverage.KIND_MATERIAL)

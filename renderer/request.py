@@ -16,6 +16,7 @@ import dataclasses
 import os
 from dataclasses import dataclass, field
 
+from renderer.film.hit_vars import primvar_names
 from renderer.options import SETTINGS, RenderOptions, check_settings, default_of, resolve_given
 from renderer.render import PreparedScene, prepare
 from renderer.scene.model import Scene
@@ -116,7 +117,8 @@ class RenderRequest:
         scene = load_scene(os.fspath(self.scene_path), self.frame, camera_path=self.camera, shutter=self.shutter,
                            motion_blur=self.motion_blur_keys, image_width=self.options.width,
                            ocio_config=self.ocio_config, settings_path=self.settings_prim,
-                           product_path=self.product, purposes=self.purposes, stage=stage)
+                           product_path=self.product, purposes=self.purposes,
+                           primvars=primvar_names(self.options.hit_vars), stage=stage)
         return self.lens.apply(scene)
 
     def prepare(self, device: str = "cpu", stage=None, reuse: PreparedScene | None = None) -> PreparedScene:

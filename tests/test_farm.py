@@ -59,7 +59,11 @@ def shot(tmp_path_factory):
     d = tmp_path_factory.mktemp("farm")
     stage = stages.new_stage(d / "shot.usda")
     stages.camera(stage, translate=(0, 0, 0))
-    stages.rect_xy(stage, "/World/Card", -0.5, 0.5, -0.4, 0.4, -3.0, stages.material(stage, "W", (0.5, 0.5, 0.5)))
+    card = stages.rect_xy(stage, "/World/Card", -0.5, 0.5, -0.4, 0.4, -3.0,
+                          stages.material(stage, "W", (0.5, 0.5, 0.5)))
+    # a user primvar that grows from 0 at the card's left edge to 1 at its right one
+    UsdGeom.PrimvarsAPI(card).CreatePrimvar("heat", Sdf.ValueTypeNames.FloatArray, UsdGeom.Tokens.vertex).Set(
+        [0.0, 1.0, 1.0, 0.0])
     stages.distant_light(stage, rotate_x=-20.0)
     beauty = UsdRender.Settings.Define(stage, "/Render/Beauty")
     beauty.CreateResolutionAttr(Gf.Vec2i(40, 30))
@@ -69,10 +73,12 @@ def shot(tmp_path_factory):
     z = _var(stage, "/Render/Vars/depth", "depth", "float")
     alb = _var(stage, "/Render/Vars/alb", "albedo", "color3f", aov_name="diffuse_albedo", fmt="half")
     p = _var(stage, "/Render/Vars/P", "P", "point3f")
+    heat = _var(stage, "/Render/Vars/heat", "heat", "float", kind="primvar")
+    pid = _var(stage, "/Render/Vars/pid", "primId", "int")
     lg = _var(stage, "/Render/Vars/key", "C.*<L.'key'>", "color3f", kind="lpe")  # no light of group key
     _product(stage, beauty, "/Render/Beauty/beauty", {1: "beauty.0001.exr", 2: "beauty.0002.exr",
                                                       3: "beauty.0003.exr"}, (c, n, z, alb, lg))
-    _product(stage, beauty, "/Render/Beauty/util", "util.$F4.exr", (z, p), resolution=(20, 15))
+    _product(stage, beauty, "/Render/Beauty/util", "util.$F4.exr", (z, p, heat, pid), resolution=(20, 15))
     preview = UsdRender.Settings.Define(stage, "/Render/Preview")
     preview.CreateResolutionAttr(Gf.Vec2i(16, 12))
     _product(stage, preview, "/Render/Preview/img", "preview.####.exr")
@@ -95,10 +101,17 @@ def test_a_range_writes_every_product_with_its_vars(shot, tmp_path):
     assert abs(ch["diffuse_albedo.G"][15, 20] - 0.5) < 1e-2 and ch["A"][15, 20] == 1.0
     assert header["drt/frame"] == 2.0
     util, uheader = read_exr(tmp_path / "util.0001.exr")
-    assert set(util) == {"depth.Z"} and util["depth.Z"].shape == (15, 20)  # the product's own resolution
-    # the vars drt does not produce are named once, for the whole range
-    warned = [line for line in r.stderr.splitlines() if "render vars not written" in line]
-    assert len(warned) == 1 and "/Render/Vars/P (raw P)" in warned[0] and "/Render/Vars/key" not in warned[0]
+    assert set(util) == {"depth.Z", "P.X", "P.Y", "P.Z", "heat.Y", "pid.Y"}
+    assert util["depth.Z"].shape == (15, 20)  # the product's own resolution
+    # what the centre pixel saw: the card's point 3 m ahead, its primvar interpolated there, the card's id
+    # (pixel 10 of 20 is centred 0.5 px right of the axis; 2.16 m across at 3 m with a 36 mm back, 50 mm lens)
+    assert np.allclose([util["P.X"][7, 10], util["P.Z"][7, 10]], [0.5 / 20 * 2.16, -3.0], atol=0.01)
+    assert util["pid.Y"][7, 10] == 0 and util["pid.Y"][0, 0] == -1  # the card is instance 0; a corner sees nothing
+    row = util["heat.Y"][7]
+    covered = util["P.Z"][7] != 0
+    x = util["P.X"][7][covered]
+    assert np.allclose(row[covered], x + 0.5, atol=0.02)  # heat = x + 0.5 across the card, where P says x is
+    assert not [line for line in r.stderr.splitlines() if "render vars not written" in line]
     # the LPE var is the light group 'key': the only light is the prim Sun, whose group is its name
     assert not ch["key.R"].any() and ch["R"][15, 20] > 0
 

@@ -132,9 +132,13 @@ class SampleBuffer:
     # element when there are none), and the LPE vars' automaton states (``renderer.lpe.kernel``)
     extra: wp.array(dtype=wp.vec3)
     lpe_state: wp.array(dtype=wp.int32)
-    # the instance and global triangle each sample saw first (-1: none), when a render records them (Cryptomatte)
+    hits: wp.array(dtype=wp.vec3)  # per sample, the RGB triples of the vars of what it hit (``film.hit_vars``)
+    # the instance, global triangle, barycentrics (b1, b2) and world point each sample saw first (instance -1:
+    # none), when a render records them (Cryptomatte, primvar and id vars)
     hit_inst: wp.array(dtype=wp.int32)
     hit_tri: wp.array(dtype=wp.int32)
+    hit_uv: wp.array(dtype=wp.vec2)
+    hit_p: wp.array(dtype=wp.vec3)
     wx: wp.array(dtype=wp.vec3)  # filter weights along x toward the pixels at offsets -1, 0, +1 (``axis_weights``)
     wy: wp.array(dtype=wp.vec3)
 
@@ -152,17 +156,23 @@ class TileAccum:
     normal: wp.array(dtype=wp.vec3)
     albedo: wp.array(dtype=wp.vec3)
     extra: wp.array(dtype=wp.vec3)  # sum(w * value) of each further RGB triple: (partial, triple), flat
+    hits: wp.array(dtype=wp.vec3)  # ... of each hit var's triple
 
 
-def new_sample_buffer(n: int, device: str, extra: int = 0, lpe_vars: int = 0, hits: bool = False) -> SampleBuffer:
-    """Room for n samples with ``extra`` further RGB triples and ``lpe_vars`` automaton states each, not cleared: a
+def new_sample_buffer(n: int, device: str, extra: int = 0, lpe_vars: int = 0, hits: bool = False,
+                      hit_triples: int = 0) -> SampleBuffer:
+    """Room for n samples with ``extra`` further RGB triples, ``hit_triples`` of hit vars, hit records (``hits``)
+    and ``lpe_vars`` automaton states each, not cleared: a
     wave writes every sample it later reads (the path tracing kernel its values, ``axis_weights_kernel`` its
     weights) before the gather reads them."""
     b = SampleBuffer()
     b.extra = wp.empty(max(1, n * extra), dtype=wp.vec3, device=device)
+    b.hits = wp.empty(max(1, n * hit_triples), dtype=wp.vec3, device=device)
     b.lpe_state = wp.empty(max(1, n * lpe_vars), dtype=wp.int32, device=device)
     b.hit_inst = wp.empty(n if hits else 1, dtype=wp.int32, device=device)
     b.hit_tri = wp.empty(n if hits else 1, dtype=wp.int32, device=device)
+    b.hit_uv = wp.empty(n if hits else 1, dtype=wp.vec2, device=device)
+    b.hit_p = wp.empty(n if hits else 1, dtype=wp.vec3, device=device)
     b.film = wp.empty(n, dtype=wp.vec2, device=device)
     b.rgba = wp.empty(n, dtype=wp.vec4, device=device)
     b.depth = wp.empty(n, dtype=wp.float32, device=device)
@@ -183,12 +193,13 @@ def needs_aov_sums(aovs, denoise: bool) -> bool:
     return denoise or any(a in AOV_SUMS for a in aovs)
 
 
-def new_tile_accum(n: int, device: str, aovs: bool = True, extra: int = 0) -> TileAccum:
+def new_tile_accum(n: int, device: str, aovs: bool = True, extra: int = 0, hit_triples: int = 0) -> TileAccum:
     """n partial sums of each channel, and of ``extra`` further RGB triples, zeroed; without ``aovs`` the depth, normal
     and albedo sums (which the gather then leaves alone) are one each."""
     m = n if aovs else 1
     a = TileAccum()
     a.extra = wp.zeros(max(1, n * extra), dtype=wp.vec3, device=device)
+    a.hits = wp.zeros(max(1, n * hit_triples), dtype=wp.vec3, device=device)
     a.rgba = wp.zeros(n, dtype=wp.vec4, device=device)
     a.weight = wp.zeros(n, dtype=wp.float32, device=device)
     a.depth = wp.zeros(m, dtype=wp.float32, device=device)
@@ -414,7 +425,8 @@ def add_scaled(acc: wp.array(dtype=wp.vec3), k: int, src: wp.array(dtype=wp.vec3
 @wp.kernel
 def gather_extra_kernel(
     buf: SampleBuffer,
-    acc: TileAccum,
+    src: wp.array(dtype=wp.vec3),  # per sample, ``extra`` triples (``SampleBuffer.extra`` or ``hits``)
+    dst: wp.array(dtype=wp.vec3),  # per (target, direction), ``extra`` triples (``TileAccum.extra`` or ``hits``)
     extra: int,  # RGB triples per sample
     wave: int,
     tile_x0: int,
@@ -427,7 +439,7 @@ def gather_extra_kernel(
     ext_h: int,
     margin: int,
 ):
-    """``gather_kernel`` for the further channels (``SampleBuffer.extra``): the same weights, targets, partials
+    """``gather_kernel`` for the further channels (``SampleBuffer.extra``, ``hits``): the same weights, targets, partials
     and order, so that they are filtered exactly as the colour is. A launch of its own, made only when there are
     such channels: the colour's gather stays as it is."""
     tid = wp.tid()
@@ -447,11 +459,11 @@ def gather_extra_kernel(
                 for j in range(wave):
                     w = buf.wx[base + j][1 - ox] * buf.wy[base + j][1 - oy]
                     if w != 0.0:
-                        add_scaled(acc.extra, k, buf.extra, (base + j) * extra, extra, w)
+                        add_scaled(dst, k, src, (base + j) * extra, extra, w)
 
 
 def accum_partials(acc: TileAccum, directions: int, rows: int, columns: int,
-                   aovs: bool = True, extra: int = 0) -> dict[str, np.ndarray | None]:
+                   aovs: bool = True, extra: int = 0, hit_triples: int = 0) -> dict[str, np.ndarray | None]:
     """The partial sums as (directions, rows, columns[, c]) arrays (``borders.split_tile``'s input); without
     ``aovs`` the depth, normal and albedo sums are None (all zero); ``extra`` further RGB triples under "extra"
     (3 x extra channels)."""
@@ -459,12 +471,16 @@ def accum_partials(acc: TileAccum, directions: int, rows: int, columns: int,
     arrays = {"rgba": acc.rgba.numpy().reshape(shape + (4,)), "weight": acc.weight.numpy().reshape(shape)}
     if extra:
         arrays["extra"] = acc.extra.numpy()[:rows * columns * directions * extra].reshape(shape + (3 * extra,))
+    if hit_triples:
+        arrays["hits"] = acc.hits.numpy()[:rows * columns * directions * hit_triples].reshape(
+            shape + (3 * hit_triples,))
     if aovs:
         arrays.update({"depth": acc.depth.numpy().reshape(shape), "hit_weight": acc.hit_weight.numpy().reshape(shape),
                        "normal": acc.normal.numpy().reshape(shape + (3,)),
                        "albedo": acc.albedo.numpy().reshape(shape + (3,))})
     out = {k: np.moveaxis(a, 2, 0) for k, a in arrays.items()}
-    names = ("rgba", "weight", "depth", "hit_weight", "normal", "albedo") + (("extra",) if extra else ())
+    names = ("rgba", "weight", "depth", "hit_weight", "normal", "albedo") + (("extra",) if extra else ()) + (
+        ("hits",) if hit_triples else ())
     return {k: out.get(k) for k in names}
 
 
@@ -484,4 +500,7 @@ def resolve(sums: dict[str, np.ndarray], exposure_scale: float = 1.0) -> dict[st
     if sums.get("extra") is not None:  # filtered as the colour: divided by the same weights, exposed alike
         with np.errstate(divide="ignore", invalid="ignore"):
             out["extra"] = np.where(w[..., None] > 0, sums["extra"] / w[..., None], 0.0) * exposure_scale
+    if sums.get("hits") is not None:  # the hit vars: weighted means, not light (no exposure)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out["hits"] = np.where(w[..., None] > 0, sums["hits"] / w[..., None], 0.0)
     return {k: np.nan_to_num(v, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32) for k, v in out.items()}

@@ -89,6 +89,9 @@ class Mesh:
     # float32, origin (T,) int: the stand-in triangle each comes from, solid (T,) bool or None); None once the
     # triangles are the real ones.
     tessellate: Callable[[], tuple] | None = None
+    # primvars a render asked for by name (``film.hit_vars``): per-corner (T, 3, C) float32 on these triangles,
+    # or (C,) for a constant one
+    primvars: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def deforming(self) -> bool:
@@ -102,6 +105,8 @@ class Mesh:
                 return self
             points, triangles, normals, origin, solid = self.tessellate()
             self.material_ids = np.ascontiguousarray(self.material_ids[origin])
+            self.primvars = {k: v if v.ndim == 1 else np.ascontiguousarray(v[origin])
+                             for k, v in self.primvars.items()}
             if self.colors is not None:
                 self.colors = np.ascontiguousarray(self.colors[origin])
             self.points, self.triangles, self.normals, self.solid = points, triangles, normals, solid

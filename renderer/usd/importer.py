@@ -48,7 +48,7 @@ from renderer.usd.mtlx import compose_mtlx
 from renderer.usd.motion import TransformSampler, collapse_keys, motion_transform, motion_transforms, samples_in_shutter
 from renderer.usd.point_instancers import PointInstancing
 from renderer.usd.primitives import PRIMITIVE_TYPES, primitive_signature, read_primitive
-from renderer.usd.primvars import default_uv_name, read_display_colors, read_named_uvs
+from renderer.usd.primvars import default_uv_name, read_corner_primvar, read_display_colors, read_named_uvs
 from renderer.usd.light_groups import assign_light_groups
 from renderer.usd.reads import reads, report_unread
 from renderer.usd.skel import Skinning
@@ -69,7 +69,7 @@ def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_pa
                shutter: tuple[float, float] | None = None, motion_blur: bool = True,
                subdivision_level: int | None = None, image_width: int | None = None,
                ocio_config: str | None = None, settings_path: str | None = None, product_path: str | None = None,
-               purposes: tuple[str, ...] = (), stage=None) -> sc.Scene:
+               purposes: tuple[str, ...] = (), primvars: tuple[str, ...] = (), stage=None) -> sc.Scene:
     """Load one frame of a USD stage as a ``Scene``.
 
     ``frame`` defaults to the stage's startTimeCode (0 if no range is authored). The shutter is ``frame +``
@@ -101,6 +101,7 @@ def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_pa
                              image_width, ocio_config)
         importer.settings_path, importer.product_path = settings_path, product_path
         importer.purposes = tuple(purposes)
+        importer.primvar_names = tuple(primvars)
         return importer.run()
     except Tf.ErrorException as e:
         raise SceneError(f"cannot read {os.path.basename(path)}: {_pxr_message(e)}") from None
@@ -158,6 +159,7 @@ class _Importer(PointInstancing):
         self.settings_path: str | None = None
         self.product_path: str | None = None
         self.purposes: tuple[str, ...] = ()
+        self.primvar_names: tuple[str, ...] = ()  # primvars a render asked for (``_asked_primvars``)
 
     # -- top level ------------------------------------------------------------------------------------------------
     def run(self) -> sc.Scene:
@@ -512,10 +514,33 @@ class _Importer(PointInstancing):
                 shape=getattr(geom, "shape", None),
                 tessellate=getattr(geom, "tessellate", None),
                 point_radii=getattr(geom, "point_radii", None),
+                primvars=self._asked_primvars(prim, geom),
             ))
             self._mesh_bounds.append(np.stack(object_box(self.meshes[-1])))
         self._mesh_cache[key] = index
         return index
+
+    def _asked_primvars(self, prim, geom) -> dict[str, np.ndarray]:
+        """The primvars a render asked for by name (primvar RenderVars) that the prim has: a Mesh's per corner on its
+        triangles, any gprim's constant (inherited from an ancestor too) as one value."""
+        out = {}
+        api = UsdGeom.PrimvarsAPI(prim)
+        for name in self.primvar_names:
+            pv = api.FindPrimvarWithInheritance(name)
+            if not pv or not pv.HasValue():
+                continue
+            flat = np.asarray(pv.ComputeFlattened(self.frame), np.float64)
+            if flat.size == 0 or not np.all(np.isfinite(flat)):
+                continue
+            if pv.GetInterpolation() == UsdGeom.Tokens.constant:
+                out[name] = flat.ravel()[:3].astype(np.float32)
+                continue
+            width = flat.shape[1] if flat.ndim == 2 else 1
+            values = read_corner_primvar(prim, name, self.frame, self.warn, geom.subdivision_level, width) \
+                if prim.IsA(UsdGeom.Mesh) else None
+            if values is not None and len(values) == len(geom.triangles):
+                out[name] = np.ascontiguousarray(values[..., :3], np.float32)
+        return out
 
     def _material_uv_set(self, prim, geom) -> None:
         """Texture coordinates from the primvar the prim's materials read (a UsdPrimvarReader_float2 ``varname``)
