@@ -235,3 +235,32 @@ def test_a_linear_rec709_render_never_reads_a_config(tmp_path):
     env = {k: v for k, v in __import__("os").environ.items() if k != "OCIO"}
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)
     assert r.stdout.strip().splitlines()[-1] == "False", r.stderr[-2000:]
+
+
+def test_volume_colours_convert_into_the_rendering_space(tmp_path):
+    """A standard_volume's scatter colour authored in ACEScg scatters as its linear Rec.709 value (the albedo, and so
+    sigma_s, per channel)."""
+    import shutil
+
+    from renderer.scene.model import VolumeMedium
+
+    for name in ("volumes.usda", "volumes.vdb"):
+        shutil.copy(f"examples/{name}", tmp_path / name)
+    color = (0.3, 0.2, 0.1)
+    stage = Usd.Stage.Open(str(tmp_path / "volumes.usda"))
+    attr = UsdShade.Shader(stage.GetPrimAtPath("/World/Looks/Fire/standard_volume")).GetInput(
+        "scatter_color").GetAttr()
+    attr.Set(Gf.Vec3f(*color))
+    stage.Save()
+    plain = load_scene(str(tmp_path / "volumes.usda"))
+    attr.SetColorSpace("lin_ap1_scene")
+    stage.Save()
+    converted = load_scene(str(tmp_path / "volumes.usda"))
+
+    def medium(scene) -> VolumeMedium:
+        return next(v.medium for v in scene.volumes if v.name == "/World/Fire")
+
+    extinction = np.add(medium(plain).absorption, medium(plain).scattering)
+    np.testing.assert_allclose(np.divide(medium(plain).scattering, extinction), color, rtol=1e-5)
+    np.testing.assert_allclose(np.divide(medium(converted).scattering, extinction),
+                               ocio_convert(color, "ACEScg", "lin_rec709_scene"), rtol=1e-5)

@@ -179,7 +179,7 @@ class _Importer(PointInstancing):
         self.materials = MaterialTable(self.frame, warn, self.shutter, self.colors, settings.material_binding_purpose)
         # None: default and render, proxy where no render
         self._included = self.purposes or settings.included_purposes
-        self.volume_reader = usd_volumes.VolumeReader(self.frame, warn, self._skipped)
+        self.volume_reader = usd_volumes.VolumeReader(self.frame, warn, self._skipped, self.colors)
         self.detail = self._subdivision_detail(cam_prim, settings)
         self.skinning = Skinning(self.shutter, warn)
         if cam_prim is not None:

@@ -32,6 +32,7 @@ from pxr import UsdShade, UsdVol
 
 from renderer.media.openvdb import VdbError, read_field
 from renderer.scene.model import Volume, VolumeField, VolumeMedium
+from renderer.usd.color import attribute_colors
 from renderer.usd.reads import reads
 from renderer.usd.texture_files import resolve_asset
 
@@ -42,9 +43,10 @@ VOLUME_OUTPUTS = ("volume", "arnold:volume", "mtlx:volume")
 class VolumeReader:
     """Reads Volume prims of one stage at one frame; caches fields by (file, name, index)."""
 
-    def __init__(self, frame: float, warn, skipped: set[str] | None = None):
+    def __init__(self, frame: float, warn, skipped: set[str] | None = None, colors=None):
         self.frame = frame
         self.warn = warn
+        self.colors = colors  # ``usd.color.AttributeColors``: colour inputs into the rendering space (None: as read)
         self.skipped = skipped if skipped is not None else set()  # fields skipped with a warning (paths)
         self._fields: dict[tuple, VolumeField | None] = {}
 
@@ -143,14 +145,15 @@ class VolumeReader:
             return VolumeMedium(name=str(mat.GetPath())), {}
         sid = str(shader.GetIdAttr().Get() or "")
         if sid in ("arnold:standard_volume", "standard_volume"):
-            return standard_volume(shader, self.frame)
+            return standard_volume(shader, self.frame, self.colors)
         if sid == "ND_volume_vdf" or sid.startswith("ND_volume"):
-            return mtlx_volume(shader, self.frame, self.warn)
+            return mtlx_volume(shader, self.frame, self.warn, self.colors)
         self.warn("volume shaders not modelled: default fog", f"{shader.GetPath()} ({sid or '?'})")
         return VolumeMedium(name=str(mat.GetPath())), {}
 
 
-def _input(shader, name: str, frame: float, default):
+def _input(shader, name: str, frame: float, default, colors=None):
+    """An input's value at the frame (``default`` when unauthored); a colour input in the rendering space."""
     inp = shader.GetInput(name)
     if not inp:
         return default
@@ -158,16 +161,16 @@ def _input(shader, name: str, frame: float, default):
     if v is None:
         return default
     if isinstance(default, tuple):
-        a = np.asarray(v, np.float64).reshape(-1)
+        a = np.asarray(attribute_colors(colors, inp.GetAttr(), v), np.float64).reshape(-1)
         return tuple(float(x) for x in (a[:3] if a.size >= 3 else np.repeat(a[:1], 3)))
     if isinstance(default, str):
         return str(v)
     return float(v)
 
 
-def standard_volume(shader, frame: float) -> tuple[VolumeMedium, dict]:
+def standard_volume(shader, frame: float, colors=None) -> tuple[VolumeMedium, dict]:
     """Arnold's standard_volume (see the module docstring for the mapping)."""
-    g = lambda n, d: _input(shader, n, frame, d)  # noqa: E731
+    g = lambda n, d: _input(shader, n, frame, d, colors)  # noqa: E731
     transparent = np.clip(np.asarray(g("transparent", (np.exp(-1.0),) * 3)), 1e-6, 1.0)
     depth = max(g("transparent_depth", 1.0), 1e-6)
     extinction = -np.log(transparent) / depth
@@ -190,18 +193,18 @@ def standard_volume(shader, frame: float) -> tuple[VolumeMedium, dict]:
     return med, channels
 
 
-def mtlx_volume(shader, frame: float, warn) -> tuple[VolumeMedium, dict]:
+def mtlx_volume(shader, frame: float, warn, colors=None) -> tuple[VolumeMedium, dict]:
     """MaterialX volume_vdf: its vdf's absorption / scattering / anisotropy, its edf's emission."""
     med = VolumeMedium(name=str(shader.GetPath()))
     vdf = _source(shader, "vdf")
     if vdf is not None:
-        v = lambda n, d: _input(vdf, n, frame, d)  # noqa: E731
+        v = lambda n, d: _input(vdf, n, frame, d, colors)  # noqa: E731
         med.absorption = v("absorption", (0.0, 0.0, 0.0))
         med.scattering = v("scattering", (1.0, 1.0, 1.0))
         med.anisotropy = v("anisotropy", 0.0)
     edf = _source(shader, "edf")
     if edf is not None:
-        med.emission = _input(edf, "color", frame, (0.0, 0.0, 0.0))
+        med.emission = _input(edf, "color", frame, (0.0, 0.0, 0.0), colors)
         med.emission_from_density = True
     return med, {}
 
