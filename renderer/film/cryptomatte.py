@@ -238,7 +238,9 @@ def decode(channels: Mapping[str, np.ndarray], attributes: Mapping[str, object],
 
 def scene_names(scene) -> dict[str, list[str]]:
     """The names of each kind: "object" and "asset" per ``scene.instances`` index (``Instance.name``,
-    ``Instance.asset``), "material" per ``scene.materials`` index (``Material.name``)."""
+    ``Instance.asset``, or the instance's name where no asset was recorded), "material" per ``scene.materials``
+    index (``Material.name``: the bound Material prim's path; "default grey" or "displayColor (r, g, b)" for prims
+    without a bound material)."""
     return {
         "object": [inst.name for inst in scene.instances],
         "material": [m.name for m in scene.materials],
