@@ -41,7 +41,9 @@ def light_group_names(lights) -> list[str]:
 
 
 def group_expression(group: str) -> str:
-    return f"C.*<L.'{group}'>|C.*<O.'{group}'>"
+    # a set, not ``C.*<L.'g'>|C.*<O.'g'>``: '|' joins single items (OSL's grammar), so that would read
+    # C.*(<L.'g'>|C).*<O.'g'> and accept no path
+    return f"C.*[<L.'{group}'><O.'{group}'>]"
 
 
 def render_vars(lpe: tuple[str, ...], light_groups: bool, lights) -> list[tuple[str, str]]:
