@@ -4,15 +4,13 @@ analytic disk, the same bits in any tiling, and the command line's errors."""
 from __future__ import annotations
 
 import math
-import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 from pxr import Gf, Kind, Sdf, Usd, UsdGeom, UsdLux, UsdShade
 
 import stages
+from test_cli import assert_one_line_error, drt
 from renderer.film import cryptomatte as cm
 from renderer.options import RenderOptions
 from renderer.render import frame_image, prepare, render_frame
@@ -323,12 +321,6 @@ def test_lpe_light_group_and_cryptomatte_layers_have_the_same_bits_in_any_tiling
 # -- command line ------------------------------------------------------------------------------------------------
 
 
-def drt(*args):
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
-    return subprocess.run([sys.executable, "-m", "renderer.cli", *map(str, args)], capture_output=True, text=True,
-                          env=env, timeout=300)
-
-
 @pytest.mark.parametrize("args,needles", [
     (("--lpe", "bad=C<RD"), ("--lpe", "C<RD", "'>'")),
     (("--lpe", "C<RD>L"), ("--lpe", "NAME=EXPRESSION")),
@@ -337,9 +329,6 @@ def drt(*args):
 def test_the_command_line_rejects_bad_lpes_and_cryptomatte_kinds_in_one_line(room_file, tmp_path, args, needles):
     out = tmp_path / "out.exr"
     r = drt("render", room_file, "-o", out, "--width", 16, "--height", 16, "--spp", 1, *args)
-    assert r.returncode == 2
-    lines = r.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("drt: error:"), r.stderr
-    for needle in needles:
-        assert needle in lines[0], lines[0]
+    assert_one_line_error(r, "drt: error:", *needles)
+    assert r.returncode == 2 and r.stderr.startswith("drt: error:")
     assert not out.exists()
