@@ -64,3 +64,17 @@ def test_shared_meshes_stay_instanced():
     tets = flat.instances[1:]
     assert {flat.meshes[i.mesh].name for i in tets} == {"tet"} and len({i.mesh for i in tets}) == 1
     assert [float(i.transform.translation[0][0]) for i in tets] == [0.0, 3.0, 6.0]
+
+
+def test_one_emissive_instance_at_most_joins_the_merged_mesh():
+    """A hit's emission is weighted by, and labelled with, its instance's one mesh light: two emitters merged into one
+    instance would see one taken for the other (its BSDF-found light weighted 1 and counted twice)."""
+    meshes = [tetrahedron(), quad(1), quad(1), quad(1)]
+    instances = [Instance(m, MotionTransform.static(translate(x))) for m, x in ((0, 5), (1, -3), (2, -6), (3, 9))]
+    lights = [Light(LIGHT_MESH, f"card{i}", (1, 1, 1), instances[i].transform, instance=i) for i in (1, 2, 3)]
+    scene = Scene(meshes, instances, [Material("m"), Material("e", emissive_color=(1, 1, 1))], lights,
+                  Camera("c", MotionTransform.static(np.eye(4))), Shutter(0, 0, 1))
+    flat = flatten_still_instances(scene)
+    assert len(flat.instances) == 3  # the tetrahedron and the first card merged, the other cards instanced
+    assert [lt.instance for lt in flat.lights] == [0, 1, 2]
+    assert flat.lights[0].triangles == (4, 6)

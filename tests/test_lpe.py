@@ -374,3 +374,13 @@ def test_disjoint_expressions_partition_every_path(exprs):
         hits = [v for v in range(len(exprs)) if table.accepts(v, symbols)]
         assert len(hits) == 1, ([ev.describe(s, LABELS) for s in symbols], [exprs[v] for v in hits])
         assert table.accepts(len(exprs), symbols)
+
+
+def test_a_light_groups_expression_takes_its_lights_and_emitters_wherever_they_are_reached():
+    from renderer.lpe.vars import group_expression
+
+    a = compile_lpe(group_expression("key"), LABELS)
+    for events in [("C", "L'key'"), ("C", "RD", "L'key'"), ("C", "TS", "VG", "O'key'"), ("C", "O'key'")]:
+        assert a.accepts(path(*events)), events
+    for events in [("C", "RD", "L'fill'"), ("C", "L"), ("C", "RD", "O"), ("C", "O'rim'")]:
+        assert not a.accepts(path(*events)), events

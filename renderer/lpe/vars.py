@@ -2,7 +2,7 @@
 
 A var is an EXR layer ``NAME.R/G/B`` holding the light of every path its expression accepts, filtered as the
 beauty. ``--light-groups`` adds the layer ``RGBA_<group>`` of each light group ``g`` the scene's lights carry
-(``renderer.usd.light_groups``): ``(C.*<L.'g'>)|(C.*<O.'g'>)``, its lights' light and its emissive geometry's.
+(``renderer.usd.light_groups``): ``C.*<L.'g'>`` and the emissive geometry of that group, ``C.*<O.'g'>``.
 """
 from __future__ import annotations
 
@@ -41,7 +41,9 @@ def light_group_names(lights) -> list[str]:
 
 
 def group_expression(group: str) -> str:
-    return f"(C.*<L.'{group}'>)|(C.*<O.'{group}'>)"  # OSL's | joins single items: whole alternatives in parentheses
+    # a set, not ``C.*<L.'g'>|C.*<O.'g'>``: '|' joins single items (OSL's grammar), so that would read
+    # C.*(<L.'g'>|C).*<O.'g'> and accept no path
+    return f"C.*[<L.'{group}'><O.'{group}'>]"
 
 
 def render_vars(lpe: tuple[str, ...], light_groups: bool, lights) -> list[tuple[str, str]]:
