@@ -47,6 +47,8 @@ DATA_TYPES = {
 }
 HALF_FORMATS = {"half", "half16", "float16", "color3h", "color4h"}
 FLOAT_FORMATS = {"float", "float32", "color3f", "color4f"}
+UNWRITTEN = ("render vars not written (drt renders no LPEs but the beauty, no primvars, and the raw sources of "
+             "docs/rendering.md's table)")  # the warning that names ``unwritten``'s vars
 
 
 def source_kind(var) -> str | None:
@@ -134,11 +136,17 @@ def product_channels(prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = ()
     return out, halves
 
 
-def write_product(path, prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = (), half: bool = False) -> int:
-    """Write a product's EXR atomically (``product_channels``). Returns the number of non-finite values zeroed."""
-    from renderer.film.exr import write_exr
-    from renderer.render import frame_attributes, frame_windows
+def product_image(prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = (), half: bool = False):
+    """A product's EXR as plain values that pickle (``renderer.render.FrameImage``) and the names of its channels
+    stored as HALF: made where the prepared frame is (a worker of the service), written elsewhere with
+    ``image.write(path, half=halves)``, the same bits as ``write_product``."""
+    from renderer.render import FrameImage, frame_attributes, frame_windows
 
     channels, halves = product_channels(prep, sums, vars_, user_aovs=user_aovs, half=half)
-    return write_exr(path, channels, half=frozenset(halves), attributes=frame_attributes(prep),
-                     **frame_windows(prep))
+    return FrameImage(channels=channels, attributes=frame_attributes(prep), **frame_windows(prep)), frozenset(halves)
+
+
+def write_product(path, prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = (), half: bool = False) -> int:
+    """Write a product's EXR atomically (``product_channels``). Returns the number of non-finite values zeroed."""
+    image, halves = product_image(prep, sums, vars_, user_aovs=user_aovs, half=half)
+    return image.write(path, half=halves)
