@@ -179,7 +179,7 @@ def get_product(store: StoreDep, settings: SettingsDep, job_id: str, frame: str,
     names = [p["name"] for p in f.products or ()]
     if name not in names:
         raise ApiError(404, errors.product_not_found(frame, name, names))
-    path = JobFiles(settings.data_dir, job_id).product(f.idx, name)  # ValueError never: the name was written
+    path = JobFiles(settings.data_dir, job_id).product(f.idx, name)  # a safe name, checked above
     if not path.is_file():
         raise ApiError(404, errors.product_not_found(frame, name, names))
     return FileResponse(path, media_type="image/x-exr", filename=name.rsplit("/", 1)[-1])

@@ -71,18 +71,23 @@ def inspect_task(task: InspectTask) -> dict:
         problem = _composition_problem(path)
         if problem:
             return {"error": problem}
+        from pxr import Usd
+
         from renderer.options import MAX_PIXELS
         from renderer.render import resolve_resolution
 
         frames = task.frames
-        scene = task.spec.load(frames[0] if frames else None)
+        stages = Usd.StageCache()  # the products are read from the stage the frame loaded from: opened once
+        with Usd.StageCacheContext(stages):
+            scene = task.spec.load(frames[0] if frames else None)
         options = task.spec.options().validate()
         width, height = resolve_resolution(scene, options)
         if width * height > MAX_PIXELS:
             return {"error": f"image of {width}x{height} pixels is too large"}
         first = frames[0] if frames else float(scene.frame)
         warnings = list(scene.warnings)
-        product_aovs = _product_aovs(task.spec, first, warnings)
+        with Usd.StageCacheContext(stages):
+            product_aovs = _product_aovs(task.spec, first, warnings)
         return {"frames": list(frames) if frames else [first], "width": width, "height": height,
                 "exposure_scale": float(2.0 ** scene.camera.exposure), "warnings": warnings,
                 "product_aovs": product_aovs}
