@@ -12,8 +12,9 @@ or a cancellation takes effect within about one tile's time, and waits for a tas
   into the frame's products (each one's channels and header as plain values, ``tasks.ProductImage``: it holds the
   prepared frame and the stage's RenderProducts), and this thread writes each atomically with the renderer's
   writer under its name (as ``drt render`` does), inside the job's folder whatever the productName says; the
-  frame is marked done with its products' names and its tile checkpoints are removed. A frame that fits in one batch is rendered and made
-  an image in one task (``tasks.whole_frame_task``: no checkpoint). The job succeeds when every frame is done.
+  frame is marked done with its products' names and its tile checkpoints are removed. A frame that fits in one
+  batch is rendered and made its products in one task (``tasks.whole_frame_task``: no checkpoint). The job
+  succeeds when every frame is done.
 * A job that left the active states (canceled, failed, deleted) has its tasks cancelled (running tiles stop at
   their next sample wave) and late results dropped.
 * A task that raises (including a worker that died three times running it, Dask's ``KilledWorker``) is submitted

@@ -3,8 +3,8 @@
 A worker needs nothing but the scheduler's address. It never sees the service's data directory: the uploaded
 scene reaches it through Dask (a ``ScenePackage``, the upload's bytes, is the result of a ``scene_package`` task on
 which every tile task depends, so Dask copies it to a worker once and recomputes it if the worker holding it dies),
-tiles and frames' product images go back as task results (numpy arrays and plain values), and the service alone writes
-checkpoints, frames and the database.
+tiles and the frames' products go back as task results (numpy arrays and plain values), and the service alone
+writes checkpoints, products and the database.
 
 Tasks are pure functions of their arguments (a ``RenderSpec``, the scene's bytes, a frame, a batch of tiles), so
 Dask may run them anywhere and run them again after a worker dies: the result is the same bits.
