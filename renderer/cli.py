@@ -132,10 +132,21 @@ def given_settings(args: argparse.Namespace) -> dict:
 
 
 def add_render_settings(p: argparse.ArgumentParser) -> None:
-    """Flags shared by ``drt render`` and ``drt submit``: the frame and every render setting."""
+    """Flags shared by ``drt render`` and ``drt submit``: the frames (``frames_from_args``) and every render
+    setting."""
     p.add_argument("-f", "--frame", type=_number, default=None, help="time code to render, or the first of a range "
                    "(default: stage start)")
+    p.add_argument("-n", "--frame-count", type=_parse_as(Setting("frame_count", int, None, "", ge=1)),
+                   default=None, metavar="N", help="frames to render from --frame (default 1)")
+    p.add_argument("-i", "--frame-inc", type=_parse_as(Setting("frame_inc", float, None, "", gt=0)),
+                   default=None, metavar="STEP", help="time codes between frames, may be fractional (default 1)")
+    p.add_argument("--frames", type=_frame_list, default=None, metavar="A-BxS",
+                   help="frames as usdrecord writes them: 1-10, 1-10x2, 1:10x0.5, 1,5,9 (instead of -f/-n/-i)")
     add_setting_flags(p)
+
+
+def add_make_output_path(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--make-output-path", action="store_true", help="create the output folders that do not exist")
 
 
 def new_parser() -> tuple[argparse.ArgumentParser, argparse._SubParsersAction]:
@@ -169,13 +180,7 @@ def add_render_command(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
                    help="the image (of a render settings' products, the first); $F, $F4, $FF and #### expand to "
                         "the frame (default: each RenderProduct to its productName)")
     add_render_settings(r)
-    r.add_argument("-n", "--frame-count", type=_parse_as(Setting("frame_count", int, None, "", ge=1)),
-                   default=None, metavar="N", help="frames to render from --frame (default 1)")
-    r.add_argument("-i", "--frame-inc", type=_parse_as(Setting("frame_inc", float, None, "", gt=0)),
-                   default=None, metavar="STEP", help="time codes between frames, may be fractional (default 1)")
-    r.add_argument("--frames", type=_frame_list, default=None, metavar="A-BxS",
-                   help="frames as usdrecord writes them: 1-10, 1-10x2, 1:10x0.5, 1,5,9 (instead of -f/-n/-i)")
-    r.add_argument("--make-output-path", action="store_true", help="create the output folders that do not exist")
+    add_make_output_path(r)
     r.add_argument("--checkpoint", action="store_true",
                    help="keep finished tiles beside the output (OUT.exr.drt-tiles/) until the frame is written: the "
                         "same command run again resumes the frame, with the same pixels")
@@ -314,7 +319,8 @@ class _Warnings:
             sys.stderr.write(f"drt: warning: {text}\n")
 
 
-def _output_path(name: str, make: bool) -> str:
+def output_path(name: str, make: bool) -> str:
+    """``name`` as an absolute path; its folder made (``make``) or RenderError if it does not exist."""
     from renderer.errors import RenderError
 
     out = os.path.abspath(name)
@@ -359,7 +365,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     from renderer.usd.products import default_frame, resolve_settings_path
 
     if args.output is not None and not args.make_output_path and expand_frame(args.output, 0.0) == args.output:
-        _output_path(args.output, make=False)  # a missing folder fails before the load
+        output_path(args.output, make=False)  # a missing folder fails before the load
     t_load = time.perf_counter()
     base = request_from_args(args)
     warn = _Warnings(args.quiet)
@@ -443,26 +449,18 @@ class _Run:
     def frame(self, frame: float) -> None:
         from dataclasses import replace
 
-        from renderer.products import (
-            needed_aovs,
-            needed_cryptomatte,
-            needed_hit_vars,
-            needed_lpes,
-            unwritten,
-            write_product,
-        )
+        from renderer.products import UNWRITTEN, needs, unwritten, with_needs, write_product
         from renderer.render import auto_tile_size, render_frame
         from renderer.usd.products import read_products
 
         args, base = self.args, self.base
         t0 = time.perf_counter()
         products = read_products(self.stage, self.settings_path, frame)
-        targets = [(_output_path(name, args.make_output_path), name, product)
+        targets = [(output_path(name, args.make_output_path), name, product)
                    for name, product in _targets(args, products, frame, self.warn)]
         skipped = unwritten([v for _, _, p in targets if p for v in p.vars])
         if skipped:
-            self.warn("render vars not written (drt renders the raw sources of docs/rendering.md's table, primvars "
-                      "and LPEs)", ", ".join(dict.fromkeys(skipped)))
+            self.warn(UNWRITTEN, ", ".join(dict.fromkeys(skipped)))
         groups: dict = {}  # products with the same overrides render once
         for path, name, product in targets:
             groups.setdefault(product.override_key if product else None, []).append((path, name, product))
@@ -470,11 +468,7 @@ class _Run:
         for g, (key, members) in enumerate(groups.items()):
             first = members[0][2]
             vars_ = [v for _, _, p in members if p for v in p.vars]
-            o = base.options
-            options = replace(o, aovs=tuple(dict.fromkeys(o.aovs + needed_aovs(vars_))),
-                              lpe=tuple(dict.fromkeys(o.lpe + needed_lpes(vars_))),
-                              cryptomatte=tuple(dict.fromkeys(o.cryptomatte + needed_cryptomatte(vars_))),
-                              hit_vars=needed_hit_vars(vars_))
+            options = with_needs(base.options, needs(vars_))[0]
             request = replace(base, frame=frame, product=first.path if first else None, options=options)
             t_prep = time.perf_counter()
             prep = request.prepare(stage=self.stage, reuse=self.prepared.get(key))

@@ -59,6 +59,8 @@ DATA_TYPES = {
 }
 HALF_FORMATS = {"half", "half16", "float16", "color3h", "color4h"}
 FLOAT_FORMATS = {"float", "float32", "color3f", "color4f"}
+UNWRITTEN = ("render vars not written (drt renders the raw sources of docs/rendering.md's table, primvars and "
+             "LPEs)")  # the warning that names ``unwritten``'s vars
 
 
 def source_kind(var) -> str | None:
@@ -106,6 +108,28 @@ def needed_cryptomatte(vars_) -> tuple[str, ...]:
     """Cryptomatte kinds the vars ask for (the renderer's ``cryptomatte`` setting)."""
     return tuple(dict.fromkeys(CRYPTO_SOURCES[v.source.strip().lower()] for v in vars_
                                if source_kind(v) == "crypto"))
+
+
+def needs(vars_) -> tuple[str, ...]:
+    """What the vars need rendered beyond the beauty, as strings that travel (a job's record): AOV names, and
+    ``lpe:NAME=EXPR``, ``cryptomatte:KIND``, ``hit:KEY`` items (``with_needs`` reads them back)."""
+    return (needed_aovs(vars_) + tuple("lpe:" + x for x in needed_lpes(vars_))
+            + tuple("cryptomatte:" + x for x in needed_cryptomatte(vars_))
+            + tuple("hit:" + x for x in needed_hit_vars(vars_)))
+
+
+def with_needs(options, items) -> tuple[object, tuple[str, ...]]:
+    """``options`` with ``needs``' items added, and the items that were not asked for already (product-only)."""
+    fields = {"lpe": "lpe", "cryptomatte": "cryptomatte", "hit": "hit_vars"}
+    added: list[str] = []
+    values = {f: list(getattr(options, f)) for f in ("aovs", *fields.values())}
+    for item in dict.fromkeys(items):
+        kind, sep, value = item.partition(":")
+        field, value = (fields[kind], value) if sep and kind in fields else ("aovs", item)
+        if value not in values[field]:
+            values[field].append(value)
+            added.append(item)
+    return replace(options, **{f: tuple(v) for f, v in values.items()}), tuple(added)
 
 
 def needed_aovs(vars_) -> tuple[str, ...]:
@@ -195,16 +219,24 @@ def product_channels(prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = ()
     return out, halves
 
 
-def write_product(path, prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = (),
-                  user_cryptomatte: tuple[str, ...] = (), half: bool = False) -> int:
-    """Write a product's EXR atomically (``product_channels``, and the Cryptomatte layers its vars or the command
-    line ask for). Returns the number of non-finite values zeroed."""
-    from renderer.film.exr import write_exr
-    from renderer.render import cryptomatte_channels, frame_attributes, frame_windows
+def product_image(prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = (),
+                  user_cryptomatte: tuple[str, ...] = (), half: bool = False):
+    """A product's EXR as plain values that pickle (``renderer.render.FrameImage``) and the names of its channels
+    stored as HALF: ``product_channels``, and the Cryptomatte layers its vars or the command line ask for. Made
+    where the prepared frame is (a worker of the service), written elsewhere with ``image.write(path,
+    half=halves)``, the same bits as ``write_product``."""
+    from renderer.render import FrameImage, cryptomatte_channels, frame_attributes, frame_windows
 
     channels, halves = product_channels(prep, sums, vars_, user_aovs=user_aovs, half=half)
     kinds = needed_cryptomatte(vars_) + tuple(user_cryptomatte) if vars_ else None  # None: all asked for
     crypto, manifests = cryptomatte_channels(prep, sums, kinds)
-    return write_exr(path, {**channels, **crypto}, half=frozenset(halves), attributes={**frame_attributes(prep),
-                                                                                       **manifests},
-                     **frame_windows(prep))
+    return FrameImage(channels={**channels, **crypto}, attributes={**frame_attributes(prep), **manifests},
+                      **frame_windows(prep)), frozenset(halves)
+
+
+def write_product(path, prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = (),
+                  user_cryptomatte: tuple[str, ...] = (), half: bool = False) -> int:
+    """Write a product's EXR atomically (``product_image``). Returns the number of non-finite values zeroed."""
+    image, halves = product_image(prep, sums, vars_, user_aovs=user_aovs, user_cryptomatte=user_cryptomatte,
+                                  half=half)
+    return image.write(path, half=halves)

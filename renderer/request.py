@@ -101,7 +101,8 @@ class RenderRequest:
     def scene_key(self) -> tuple:
         """What the prepared scene depends on besides the scene's content: the frame and the settings the table
         marks ``scene``. Jobs that differ only in sampling and output settings share one prepared scene."""
-        return (self.frame, self.product, tuple(sorted((k, v) for k, v in self.settings().items() if SETTINGS[k].scene)))
+        return (self.frame, self.product, self.options.hit_vars,
+                tuple(sorted((k, v) for k, v in self.settings().items() if SETTINGS[k].scene)))
 
     @property
     def motion_blur_keys(self) -> bool:

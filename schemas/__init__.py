@@ -4,11 +4,12 @@
 (``renderer.options``, pure Python), from which ``RenderSettings`` is derived. Settings keys are named like the
 ``drt render`` flags.
 """
-from .jobs import ErrorBody, FramePublic, FrameState, Health, JobList, JobPublic, JobState, SceneInfo
+from .jobs import (ErrorBody, FramePublic, FrameState, Health, JobList, JobPublic, JobState, ProductPublic,
+                   SceneInfo, product_name)
 from .limits import Limits
 from .monitor import Farm, FarmTask, FarmWorker, FrameTiles, TileMap
 from .settings import MAX_FRAMES, FrameRange, JobCreate, RenderSettings
 
 __all__ = ["MAX_FRAMES", "ErrorBody", "Farm", "FarmTask", "FarmWorker",
            "FramePublic", "FrameRange", "FrameState", "FrameTiles", "Health", "JobCreate", "JobList", "JobPublic",
-           "JobState", "Limits", "RenderSettings", "SceneInfo", "TileMap"]
+           "JobState", "Limits", "ProductPublic", "RenderSettings", "SceneInfo", "TileMap", "product_name"]

@@ -15,6 +15,14 @@ IDEMPOTENCY_BUSY = "a request with this Idempotency-Key is still being processed
 CLUSTER_UNAVAILABLE = "the render cluster is unavailable"
 
 
+def product_not_found(frame: str, name: str, names: list[str]) -> str:
+    return f"frame {frame} has no product {name!r} (its products: {', '.join(names) or 'none'})"
+
+
+def bad_product_name(name: str) -> str:
+    return f"not a product name: {name!r} (a relative path inside the job, without '..')"
+
+
 def cannot_cancel(state: str) -> str:
     return f"cannot cancel a {state} job"
 

@@ -1,4 +1,4 @@
-"""``/v1/jobs``: submit, read, list, cancel, retry, delete; frame EXRs and previews.
+"""``/v1/jobs``: submit, read, list, cancel, retry, delete; frames' products (EXRs) and previews.
 
 Status codes: 202 + ``Location`` on create (also when an Idempotency-Key replays it), 400 malformed multipart, 401
 no or a wrong token, 404 unknown job or frame, 409 illegal state change or frame not ready, 413 upload too large,
@@ -16,7 +16,7 @@ from fastapi import APIRouter, File, Form, Header, Query, Request, Response, Upl
 from fastapi.responses import FileResponse, JSONResponse
 
 from renderer.film.tiles import split_tiles
-from schemas import JobList, JobPublic, JobState
+from schemas import JobList, JobPublic, JobState, product_name
 
 from .. import errors
 from ..errors import ApiError
@@ -147,19 +147,42 @@ def delete_job(runtime: RuntimeDep, job_id: str):
     return Response(status_code=204)
 
 
-@router.get("/{job_id}/frames/{frame}.exr", response_class=FileResponse,
-            responses={200: {"content": {"image/x-exr": {"schema": {"type": "string", "format": "binary"}}},
-                             "description": "the frame's OpenEXR file"}, **answers(404, 409, 422)})
+_EXR = {200: {"content": {"image/x-exr": {"schema": {"type": "string", "format": "binary"}}},
+              "description": "an OpenEXR file"}}
+
+
+@router.get("/{job_id}/frames/{frame}.exr", response_class=FileResponse, responses={**_EXR, **answers(404, 409, 422)})
 def get_frame(store: StoreDep, settings: SettingsDep, job_id: str, frame: str):
-    """The frame's EXR, once it is rendered (409 before)."""
-    row = _job(store, job_id)
-    f = find_frame(row, frame)
+    """The frame's EXR, once it is rendered (409 before): its first product (``products[0]``)."""
+    f = find_frame(_job(store, job_id), frame)
     if f is None:
         raise ApiError(404, errors.FRAME_NOT_FOUND)
-    path = JobFiles(settings.data_dir, job_id).frame(f.idx)
-    if not f.done or not path.is_file():
+    path = JobFiles(settings.data_dir, job_id).main_image(f) if f.done else None
+    if path is None or not path.is_file():
         raise ApiError(409, errors.FRAME_NOT_READY)
     return FileResponse(path, media_type="image/x-exr", filename=f"{job_id}_{frame}.exr")
+
+
+@router.get("/{job_id}/frames/{frame}/products/{name:path}", response_class=FileResponse,
+            responses={**_EXR, **answers(404, 409, 422)})
+def get_product(store: StoreDep, settings: SettingsDep, job_id: str, frame: str, name: str):
+    """One product of a frame, by its name in the frame's ``products`` (a relative path: slashes allowed), once the
+    frame is rendered (409 before). 404 names the frame's products when it has none of this name; 422 for a name
+    that could not be a product's (absolute, or with ``..``)."""
+    f = find_frame(_job(store, job_id), frame)
+    if f is None:
+        raise ApiError(404, errors.FRAME_NOT_FOUND)
+    if product_name(name) != name:
+        raise ApiError(422, errors.bad_product_name(name))
+    if not f.done:
+        raise ApiError(409, errors.FRAME_NOT_READY)
+    names = [p["name"] for p in f.products or ()]
+    if name not in names:
+        raise ApiError(404, errors.product_not_found(frame, name, names))
+    path = JobFiles(settings.data_dir, job_id).product(f.idx, name)  # a safe name, checked above
+    if not path.is_file():
+        raise ApiError(404, errors.product_not_found(frame, name, names))
+    return FileResponse(path, media_type="image/x-exr", filename=name.rsplit("/", 1)[-1])
 
 
 @router.get("/{job_id}/frames/{frame}/preview.png", response_class=Response,
@@ -172,7 +195,7 @@ def get_preview(store: StoreDep, settings: SettingsDep, job_id: str, frame: str)
     if f is None:
         raise ApiError(404, errors.FRAME_NOT_FOUND)
     files = JobFiles(settings.data_dir, job_id)
-    exr = files.frame(f.idx)
+    exr = files.main_image(f)
     if f.done and exr.is_file():
         data = preview.from_exr(exr)
     else:

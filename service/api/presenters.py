@@ -1,15 +1,17 @@
 """Database rows -> the public job view (``schemas.JobPublic``), and frame names in URLs.
 
 URLs are relative to the server (``/v1/jobs/<id>/...``) so they stay right behind a proxy. A frame's name in a URL
-is its time code: ``12`` for 12.0, ``12.5`` for 12.5.
+is its time code: ``12`` for 12.0, ``12.5`` for 12.5; a product's, its name (a relative path, slashes kept, each
+part percent-encoded).
 """
 from __future__ import annotations
 
 import functools
 import time
 from datetime import datetime, timezone
+from urllib.parse import quote
 
-from schemas import FramePublic, FrameState, JobCreate, JobPublic, JobState, SceneInfo
+from schemas import FramePublic, FrameState, JobCreate, JobPublic, JobState, ProductPublic, SceneInfo
 
 from ..queue.store import FrameRow, JobRow
 
@@ -51,8 +53,11 @@ def job_public(row: JobRow) -> JobPublic:
         else:
             state = FrameState.rendering if f.tiles_done else FrameState.pending
             progress = f.tiles_done / (row.tiles_per_frame + 1)  # +1: writing the EXR is the last step
+        products = [ProductPublic(name=p["name"], prim=p["prim"],
+                                  url=f"{base}/frames/{name}/products/{quote(p['name'])}")
+                    for p in (f.products or ()) if f.done]
         frames.append(FramePublic(frame=f.time, state=state, progress=progress,
-                                  exr_url=f"{base}/frames/{name}.exr" if f.done else None,
+                                  exr_url=f"{base}/frames/{name}.exr" if f.done else None, products=products,
                                   preview_url=f"{base}/frames/{name}/preview.png"))
     steps = row.tiles_total + len(row.frames)
     progress = (row.tiles_done + sum(f.done for f in row.frames)) / steps if steps else 0.0

@@ -146,19 +146,6 @@ class Client:
 # Commands
 
 
-def _frames(text: str):
-    """``A:B`` or ``A:B:STEP`` (a range, B included) or ``F1,F2,...``."""
-    try:
-        if ":" in text:
-            parts = [float(x) for x in text.split(":")]
-            if len(parts) not in (2, 3):
-                raise ValueError
-            return {"start": parts[0], "end": parts[1], "step": parts[2] if len(parts) == 3 else 1.0}
-        return [float(x) for x in text.split(",")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a frame range (A:B[:STEP]) or list (F1,F2,...): {text!r}") from None
-
-
 def _int(text: str) -> int:
     try:
         return int(text)
@@ -180,18 +167,20 @@ def add_connection(p: argparse.ArgumentParser) -> None:
 
 
 def add_commands(sub) -> None:
-    from renderer.cli import add_render_settings
+    from renderer.cli import add_make_output_path, add_render_settings
 
+    pattern = ("the first product of each frame; $F, $F4, $FF and #### expand to the frame (the other products keep "
+               "their names), or an existing folder to write every product under (default: each product to its "
+               "name, from the working directory)")
     s = sub.add_parser("submit", help="submit a scene to a render service")
     s.add_argument("scene", type=Path, help="a .usd/.usda/.usdc/.usdz file")
     add_render_settings(s)
-    s.add_argument("--frames", type=_frames, default=None, metavar="A:B[:STEP]|F1,F2",
-                   help="several frames (instead of --frame)")
     s.add_argument("--priority", type=_int, default=0, help="higher runs first (default 0)")
     s.add_argument("--idempotency-key", default=None, help="makes retrying this submission safe (default: random)")
     s.add_argument("--wait", action="store_true", help="wait for the job to finish, with a progress bar")
-    s.add_argument("-o", "--output", type=Path, default=None,
-                   help="download the result here (implies --wait; a directory for several frames)")
+    s.add_argument("--fetch", action="store_true", help="wait, then write the products as drt fetch does")
+    s.add_argument("-o", "--output", default=None, metavar="OUT.exr", help=pattern + "; implies --fetch")
+    add_make_output_path(s)
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     add_connection(s)
 
@@ -200,10 +189,11 @@ def add_commands(sub) -> None:
     st.add_argument("--json", action="store_true", help="print the job as JSON")
     add_connection(st)
 
-    f = sub.add_parser("fetch", help="wait for a job and download its frames")
+    f = sub.add_parser("fetch", help="wait for a job and write its frames' products")
     f.add_argument("job_id")
-    f.add_argument("-o", "--output", type=Path, required=True, help="EXR file (a directory for several frames)")
+    f.add_argument("-o", "--output", default=None, metavar="OUT.exr", help=pattern)
     f.add_argument("--frame", type=_float, default=None, help="only this frame")
+    add_make_output_path(f)
     f.add_argument("--quiet", action="store_true", help="no progress bar")
     add_connection(f)
 
@@ -216,13 +206,20 @@ def add_commands(sub) -> None:
 
 
 def settings_from_args(args: argparse.Namespace) -> dict:
-    """The job's JSON settings from ``drt submit``'s flags: the frames, the render settings that were given (the
-    server fills in the table's defaults, as ``drt render`` does) and the priority."""
-    from renderer.cli import given_settings
+    """The job's JSON settings from ``drt submit``'s flags: the frames (``-f/-n/-i`` or ``--frames``, read as
+    ``drt render`` reads them), the render settings that were given (the server fills in the table's defaults, as
+    ``drt render`` does) and the priority."""
+    from renderer.cli import frames_from_args, given_settings
+    from renderer.errors import RenderError
 
-    if args.frames is not None and args.frame is not None:
-        raise ClientError("give --frame or --frames, not both")
-    frames = args.frames if args.frames is not None else ([args.frame] if args.frame is not None else None)
+    frames = None
+    if args.frames is not None or args.frame is not None:
+        try:
+            frames = frames_from_args(args, args.frame)
+        except RenderError as e:
+            raise ClientError(str(e)) from None
+    elif args.frame_count is not None or args.frame_inc is not None:
+        raise ClientError("-n/-i need -f START with drt submit (the stage's start time is read on the server)")
     out = {"frames": frames, **given_settings(args), "priority": args.priority}
     return {k: v for k, v in out.items() if v is not None}
 
@@ -243,7 +240,27 @@ def _summary(job: dict) -> str:
     return line
 
 
-def _fetch(client: Client, job: dict, out: Path, frame: float | None) -> list[Path]:
+def _products(job: dict, frame: dict) -> list[tuple[str, str]]:
+    """(name, URL) of a frame's products; a frame of a service before products is its one EXR."""
+    from schemas import product_name
+
+    if not frame.get("products"):
+        return [(frame["exr_url"].rsplit("/", 1)[1], frame["exr_url"])]
+    out = []
+    for p in frame["products"]:
+        if product_name(p["name"]) != p["name"]:  # never write where a server says, outside the output folder
+            raise ClientError(f"job {job['id']} names a product {p['name']!r}: not a relative path")
+        out.append((p["name"], p["url"]))
+    return out
+
+
+def _targets(job: dict, out: str | None, frame: float | None, make: bool) -> list[tuple[str, Path]]:
+    """(URL, file) of every product to write, their folders checked (or made with ``make``) before any download:
+    each product to its name from the working directory, or under ``out`` if it is a folder; else ``out`` is the
+    first product's pattern (``renderer.cli.expand_frame``), as for ``drt render -o``."""
+    from renderer.cli import expand_frame, output_path
+    from renderer.errors import RenderError
+
     if job["state"] != "succeeded":
         why = f": {job['error']}" if job.get("error") else ""
         raise ClientError(f"job {job['id']} {job['state']}{why}")
@@ -252,15 +269,31 @@ def _fetch(client: Client, job: dict, out: Path, frame: float | None) -> list[Pa
         frames = [f for f in frames if f["frame"] == frame]
         if not frames:
             raise ClientError(f"job {job['id']} has no frame {frame:g}")
-    if len(frames) == 1 and not out.is_dir():
-        targets = [(frames[0], out)]
-    else:
-        out.mkdir(parents=True, exist_ok=True)
-        targets = [(f, out / f["exr_url"].rsplit("/", 1)[1]) for f in frames]
-    if not targets[0][1].parent.is_dir():
-        raise ClientError(f"output directory does not exist: {targets[0][1].parent}")
-    for f, path in targets:
-        client.download(f["exr_url"], path)
+    folder = out is not None and (os.path.isdir(out) or out.endswith(("/", os.sep)))
+    targets = []
+    for f in frames:
+        for i, (name, url) in enumerate(_products(job, f)):
+            if out is not None and not folder and i == 0:
+                path = expand_frame(out, f["frame"])
+            else:
+                path = os.path.join(out, name) if folder else name
+            targets.append((url, path))
+    paths = [p for _, p in targets]
+    if len(set(paths)) < len(paths):
+        raise ClientError(f"-o {out} names one file for {len(frames)} frames: put $F4 or #### in it, or name a "
+                          "folder" if out is not None and not folder else f"job {job['id']} names a file twice")
+    try:
+        for _, path in targets:
+            output_path(path, make)
+    except RenderError as e:
+        raise ClientError(str(e)) from None
+    return [(url, Path(path)) for url, path in targets]
+
+
+def _fetch(client: Client, job: dict, out: str | None, frame: float | None, make: bool = False) -> list[Path]:
+    targets = _targets(job, out, frame, make)
+    for url, path in targets:
+        client.download(url, path)
     return [p for _, p in targets]
 
 
@@ -272,10 +305,10 @@ def run(args: argparse.Namespace) -> int:
             key = args.idempotency_key or uuid.uuid4().hex  # a retry of this very call must not duplicate the job
             job = client.submit(args.scene, settings, idempotency_key=key)
             print(job["id"], flush=True)
-            if args.wait or args.output is not None:
+            if args.wait or args.fetch or args.output is not None:
                 job = client.wait(job["id"], progress=sys.stderr.isatty() and not args.quiet)
-                if args.output is not None:
-                    for p in _fetch(client, job, args.output, None):
+                if args.fetch or args.output is not None:
+                    for p in _fetch(client, job, args.output, None, args.make_output_path):
                         print(f"wrote {p}")
                 elif job["state"] != "succeeded":
                     raise ClientError(_summary(job))
@@ -286,7 +319,7 @@ def run(args: argparse.Namespace) -> int:
             return 0
         if args.command == "fetch":
             job = client.wait(args.job_id, progress=sys.stderr.isatty() and not args.quiet)
-            for p in _fetch(client, job, args.output, args.frame):
+            for p in _fetch(client, job, args.output, args.frame, args.make_output_path):
                 print(f"wrote {p}")
             return 0
         if args.command in ("cancel", "retry"):

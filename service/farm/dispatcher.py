@@ -9,10 +9,12 @@ or a cancellation takes effect within about one tile's time, and waits for a tas
 * Small tiles share a task: a frame's next tiles up to ``task_samples`` samples together (``JobPlan.next_work``).
 * Finished tiles come back as the task's result; this thread checkpoints each (atomically) on disk, then records
   them in the database. When all tiles of a frame are recorded, they are assembled here, a worker turns the sums
-  into the frame's image (channels and header as plain values, ``FrameImage``: it holds the prepared frame), and
-  this thread writes it atomically with the renderer's writer (``FrameImage.write``, as ``drt render`` does); the
-  frame is marked done and its tile checkpoints are removed. A frame that fits in one batch is rendered and made
-  an image in one task (``tasks.whole_frame_task``: no checkpoint). The job succeeds when every frame is done.
+  into the frame's products (each one's channels and header as plain values, ``tasks.ProductImage``: it holds the
+  prepared frame and the stage's RenderProducts), and this thread writes each atomically with the renderer's
+  writer under its name (as ``drt render`` does), inside the job's folder whatever the productName says; the
+  frame is marked done with its products' names and its tile checkpoints are removed. A frame that fits in one
+  batch is rendered and made its products in one task (``tasks.whole_frame_task``: no checkpoint). The job
+  succeeds when every frame is done.
 * A job that left the active states (canceled, failed, deleted) has its tasks cancelled (running tiles stop at
   their next sample wave) and late results dropped.
 * A task that raises (including a worker that died three times running it, Dask's ``KilledWorker``) is submitted
@@ -43,7 +45,7 @@ from renderer.film import film
 from renderer.film.borders import check_tile
 from renderer.film.tiles import Tile, split_tiles
 from renderer.render import TileSums, assemble
-from schemas import JobCreate, JobState
+from schemas import JobCreate, JobState, product_name
 
 from ..queue import states as sm
 from ..queue.scenes import SceneStore
@@ -413,12 +415,21 @@ class Dispatcher:
         frame.queue.extend(sorted(tiles))
 
     def _frame_image(self, plan: JobPlan, frame: FramePlan, result: dict) -> None:
+        """Write the frame's products, each atomically, under their names made safe (``schemas.product_name``)."""
+        written = []
         try:
-            result["image"].write(plan.files.frame(frame.idx), half=plan.spec.request.half)
+            for p in result["products"]:
+                name = product_name(p.name)
+                if name is None or any(w["name"] == name for w in written):
+                    log.warning("job %s frame %g: product %s (%r) not written: %s", plan.job_id, frame.time,
+                                p.prim, p.name, "no usable name" if name is None else "its name is taken")
+                    continue
+                p.image.write(plan.files.product(frame.idx, name, create=True), half=p.halves)
+                written.append({"name": name, "prim": p.prim})
         except FileNotFoundError:  # the job's files are gone: it was deleted
             self._drop(plan.job_id)
             return
-        self._frame_written(plan, frame)
+        self._frame_written(plan, frame, written)
 
     def _tiles_rendered(self, plan: JobPlan, frame: FramePlan, tiles: tuple[int, ...], result: dict) -> None:
         frame.inflight.difference_update(tiles)
@@ -457,10 +468,10 @@ class Dispatcher:
             return  # the job stopped running meanwhile (nothing recorded): dropped, or its tiles queued again
         self._frame_image(plan, frame, result)
 
-    def _frame_written(self, plan: JobPlan, frame: FramePlan) -> None:
+    def _frame_written(self, plan: JobPlan, frame: FramePlan, products: list[dict]) -> None:
         frame.finishing = False
         frame.finished = True
-        self.store.frame_done(plan.job_id, frame.idx)
+        self.store.frame_done(plan.job_id, frame.idx, products)
         plan.files.remove_tiles(frame.idx)
         if all(f.finished for f in plan.frames):
             self._succeed(plan)
@@ -533,6 +544,7 @@ class Dispatcher:
         if row.job_state == sm.RUNNING:
             log.info("resuming job %s: %d of %d tiles checkpointed", row.id, row.tiles_done, row.tiles_total)
         return JobPlan(job_id=row.id, state=row.job_state, priority=row.priority,
-                       spec=RenderSpec.from_settings(settings, row.scene_name, row.scene_sha256), scene_file=path,
+                       spec=RenderSpec.from_settings(settings, row.scene_name, row.scene_sha256,
+                                                     tuple(row.product_aovs)), scene_file=path,
                        width=row.width, height=row.height, spp=settings.spp, boxes=boxes, frames=frames,
                        files=files)

@@ -1,10 +1,10 @@
-"""What runs on the Dask workers: tile rendering and a frame's image; the per-process scene caches.
+"""What runs on the Dask workers: tile rendering and a frame's products; the per-process scene caches.
 
 A worker needs nothing but the scheduler's address. It never sees the service's data directory: the uploaded
 scene reaches it through Dask (a ``ScenePackage``, the upload's bytes, is the result of a ``scene_package`` task on
 which every tile task depends, so Dask copies it to a worker once and recomputes it if the worker holding it dies),
-tiles and frame images go back as task results (numpy arrays and plain values), and the service alone writes
-checkpoints, frames and the database.
+tiles and the frames' products go back as task results (numpy arrays and plain values), and the service alone
+writes checkpoints, products and the database.
 
 Tasks are pure functions of their arguments (a ``RenderSpec``, the scene's bytes, a frame, a batch of tiles), so
 Dask may run them anywhere and run them again after a worker dies: the result is the same bits.
@@ -41,7 +41,7 @@ from pathlib import Path
 from renderer.files import atomic_write
 from renderer.film.tiles import Tile
 
-from ..spec import RenderSpec
+from ..spec import FrameProduct, RenderSpec, frame_products
 
 _cache: OrderedDict = OrderedDict()  # (sha, cache key) -> PreparedScene
 _cache_lock = threading.Lock()
@@ -95,6 +95,16 @@ class _LocalScene:
                 with _cache_lock:
                     _stats["stages"] += 1
         return scene
+
+    def products(self, spec: RenderSpec, frame: float) -> list[FrameProduct]:
+        """The products a frame of the job writes (``spec.frame_products``), read from the cached stage."""
+        from pxr import Usd
+
+        from renderer.usd.stage import open_stage
+
+        with self.lock, Usd.StageCacheContext(self.stages):
+            stage = open_stage(self.path)
+        return frame_products(stage, spec.request_at(frame), frame, lambda _message: None)
 
     def remove(self) -> None:
         self.stages.Clear()
@@ -357,16 +367,32 @@ class FrameTask:
     cache_size: int = 2
 
 
+@dataclass
+class ProductImage:
+    """One product of a frame as plain values: its name and prim (``spec.FrameProduct``), its EXR
+    (``renderer.render.FrameImage``) and the channels stored as HALF."""
+
+    name: str
+    prim: str | None
+    image: object  # renderer.render.FrameImage
+    halves: frozenset
+
+
 def frame_image_task(task: FrameTask, scene: ScenePackage) -> dict:
-    """The frame's image from its sums (``renderer.render.frame_image``: its EXR channels, header attributes and
-    windows as plain values): ``{"image"}`` or ``{"error"}``. The service writes it, with ``write_frame``'s writer,
-    so its EXR has the same bits as ``drt render``'s."""
+    """The frame's products from its sums (``renderer.products.product_image``: each one's EXR channels, header
+    attributes and windows as plain values): ``{"products": [ProductImage]}`` or ``{"error"}``. The service writes
+    them with the renderer's writer, so each EXR has the same bits as ``drt render``'s."""
     from renderer.errors import RenderError
-    from renderer.render import frame_image
+    from renderer.products import product_image
 
     try:
         prep = prepared(task.spec, task.frame, scene, task.cache_size)
-        return {"image": frame_image(prep, task.sums)}
+        out = []
+        for p in local_scene(scene).products(task.spec, task.frame):
+            image, halves = product_image(prep, task.sums, p.vars, user_aovs=task.spec.user_aovs,
+                                          user_cryptomatte=task.spec.user_cryptomatte, half=task.spec.request.half)
+            out.append(ProductImage(p.name, p.prim, image, halves))
+        return {"products": out}
     except RenderError as e:
         return {"error": _one_line(e)}
 

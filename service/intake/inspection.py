@@ -1,7 +1,8 @@
 """Scene inspection before a job is queued, in a small pool of local processes (never on the render workers).
 
 ``inspect_task`` checks an upload: every asset path inside it (``scene_checks.check_asset_paths``), composition
-errors, the first frame loaded with the renderer (camera path, settings bounds), the resolution. It answers
+errors, the first frame loaded with the renderer (camera path, settings bounds), the resolution, the products it
+writes (``spec.frame_products``: the AOVs their vars need, warnings for those it leaves out). It answers
 ``{"error": message}`` for anything wrong with the scene (the API's 422) or the facts the job needs.
 
 ``InspectionPool`` runs it in ``size`` processes of its own (``python -m service.intake.inspection``, talking over
@@ -37,7 +38,7 @@ from schemas import JobCreate
 from ..errors import ApiError
 from ..latency import freeze_heap
 from ..queue.scenes import StoredScene, UploadError
-from ..spec import RenderSpec
+from ..spec import RenderSpec, frame_products
 from .scene_checks import check_asset_paths, hide_dir
 
 log = logging.getLogger("drt.inspection")
@@ -60,7 +61,7 @@ def inspect_task(task: InspectTask) -> dict:
     """Check an upload before it is queued: asset paths, composition, the first frame, resolution.
 
     Returns ``{"error": message}`` for anything wrong with the scene or settings (the API answers 422), else
-    ``{"frames", "width", "height", "exposure_scale", "warnings"}``.
+    ``{"frames", "width", "height", "exposure_scale", "warnings", "product_aovs"}``.
     """
     from renderer.errors import RenderError
 
@@ -70,21 +71,44 @@ def inspect_task(task: InspectTask) -> dict:
         problem = _composition_problem(path)
         if problem:
             return {"error": problem}
+        from pxr import Usd
+
         from renderer.options import MAX_PIXELS
         from renderer.render import resolve_resolution
 
         frames = task.frames
-        scene = task.spec.load(frames[0] if frames else None)
+        stages = Usd.StageCache()  # the products are read from the stage the frame loaded from: opened once
+        with Usd.StageCacheContext(stages):
+            scene = task.spec.load(frames[0] if frames else None)
         options = task.spec.options().validate()
         width, height = resolve_resolution(scene, options)
         if width * height > MAX_PIXELS:
             return {"error": f"image of {width}x{height} pixels is too large"}
-        return {"frames": list(frames) if frames else [float(scene.frame)], "width": width, "height": height,
-                "exposure_scale": float(2.0 ** scene.camera.exposure), "warnings": list(scene.warnings)}
+        first = frames[0] if frames else float(scene.frame)
+        warnings = list(scene.warnings)
+        with Usd.StageCacheContext(stages):
+            product_aovs = _product_aovs(task.spec, first, warnings)
+        return {"frames": list(frames) if frames else [first], "width": width, "height": height,
+                "exposure_scale": float(2.0 ** scene.camera.exposure), "warnings": warnings,
+                "product_aovs": product_aovs}
     except (UploadError, RenderError) as e:
         return {"error": _one_line(e, path)}
     except Exception as e:  # noqa: BLE001 - untrusted input: whatever fails is reported, never a 500
         return {"error": f"scene could not be loaded: {type(e).__name__}: {_one_line(e, path)}"}
+
+
+def _product_aovs(spec: RenderSpec, frame: float, warnings: list[str]) -> list[str]:
+    """What the RenderVars of the frame's products need rendered (``renderer.products.needs``: AOVs, LPE,
+    Cryptomatte and hit items; ``spec.frame_products``); what it leaves out joins ``warnings``."""
+    from renderer.products import needs
+    from renderer.usd.stage import open_stage
+
+    def warn(message: str) -> None:
+        if message not in warnings:
+            warnings.append(message)
+
+    products = frame_products(open_stage(spec.scene_path), spec.request, frame, warn)
+    return list(needs([v for p in products for v in p.vars]))
 
 
 def _composition_problem(path: Path) -> str | None:

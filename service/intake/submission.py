@@ -146,7 +146,8 @@ class Submitter:
                     scene_sha256=sha, scene_name=name, scene_bytes=size, width=width, height=height,
                     tile_size=settings.tile, tiles_per_frame=per_frame, frame_times=frames,
                     exposure_scale=float(info.get("exposure_scale", 1.0)), warnings=list(info.get("warnings", [])),
-                    idempotency_key=idempotency_key, client=client)
+                    idempotency_key=idempotency_key, client=client,
+                    product_aovs=list(info.get("product_aovs", [])))
                 created = True
                 return job
         finally:

@@ -69,6 +69,8 @@ class JobRow(Base):
     started_at: Mapped[float | None] = mapped_column(Float, nullable=True)
     finished_at: Mapped[float | None] = mapped_column(Float, nullable=True)
     client: Mapped[str | None] = mapped_column(String(80), nullable=True)  # who submitted it (queue limits)
+    # AOVs rendered for the RenderVars of its products only, beyond the ones the settings ask for (inspection)
+    product_aovs_json: Mapped[str] = mapped_column(Text, default="[]")
 
     frames: Mapped[list["FrameRow"]] = relationship(back_populates="job", cascade="all, delete-orphan",
                                                     order_by="FrameRow.idx", lazy="selectin",
@@ -82,6 +84,10 @@ class JobRow(Base):
     def warnings(self) -> list[str]:
         return json.loads(self.warnings_json)
 
+    @property
+    def product_aovs(self) -> list[str]:
+        return json.loads(self.product_aovs_json or "[]")
+
 
 class FrameRow(Base):
     __tablename__ = "frames"
@@ -91,8 +97,15 @@ class FrameRow(Base):
     time: Mapped[float] = mapped_column(Float)
     tiles_done: Mapped[int] = mapped_column(Integer, default=0)
     done: Mapped[bool] = mapped_column(Boolean, default=False)
+    # the EXRs the frame wrote, once done: [{"name", "prim"}] in the settings' order; NULL for frames written by
+    # a service before products (their one EXR is ``JobFiles.frame``)
+    products_json: Mapped[str | None] = mapped_column(Text, nullable=True)
 
     job: Mapped[JobRow] = relationship(back_populates="frames")
+
+    @property
+    def products(self) -> list[dict] | None:
+        return None if self.products_json is None else json.loads(self.products_json)
 
 
 class TileRow(Base):
@@ -118,7 +131,7 @@ class IdempotencyRow(Base):
 
 _JOB_COLUMNS = tuple(c.name for c in JobRow.__table__.columns)
 _SELECT_JOB = f"SELECT {', '.join(_JOB_COLUMNS)} FROM jobs WHERE id = ?"
-_SELECT_FRAMES = "SELECT idx, time, tiles_done, done FROM frames WHERE job_id = ? ORDER BY idx"
+_SELECT_FRAMES = "SELECT idx, time, tiles_done, done, products_json FROM frames WHERE job_id = ? ORDER BY idx"
 _INSERT_JOB = (f"INSERT INTO jobs ({', '.join(c for c in _JOB_COLUMNS if c != 'seq')}) "
                f"VALUES ({', '.join(':' + c for c in _JOB_COLUMNS if c != 'seq')})")
 _ACTIVE = f"({', '.join(repr(x.value) for x in sorted(sm.ACTIVE))})"  # ('queued', 'running')
@@ -138,8 +151,8 @@ def _read_job(conn: sqlite3.Connection, job_id: str) -> JobRow:
     if job is None:
         raise JobNotFound(job_id)
     row = JobRow(**dict(zip(_JOB_COLUMNS, job)))
-    row.frames = [FrameRow(job_id=job_id, idx=i, time=t, tiles_done=n, done=bool(d))
-                  for i, t, n, d in conn.execute(_SELECT_FRAMES, (job_id,))]
+    row.frames = [FrameRow(job_id=job_id, idx=i, time=t, tiles_done=n, done=bool(d), products_json=p)
+                  for i, t, n, d, p in conn.execute(_SELECT_FRAMES, (job_id,))]
     return row
 
 
@@ -231,6 +244,10 @@ class Store:
             columns = {r[1] for r in s.connection().exec_driver_sql("PRAGMA table_info(jobs)")}
             if "client" not in columns:
                 s.connection().exec_driver_sql("ALTER TABLE jobs ADD COLUMN client VARCHAR(80)")
+            if "product_aovs_json" not in columns:
+                s.connection().exec_driver_sql("ALTER TABLE jobs ADD COLUMN product_aovs_json TEXT DEFAULT '[]'")
+            if "products_json" not in {r[1] for r in s.connection().exec_driver_sql("PRAGMA table_info(frames)")}:
+                s.connection().exec_driver_sql("ALTER TABLE frames ADD COLUMN products_json TEXT")
 
     def close(self) -> None:
         with self._write_lock:
@@ -289,14 +306,16 @@ class Store:
     def create_job(self, *, job_id: str, priority: int, settings_json: str, scene_sha256: str, scene_name: str,
                    scene_bytes: int, width: int, height: int, tile_size: int, tiles_per_frame: int,
                    frame_times: list[float], exposure_scale: float, warnings: list[str],
-                   idempotency_key: str | None = None, client: str | None = None) -> JobRow:
+                   idempotency_key: str | None = None, client: str | None = None,
+                   product_aovs: list[str] = ()) -> JobRow:
         now = time.time()
         job = dict(id=job_id, state=sm.QUEUED.value, priority=priority, settings_json=settings_json,
                    scene_sha256=scene_sha256, scene_name=scene_name, scene_bytes=scene_bytes, width=width,
                    height=height, tile_size=tile_size, tiles_per_frame=tiles_per_frame,
                    tiles_total=tiles_per_frame * len(frame_times), tiles_done=0, samples_done=0,
                    exposure_scale=exposure_scale, warnings_json=json.dumps(warnings), error=None, created_at=now,
-                   updated_at=now, started_at=None, finished_at=None, client=client)
+                   updated_at=now, started_at=None, finished_at=None, client=client,
+                   product_aovs_json=json.dumps(list(product_aovs)))
         with self._tx() as c:
             c.execute(_INSERT_JOB, job)
             c.executemany("INSERT INTO frames (job_id, idx, time, tiles_done, done) VALUES (?, ?, ?, 0, 0)",
@@ -469,9 +488,11 @@ class Store:
                       .values(tiles_done=FrameRow.tiles_done - n))
             s.execute(update(JobRow).where(JobRow.id == job_id).values(tiles_done=JobRow.tiles_done - n))
 
-    def frame_done(self, job_id: str, frame_idx: int) -> None:
+    def frame_done(self, job_id: str, frame_idx: int, products: list[dict] | None = None) -> None:
+        """The frame is written: its EXRs, ``[{"name", "prim"}]``, are what the API serves."""
         with self._tx() as c:
-            c.execute("UPDATE frames SET done = 1 WHERE job_id = ? AND idx = ?", (job_id, frame_idx))
+            c.execute("UPDATE frames SET done = 1, products_json = ? WHERE job_id = ? AND idx = ?",
+                      (None if products is None else json.dumps(products), job_id, frame_idx))
             c.execute("UPDATE jobs SET updated_at = ? WHERE id = ?", (time.time(), job_id))
 
     # -- idempotency -------------------------------------------------------------------------------------------

@@ -312,6 +312,8 @@ def test_health_metrics_and_docs(client, card):
     paths = client.get("/openapi.json").json()["paths"]
     assert {"/v1/jobs", "/v1/jobs/{job_id}", "/v1/jobs/{job_id}/cancel", "/v1/jobs/{job_id}/frames/{frame}.exr",
             "/v1/jobs/{job_id}/frames/{frame}/preview.png", "/healthz", "/metrics"} <= set(paths)
+    product = paths["/v1/jobs/{job_id}/frames/{frame}/products/{name}"]["get"]
+    assert "relative path" in product["description"] and {"200", "404", "409", "422"} <= set(product["responses"])
 
 
 def test_each_frame_is_prepared_once_per_worker(client, card):

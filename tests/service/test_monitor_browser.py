@@ -169,6 +169,14 @@ def test_the_job_page_fills_in_tiles_and_preview_live_then_downloads(server, tab
     dl.value.save_as(path)
     exr = server.http.get(f"/v1/jobs/{job_id}/frames/0.exr").content
     assert path.read_bytes() == exr and exr[:4] == b"\x76\x2f\x31\x01"
+    # the frame's products, each a link by its name (a stage without RenderProducts: one, named after the scene)
+    product = tab.page.locator("table.frames td.products button[data-product]")
+    assert product.all_inner_texts() == ["card.0000.exr"]
+    with tab.page.expect_download() as dl:
+        product.click()
+    assert dl.value.suggested_filename == "card.0000.exr"
+    dl.value.save_as(tmp_path / "product.exr")
+    assert (tmp_path / "product.exr").read_bytes() == exr
 
 
 def test_cancel_retry_delete_from_the_page(server, tab, card):

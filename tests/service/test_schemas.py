@@ -92,3 +92,22 @@ def test_noise_settings_reach_the_renderer_options():
     assert (o.unbiased, o.noise_threshold, o.min_spp, o.time_limit, o.denoise, o.aovs) == \
         (True, 0.02, 8, 5.0, True, ("spp",))
     o.validate()
+
+
+@pytest.mark.parametrize("given, name", [
+    ("beauty.0001.exr", "beauty.0001.exr"), ("./renders//beauty.0001.exr", "renders/beauty.0001.exr"),
+    ("/shows/x/beauty.0001.exr", "beauty.0001.exr"), ("../../etc/passwd", "passwd"), ("a/../b.exr", "b.exr"),
+    ("C:\\renders\\b.exr", "b.exr"), ("renders\\b.exr", "renders/b.exr"), ("..", None), ("", None), ("/", None),
+    ("a\0b.exr", None)])
+def test_a_product_name_stays_inside_its_folder(given, name):
+    from schemas import product_name
+
+    assert product_name(given) == name
+    if name is not None:
+        assert product_name(name) == name and not name.startswith("/") and ".." not in name.split("/")
+
+
+def test_a_job_renders_the_aovs_its_products_need_and_keeps_its_own_apart():
+    spec = RenderSpec.from_settings(JobCreate(aovs=["depth"]), "s.usda", "0" * 64, ("normal", "depth"))
+    assert spec.request.options.aovs == ("depth", "normal")
+    assert (spec.product_aovs, spec.user_aovs) == (("normal",), ("depth",))

@@ -466,7 +466,7 @@
             e.error,
             h("section", { class: "card" }, h("h2", {}, "Frames"),
               h("table", { class: "frames" }, h("thead", {}, h("tr", {},
-                ["Frame", "State", "Progress", ""].map((t) => h("th", { scope: "col" }, t)))), e.frames)),
+                ["Frame", "State", "Progress", "Products"].map((t) => h("th", { scope: "col" }, t)))), e.frames)),
             h("section", { class: "card" }, e.warnings))));
     }
 
@@ -528,11 +528,7 @@
         e.frames.replaceChildren(...j.frames.map((f, i) => h("tr", { dataset: { frame: frameName(f.frame) },
           onclick: () => this.select(i) },
         h("td", {}, h("button", { type: "button", class: "link", onclick: () => this.select(i) }, frameName(f.frame))),
-        h("td"), h("td"),
-        h("td", {}, h("button", { type: "button", class: "link", hidden: true, onclick: (ev) => {
-          ev.stopPropagation();
-          this.downloadFrame(this.job.frames[i]).catch(reportError);
-        } }, "EXR")))));
+        h("td"), h("td"), h("td", { class: "products" }))));
       }
       j.frames.forEach((f, i) => {
         const tr = e.frames.rows[i];
@@ -542,7 +538,7 @@
         tr.cells[1].textContent = f.state;
         tr.cells[2].replaceChildren(h("div", { class: "progress" }, bar(f.progress, `frame ${frameName(f.frame)}`),
           h("span", { class: "pct" }, pct(f.progress))));
-        tr.cells[3].firstChild.hidden = !f.exr_url;
+        tr.cells[3].replaceChildren(...this.productLinks(f));
       });
       e.frameLabel.textContent = j.frames.length > 1 ? `frame ${frameName(this.frame().frame)}` : "";
     }
@@ -569,6 +565,19 @@
 
     downloadFrame(f) {
       return download(f.exr_url, `${this.id}_${frameName(f.frame)}.exr`);
+    }
+
+    // A done frame's products by name (its RenderProducts' productNames), each a download of its EXR; a frame
+    // written before products were listed has its one EXR.
+    productLinks(f) {
+      const link = (label, url, filename, name) => h("button", {
+        type: "button", class: "link", title: label, dataset: name === undefined ? {} : { product: name },
+        onclick: (ev) => { ev.stopPropagation(); download(url, filename).catch(reportError); },
+      }, label);
+      if (f.products && f.products.length) {
+        return f.products.map((p) => link(p.name, p.url, p.name.split("/").pop(), p.name));
+      }
+      return f.exr_url ? [link("EXR", f.exr_url, `${this.id}_${frameName(f.frame)}.exr`)] : [];
     }
 
     // The preview is fetched again when the selected frame's progress or state changed, at most once a second.

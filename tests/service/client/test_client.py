@@ -17,7 +17,7 @@ def test_defaults_are_the_schema_defaults():
 
 
 def test_flags_become_settings():
-    s = settings("--frames", "1:5:2", "--camera", "/World/Cam", "--width", "64", "--height", "48", "--spp", "8",
+    s = settings("--frames", "1:5x2", "--camera", "/World/Cam", "--width", "64", "--height", "48", "--spp", "8",
                  "--seed", "3", "--tile", "16", "--filter", "box", "--time-filter", "strobe", "--shutter", "-0.5",
                  "0.5", "--no-motion-blur", "--no-dof", "--aov", "depth", "--aov", "depth", "--half",
                  "--priority", "7", "--focal-length", "35", "--f-stop", "2.8", "--focus-distance", "4",

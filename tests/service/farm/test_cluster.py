@@ -59,7 +59,7 @@ def cluster(tmp_path):
 
 def check_isolation(cluster: Cluster, job_ids: list[str]) -> None:
     """The workers got the scene through Dask and wrote only into their own directories; the data directory holds
-    nothing but what the service writes (database, scenes, frames)."""
+    nothing but what the service writes (database, scenes, frames' products)."""
     views = [w.hidden_view() for w in cluster.workers]
     if CAN_HIDE:  # what the workers see at the data directory's path: the empty tmpfs of their own namespace
         assert views == [[]] * len(cluster.workers), f"a worker saw or wrote something there: {views}"
@@ -70,7 +70,7 @@ def check_isolation(cluster: Cluster, job_ids: list[str]) -> None:
             assert Path(s["scene_dir"]).parent in [w.workdir for w in cluster.workers]
             assert not Path(s["scene_dir"]).is_relative_to(cluster.data)
     allowed = re.compile(r"(drt\.sqlite3(-wal|-shm)?|scenes/[0-9a-f]{64}/[\w.-]+|jobs/(" + "|".join(job_ids)
-                         + r")/frames/\d+\.exr)$")
+                         + r")/frames/\d+/[\w.-]+\.exr)$")  # a frame's products
     stray = [f for f in service_files(cluster.data) if not allowed.match(f)]
     assert not stray, f"files in the data directory the service did not write: {stray}"
 
