@@ -99,8 +99,9 @@ class RenderRequest:
         return out
 
     def scene_key(self) -> tuple:
-        """What the prepared scene depends on besides the scene's content: the frame and the settings the table
-        marks ``scene``. Jobs that differ only in sampling and output settings share one prepared scene."""
+        """What the prepared scene depends on besides the scene's content: the frame, the product, the hit vars (which
+        load primvars and keep instances apart) and the settings the table marks ``scene``. Jobs that differ only in
+        sampling and output settings share one prepared scene."""
         return (self.frame, self.product, self.options.hit_vars,
                 tuple(sorted((k, v) for k, v in self.settings().items() if SETTINGS[k].scene)))
 
