@@ -14,7 +14,9 @@ Inside a closed solid entered through its surface, light is absorbed along the d
 medium) are walked by delta tracking along every ray before its surface: a real collision makes a volume vertex
 (``FLAG_VOLUME``), lit like a surface vertex by light sampling and phase sampling combined with MIS; shadow rays
 take the media's transmittance (ratio tracking). Samples with NaN/Inf radiance are counted and zeroed; ``clamp`` (off by default) limits a
-sample's radiance to cut fireflies, never silently.
+sample's radiance to cut fireflies, never silently. Each contribution is also handed to the LPE vars whose
+automata accept its path (``renderer.lpe.kernel``), and the first surface a sample sees is recorded for
+Cryptomatte and the vars of what it hit, when a render asks for them.
 
 Path regularization (the production default, off with ``unbiased``; see README "Noise defaults"):
 - *indirect clamp*: each contribution that reached the camera after more than one surface bounce is scaled
