@@ -183,7 +183,7 @@ def clamp_contribution(c: wp.vec3, limit: float):
 @wp.func(inline=True)  # no copy of the big structs
 def add_area_light(L: wp.vec3, lights: Lights, li: int, origin: wp.vec3, rd: wp.vec3, t_hit: float, s: float,
                    prev_inst: int, prev_delta: int, prev_pdf: float, prev_p: wp.vec3, lobe_frac: wp.vec3,
-                   beta: wp.vec3, hit_clamp: float, lpe: LpeTable, buf: SampleBuffer, sample: int):
+                   beta: wp.vec3, hit_clamp: float, lpe: LpeTable, lpe_s: int, buf: SampleBuffer, sample: int):
     """L plus what area light li sends along the scattered ray (origin, rd) before the surface at t_hit, with its
     multiple importance weight against sampling the light."""
     t_l, Le, pdf_l = area_light_hit(lights, li, origin, rd, t_hit, s)
@@ -195,7 +195,7 @@ def add_area_light(L: wp.vec3, lights: Lights, li: int, origin: wp.vec3, rd: wp.
             Le = wp.cw_mul(Le, sampled_weight(lights, li, lobe_frac))
         c = clamp_contribution(wp.cw_mul(beta, Le) * w, hit_clamp)
         if lpe.count > 0:
-            lpe_light(lpe, buf.lpe_state, buf.extra, sample, light_symbol(lpe, li), c)
+            lpe_light(lpe, lpe_s, buf.extra, sample, light_symbol(lpe, li), c)
         return L + c
     return L
 
@@ -203,7 +203,7 @@ def add_area_light(L: wp.vec3, lights: Lights, li: int, origin: wp.vec3, rd: wp.
 @wp.func(inline=True)  # one call site: no copy of the big structs
 def add_area_lights(L: wp.vec3, lights: Lights, origin: wp.vec3, rd: wp.vec3, t_hit: float, s: float,
                     prev_inst: int, prev_delta: int, prev_pdf: float, prev_p: wp.vec3, lobe_frac: wp.vec3,
-                    beta: wp.vec3, hit_clamp: float, lpe: LpeTable, buf: SampleBuffer, sample: int):
+                    beta: wp.vec3, hit_clamp: float, lpe: LpeTable, lpe_s: int, buf: SampleBuffer, sample: int):
     """L plus every area light the scattered ray reaches before t_hit (``lights.reach``): the still ones of a tree
     found by walking it, then the others (all of them without a tree) in light order. One loop, so that the light
     test is inlined once: a second copy cost a Cornell box 1.5-2.5 %."""
@@ -240,7 +240,7 @@ def add_area_lights(L: wp.vec3, lights: Lights, origin: wp.vec3, rd: wp.vec3, t_
             k += 1
         if li >= 0:
             L = add_area_light(L, lights, li, origin, rd, t_hit, s, prev_inst, prev_delta, prev_pdf, prev_p,
-                               lobe_frac, beta, hit_clamp, lpe, buf, sample)
+                               lobe_frac, beta, hit_clamp, lpe, lpe_s, buf, sample)
     return L
 
 
@@ -283,7 +283,7 @@ def media_shadow(geo: Geometry, mats: Materials, media: Media, ro: wp.vec3, rd: 
 def volume_direct(L: wp.vec3, geo: Geometry, mats: Materials, tex: Textures, lights: Lights, media: Media,
                   p: wp.vec3, rd: wp.vec3, g: float, s: float, in_sa: wp.vec3, in_ss: wp.vec3, beta: wp.vec3,
                   u_light: wp.vec3, nee_clamp: float, seed: wp.uint32, pixel: wp.uint32, index: wp.uint32,
-                  bounce: int, lpe: LpeTable, buf: SampleBuffer, sample: int):
+                  bounce: int, lpe: LpeTable, lpe_s: int, buf: SampleBuffer, sample: int):
     """L plus the light sampled at a scattering point p of a medium (each infinite light and one finite light,
     as at a surface), weighted against phase sampling by the power heuristic; and the shadow rays traced. The
     phase function takes the place of BSDF x cosine; ``rd`` (the direction of travel) is the axis constant domes
@@ -325,7 +325,7 @@ def volume_direct(L: wp.vec3, geo: Geometry, mats: Materials, tex: Textures, lig
                 c = clamp_contribution(wp.cw_mul(wp.cw_mul(beta, Le_l), tr) * (ph * w / (p_sel * pdf_l)),
                                        nee_clamp)
                 if lpe.count > 0:
-                    lpe_light_after(lpe, buf.lpe_state, buf.extra, sample, volume_symbol(lpe),
+                    lpe_light_after(lpe, lpe_s, buf.extra, sample, volume_symbol(lpe),
                                     light_symbol(lpe, li), c)
                 L += c
     return L, rays
@@ -373,7 +373,8 @@ class PathSettings:
     time_filter: int
     frame_s: float  # the frame time in normalised shutter time (strobe)
     seed: wp.uint32
-    record_hits: int  # 1: each sample's first surface (``SampleBuffer.hit_*``): Cryptomatte, primvar and id vars
+    record_hits: int  # each sample's first surface (``SampleBuffer.hit_*``): 1 instance and triangle (Cryptomatte,
+    # ids), 2 also its barycentrics and point (P and primvar vars); 0 none
 
 
 @by_reference
@@ -449,8 +450,9 @@ def trace_wave_kernel(
     alive = int(1)
     path_roughness = float(0.0)  # the roughest direction sampled so far (glossy filter)
     lobe_frac = wp.vec3(0.0)  # diffuse share of the last sampled direction (per-light diffuse/specular multipliers)
+    lpe_s = int(0)  # the state of the LPE vars' automaton (``renderer.lpe.kernel``)
     if lpe.count > 0:
-        lpe_begin(lpe, buf.lpe_state, buf.extra, tid)
+        lpe_s = lpe_begin(lpe, buf.extra, tid)
     if settings.record_hits != 0:
         buf.hit_inst[tid] = -1  # until a surface is seen
     while alive != 0:
@@ -475,7 +477,7 @@ def trace_wave_kernel(
                                 wp.uint32(DIM_MEDIUM + bounce * MEDIUM_DIMS_PER_BOUNCE))
             c_walk = clamp_contribution(wp.cw_mul(beta, walk.emitted), hit_clamp)
             if lpe.count > 0:
-                lpe_light(lpe, buf.lpe_state, buf.extra, tid, emission_symbol(lpe), c_walk)
+                lpe_light(lpe, lpe_s, buf.extra, tid, emission_symbol(lpe), c_walk)
             L += c_walk
             beta = wp.cw_mul(beta, walk.weight)
             event = walk.event
@@ -484,7 +486,7 @@ def trace_wave_kernel(
         # UsdLux area lights are not in the scene's hierarchy: rays after the first bounce may reach them directly
         if bounce > 0:
             L = add_area_lights(L, lights, origin, rd, t_seg, s, prev_inst, prev_delta, prev_pdf, prev_p, lobe_frac,
-                                beta, hit_clamp, lpe, buf, tid)
+                                beta, hit_clamp, lpe, lpe_s, buf, tid)
         if event != MEDIUM_NONE:  # a volume vertex: absorbed, or scattered by the phase function
             p = origin + rd * t_seg
             cone_w = cone_w + cone_spread * t_seg
@@ -497,7 +499,7 @@ def trace_wave_kernel(
                 dim = wp.uint32(DIM_LIGHT_BASE + bounce * DIMS_PER_BOUNCE)
                 u_light = sample_3d(seed, pixel, index, dim + wp.uint32(BOUNCE_LIGHT_CHOICE))
                 L, nee_rays = volume_direct(L, geo, mats, tex, lights, media, p, rd, g_event, s, sigma, in_ss, beta,
-                                            u_light, nee_clamp, seed, pixel, index, bounce, lpe, buf, tid)
+                                            u_light, nee_clamp, seed, pixel, index, bounce, lpe, lpe_s, buf, tid)
                 rays += nee_rays
                 u_phase = sample_3d(seed, pixel, index, dim + wp.uint32(BOUNCE_LOBE))
                 wi, pdf = hg_sample(g_event, rd, wp.vec2(u_phase[0], u_phase[1]))
@@ -513,7 +515,7 @@ def trace_wave_kernel(
                 prev_event = FLAG_VOLUME
                 see_through = 0
                 if lpe.count > 0:
-                    lpe_event(lpe, buf.lpe_state, tid, volume_symbol(lpe))
+                    lpe_s = lpe_event(lpe, lpe_s, volume_symbol(lpe))
                 origin = p
                 rd = wi
                 t_far = float(BIG)
@@ -535,7 +537,7 @@ def trace_wave_kernel(
                         Le = wp.cw_mul(Le, sampled_weight(lights, li, lobe_frac))
                     c_inf = clamp_contribution(wp.cw_mul(beta, Le) * w, hit_clamp)
                     if lpe.count > 0:
-                        lpe_light(lpe, buf.lpe_state, buf.extra, tid, light_symbol(lpe, li), c_inf)
+                        lpe_light(lpe, lpe_s, buf.extra, tid, light_symbol(lpe, li), c_inf)
                     L += c_inf
             if bounce == 0 and lights.dome_visible != 0:
                 alpha = 1.0
@@ -562,8 +564,9 @@ def trace_wave_kernel(
                 if settings.record_hits != 0:
                     buf.hit_inst[tid] = hit.inst
                     buf.hit_tri[tid] = hit.tri
-                    buf.hit_uv[tid] = wp.vec2(hit.b1, hit.b2)
-                    buf.hit_p[tid] = sp.p
+                    if settings.record_hits > 1:
+                        buf.hit_uv[tid] = wp.vec2(hit.b1, hit.b2)
+                        buf.hit_p[tid] = sp.p
                 depth_aov = wp.dot(sp.p - cam_origin, fwd)
                 normal_aov = ns
                 albedo_aov = bsdf_albedo_hint(params)
@@ -590,7 +593,7 @@ def trace_wave_kernel(
                     sym = emission_symbol(lpe)
                     if li >= 0:  # emission sampled as a light: its event and group
                         sym = light_symbol(lpe, li)
-                    lpe_light(lpe, buf.lpe_state, buf.extra, tid, sym, c_em)
+                    lpe_light(lpe, lpe_s, buf.extra, tid, sym, c_em)
                 L += c_em
             if bounce >= settings.max_depth:
                 alive = 0
@@ -666,11 +669,11 @@ def trace_wave_kernel(
                                     light_sym = light_symbol(lpe, li)
                                     lit = wp.cw_mul(wp.cw_mul(beta, Le_l), tr) * scale
                                     if fd[0] > 0.0 or fd[1] > 0.0 or fd[2] > 0.0:
-                                        lpe_light_after(lpe, buf.lpe_state, buf.extra, tid,
+                                        lpe_light_after(lpe, lpe_s, buf.extra, tid,
                                                         surface_symbol(lpe, through, SCATTER_D), light_sym,
                                                         wp.cw_mul(lit, fd))
                                     if fs[0] > 0.0 or fs[1] > 0.0 or fs[2] > 0.0:
-                                        lpe_light_after(lpe, buf.lpe_state, buf.extra, tid,
+                                        lpe_light_after(lpe, lpe_s, buf.extra, tid,
                                                         surface_symbol(lpe, through, SCATTER_G), light_sym,
                                                         wp.cw_mul(lit, fs))
                 # --- the BSDF's own direction continues the path
@@ -708,7 +711,7 @@ def trace_wave_kernel(
                     if lpe.count > 0 and not passthrough and not medium_boundary(media, sp.material, flags):
                         lobe_diffuse = wp.clamp(u_bsdf[2], 0.0, 0.99999994) >= (lobes.p_coat + lobes.p_spec
                                                                                  + lobes.p_trans)
-                        lpe_event(lpe, buf.lpe_state, tid, surface_symbol(
+                        lpe_s = lpe_event(lpe, lpe_s, surface_symbol(
                             lpe, (flags & FLAG_TRANSMISSION) != 0, sampled_scatter(flags & FLAG_DELTA, lobe_diffuse)))
                     if (flags & FLAG_TRANSMISSION) != 0:
                         origin = offset_origin(sp.p, -sp.ng)

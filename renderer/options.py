@@ -199,7 +199,7 @@ SETTINGS_TABLE: tuple[Setting, ...] = (
             "karma:light:lpetag, ri:light:lightGroup or primvars:arnold:aov, else the light's name"),
     Setting("cryptomatte", str, (), "Cryptomatte layers: object (prim paths), material (bound materials), asset "
             "(model-kind ancestors); comma-separated or repeated", choices=CRYPTOMATTE_KINDS, shape="many",
-            metavar="KINDS", scene=True),
+            metavar="KINDS"),
     Setting("cryptomatte_ranks", int, 6, "Cryptomatte id/coverage pairs per pixel", ge=1, le=16, metavar="N"),
     Setting("denoise", bool, False, "add an Open Image Denoise layer denoised.R/G/B (the beauty stays raw); needs "
             "pip install 'drt[denoise]'"),

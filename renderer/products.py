@@ -149,7 +149,7 @@ def _values(kind: str, r: dict, sums: dict, prep=None, var=None) -> np.ndarray:
     if kind == "id":
         ids_name, weights_name = id_tables.names("object")
         top = np.where(sums[weights_name][..., 0] > 0, sums[ids_name][..., 0], -1)
-        return hit_vars.id_values(hit_key(var), top, prep.flat or prep.scene)[..., None]
+        return hit_vars.id_values(hit_key(var), top, prep.scene)[..., None]
     if kind == "lpe":
         v = prep.lpe_vars.names.index(lpe_layer(var))
         return r["extra"][..., 3 * v:3 * v + 3]

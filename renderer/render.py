@@ -86,6 +86,8 @@ class PreparedScene:
     lpe_table: object | None = None
     hit_layout: hit_vars.HitLayout | None = None  # P and primvar vars among the further triples (after the LPEs')
     hit_index: tuple[np.ndarray, np.ndarray] | None = None  # instance -> mesh, mesh -> first global triangle
+    # the loaded scene's instance of each instance (-1: merged) and of each global triangle (``object_tables``)
+    objects: tuple[object, object] | None = None
 
     @property
     def lpe_count(self) -> int:
@@ -132,7 +134,8 @@ def _flatten(scene: Scene, key: bytes, reuse: PreparedScene | None, merge: bool 
     old = reuse.flat
     lights = [replace(lt, instance=was.instance, triangles=was.triangles) if lt.kind == LIGHT_MESH else lt
               for lt, was in zip(scene.lights, old.lights)]
-    return replace(scene, meshes=old.meshes, instances=old.instances, lights=lights)
+    return replace(scene, meshes=old.meshes, instances=old.instances, lights=lights,
+                   instance_sources=old.instance_sources)
 
 
 def _lpe_tables(flat: Scene, options: RenderOptions, device: str) -> tuple[object | None, object]:
@@ -143,9 +146,11 @@ def _lpe_tables(flat: Scene, options: RenderOptions, device: str) -> tuple[objec
     vars_ = render_vars(options.lpe, options.light_groups, flat.lights)
     if not vars_:
         return None, empty_table(device)
-    compiled = compile_vars(vars_, flat.lights)
-    return compiled, upload_table(compiled.packed, compiled.after_camera, compiled.light_label,
-                                  compiled.light_event, device)
+    try:
+        compiled = compile_vars(vars_, flat.lights)
+    except ValueError as e:
+        raise SettingsError(str(e)) from None
+    return compiled, upload_table(compiled, device)
 
 
 def prepare(scene: Scene, options: RenderOptions, device: str = "cpu",
@@ -167,10 +172,10 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu",
     dof = options.dof and not scene.render_settings.disable_depth_of_field
     warnings = list(scene.warnings)
     reuse = reuse if reuse is not None and reuse.device == device else None
-    # Cryptomatte and the vars of what a sample hit name each instance: still ones are not merged then (their
-    # frames differ in bits, not in sense)
-    merge = not (options.cryptomatte or options.hit_vars)
-    geometry_key = _fingerprint(_geometry_key(scene), merge)
+    # the vars of what a sample hit read each instance's primvars: still ones are not merged then (their frames
+    # differ in bits, not in sense); Cryptomatte finds merged instances from their triangles (``object_tables``)
+    merge = not hit_vars.primvar_names(options.hit_vars)
+    geometry_key = _fingerprint(_geometry_key(scene), merge)  # a frame merged is not reused unmerged
     flat = _flatten(scene, geometry_key, reuse, merge)
     if reuse is not None and reuse.geometry_key == geometry_key:
         geometry, stats = reuse.geometry, reuse.stats
@@ -198,6 +203,21 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu",
     return _with_hit_layout(prep)
 
 
+def object_tables(flat: Scene, geometry, device: str) -> tuple[object, object]:
+    """Which instance of the loaded scene each instance (-1: still ones merged into one mesh) and each global
+    triangle (for those merged: ``Mesh.source_instance``) is: the objects Cryptomatte and ids name."""
+    n = len(flat.instances)
+    inst_object = np.asarray(flat.instance_sources if flat.instance_sources is not None else range(n), np.int32)
+    offsets = geometry.mesh_tri_off.numpy()
+    tri_object = np.full(max(1, int(offsets[-1]) + len(flat.meshes[-1].triangles)) if flat.meshes else 1, -1,
+                         np.int32)
+    for m, mesh in enumerate(flat.meshes):
+        if mesh.source_instance is not None:
+            tri_object[offsets[m]:offsets[m] + len(mesh.source_instance)] = mesh.source_instance
+    return (wp.array(inst_object if n else np.full(1, -1, np.int32), dtype=wp.int32, device=device),
+            wp.array(tri_object, dtype=wp.int32, device=device))
+
+
 def _with_hit_layout(prep: PreparedScene) -> PreparedScene:
     """``prep`` with the layout of its P and primvar vars (their widths from the meshes' primvars)."""
     keys = tuple(k for k in prep.options.hit_vars if k not in hit_vars.ID_SOURCES)
@@ -206,7 +226,10 @@ def _with_hit_layout(prep: PreparedScene) -> PreparedScene:
                                            default=1) for name in hit_vars.primvar_names(keys)}
     plan = hit_vars.layout(keys, widths)
     index = (prep.geometry.inst_mesh.numpy(), prep.geometry.mesh_tri_off.numpy()) if keys else None
-    return replace(prep, hit_layout=plan, hit_index=index)
+    objs = prep.objects
+    if objs is None and coverage_kinds(prep.options):
+        objs = object_tables(flat, prep.geometry, prep.device)
+    return replace(prep, hit_layout=plan, hit_index=index, objects=objs)
 
 
 def with_options(prep: PreparedScene, options: RenderOptions) -> PreparedScene:
@@ -217,10 +240,9 @@ def with_options(prep: PreparedScene, options: RenderOptions) -> PreparedScene:
     that differ in nothing else."""
     old = prep.options
     def kept(o: RenderOptions) -> tuple:
-        return o.width, o.height, o.dof, bool(o.cryptomatte or o.hit_vars), hit_vars.primvar_names(o.hit_vars)
+        return o.width, o.height, o.dof, hit_vars.primvar_names(o.hit_vars)
     if kept(options) != kept(old):
-        raise ValueError("with_options keeps the resolution, depth of field, Cryptomatte and hit vars of the prepared "
-                         "scene")
+        raise ValueError("with_options keeps the resolution, depth of field and primvar vars of the prepared scene")
     options.validate()
     if options.denoise:
         denoise.require()
@@ -275,12 +297,14 @@ def render_tile(prep: PreparedScene, tile: Tile,
     plan = prep.hit_layout
     hit_triples = plan.triples if plan else 0  # ... and the vars of what each sample hit
     tables = coverage_kinds(opts)  # id tables: {kind: (ids, weights)} per (target, direction, slot)
-    records = bool(tables) or bool(plan and plan.keys)
-    buf = film.new_sample_buffer(sw * sh * max_wave, dev, extra=extra, lpe_vars=n_lpe, hits=records,
+    records = 2 if plan and plan.keys else int(bool(tables))
+    buf = film.new_sample_buffer(sw * sh * max_wave, dev, extra=extra, hits=records > 0,
                                  hit_triples=hit_triples)
     tables = {k: (wp.full(targets * directions * coverage.SLOTS, -1, dtype=wp.int32, device=dev),
                   wp.zeros(targets * directions * coverage.SLOTS, dtype=wp.float32, device=dev)) for k in tables}
-    sample_ids = wp.empty(sw * sh * max_wave if tables else 1, dtype=wp.int32, device=dev)
+    sample_ids = wp.empty(sw * sh * max_wave if tables else 1, dtype=wp.vec2i, device=dev)
+    none = (wp.empty(1, dtype=wp.int32, device=dev), wp.empty(1, dtype=wp.float32, device=dev))
+    kinds_mask = sum(1 << k for k in tables)
     acc = film.new_tile_accum(directions * targets, dev, aovs=bool(aov_sums), extra=extra, hit_triples=hit_triples)
 
     counters = wp.zeros(2, dtype=wp.int64, device=dev)  # rays traced, non-finite samples zeroed
@@ -292,7 +316,7 @@ def render_tile(prep: PreparedScene, tile: Tile,
     settings.time_filter = TIME_FILTERS[opts.time_filter]
     settings.frame_s = prep.scene.shutter.frame_s
     settings.seed = wp.uint32(opts.seed)
-    settings.record_hits = int(records)
+    settings.record_hits = records
     slot_of = np.full(sw * sh, -1, np.int32)
     # the tile's own pixels among the sample pixels (its samples-per-pixel count and progress)
     mine = np.zeros((sh, sw), bool)
@@ -331,12 +355,13 @@ def render_tile(prep: PreparedScene, tile: Tile,
             hit_vars.fill(plan, prep.flat or prep.scene, *prep.hit_index, buf.hit_inst.numpy()[:n],
                           buf.hit_tri.numpy()[:n], buf.hit_uv.numpy()[:n], buf.hit_p.numpy()[:n],
                           buf.hits.numpy()[:n * hit_triples].reshape(n, hit_triples, 3))
-        for kind, (ids, weights) in tables.items():
+        if tables:
             wp.launch(coverage.sample_ids_kernel, dim=pixels.size * wave, device=dev,
-                      inputs=[buf, prep.geometry.tri_material, kind, sample_ids])
+                      inputs=[buf, *prep.objects, prep.geometry.tri_material, sample_ids])
             wp.launch(coverage.coverage_gather_kernel, dim=sw * sh, device=dev,
-                      inputs=[buf, sample_ids, ids, weights, wave, sx0, sy0, sw, slot_array, ex0, ey0, ex1 - ex0,
-                              ey1 - ey0, margin])
+                      inputs=[buf, sample_ids, *tables.get(coverage.KIND_OBJECT, none),
+                              *tables.get(coverage.KIND_MATERIAL, none), kinds_mask, wave, sx0, sy0, sw, slot_array,
+                              ex0, ey0, ex1 - ex0, ey1 - ey0, margin])
         for src, dst, count in ((buf.extra, acc.extra, extra), (buf.hits, acc.hits, hit_triples)):
             if count:
                 wp.launch(film.gather_extra_kernel, dim=sw * sh, device=dev,
@@ -484,8 +509,7 @@ def cryptomatte_channels(prep: PreparedScene, sums: dict[str, np.ndarray],
     from renderer.film import cryptomatte
 
     channels, attributes = {}, {}
-    scene = prep.flat or prep.scene
-    names = cryptomatte.scene_names(scene)
+    names = cryptomatte.scene_names(prep.scene)  # ids are the loaded scene's instances (``object_tables``)
     for kind in dict.fromkeys(prep.options.cryptomatte if kinds is None else kinds):
         if kind not in prep.options.cryptomatte:
             continue
@@ -493,8 +517,14 @@ def cryptomatte_channels(prep: PreparedScene, sums: dict[str, np.ndarray],
         ids_name, weights_name = id_tables.names(table)
         if ids_name not in sums:
             continue
-        c, a = cryptomatte.encode(kind, names[kind], sums[ids_name], sums[weights_name], sums["weight"],
-                                  ranks=prep.options.cryptomatte_ranks)
+        ids, weights, kind_names = sums[ids_name], sums[weights_name], names[kind]
+        if kind == "asset":  # objects of one asset merge first (the tables are sorted per object)
+            kind_names = list(dict.fromkeys(kind_names))
+            index = {n: i for i, n in enumerate(kind_names)}
+            ids, weights = id_tables.remap(ids, weights, np.array([index[n] for n in names[kind]], np.int32))
+        ranks = prep.options.cryptomatte_ranks
+        # the tables hold each id once, sorted by weight: ranked already
+        c, a = cryptomatte.encode_ranked(kind, kind_names, ids, weights, sums["weight"], ranks=ranks)
         channels.update(c)
         attributes.update(a)
     return channels, attributes

@@ -102,6 +102,7 @@ def reorder_mesh(mesh: Mesh, order: np.ndarray, shift: np.ndarray) -> Mesh:
     return replace(mesh, triangles=corners(mesh.triangles), material_ids=per_triangle(mesh.material_ids),
                    normals=corners(mesh.normals), uvs=corners(mesh.uvs), colors=corners(mesh.colors),
                    solid=per_triangle(mesh.solid), tangents=per_triangle(mesh.tangents),
+                   source_instance=per_triangle(mesh.source_instance),
                    primvars={k: v if v.ndim == 1 else corners(v) for k, v in mesh.primvars.items()})
 
 

@@ -20,31 +20,63 @@ from renderer.film.film import SampleBuffer
 wp.set_module_options({"enable_backward": False})
 
 SLOTS = 8  # ids per (target pixel, direction) table
+vec9i = wp.types.vector(length=9, dtype=wp.int32)  # one entry per direction (``film.filter_margin`` is at most 1)
 KIND_OBJECT = 0
 KIND_MATERIAL = 1
 
 
 @wp.kernel
-def sample_ids_kernel(buf: SampleBuffer, tri_material: wp.array(dtype=wp.int32), kind: int,
-                      out: wp.array(dtype=wp.int32)):
-    """Each sample's id: the instance (a render with coverage keeps every instance its own: ``render.prepare``
-    does not merge still ones) or the material of the surface it saw first; -1 where it saw none."""
+def sample_ids_kernel(buf: SampleBuffer, inst_object: wp.array(dtype=wp.int32),
+                      tri_object: wp.array(dtype=wp.int32), tri_material: wp.array(dtype=wp.int32),
+                      out: wp.array(dtype=wp.vec2i)):
+    """Each sample's ids: the object (the loaded scene's instance: its own, or for merged still geometry its
+    triangle's, ``render.object_tables``) and the material of the surface it saw first; -1 where it saw none."""
     i = wp.tid()
     inst = buf.hit_inst[i]
-    found = int(-1)
+    obj = int(-1)
+    mat = int(-1)
     if inst >= 0:
-        found = inst
-        if kind == KIND_MATERIAL:
-            found = tri_material[buf.hit_tri[i]]
-    out[i] = found
+        tri = buf.hit_tri[i]
+        mat = tri_material[tri]
+        obj = inst_object[inst]
+        if obj < 0:
+            obj = tri_object[tri]
+    out[i] = wp.vec2i(obj, mat)
+
+
+@wp.func
+def table_add(ids: wp.array(dtype=wp.int32), weights: wp.array(dtype=wp.float32), k: int, sid: int, w: float,
+              last_id: int, last_at: int):
+    """w added to id ``sid`` in the table at k (the slot holding it, else the first empty one: slots fill in order;
+    dropped when all are taken). ``last_id``/``last_at``: the previous sample's id and slot, which neighbouring
+    samples mostly share; returns them for the next."""
+    at = int(last_at)
+    if sid != last_id:
+        found = int(-1)
+        q = int(0)
+        while q < SLOTS:
+            e = ids[k + q]
+            if e == sid or e < 0:
+                found = q
+                break
+            q += 1
+        if found >= 0:
+            ids[k + found] = sid
+        at = found
+    if at >= 0:
+        weights[k + at] = weights[k + at] + w
+    return sid, at
 
 
 @wp.kernel
 def coverage_gather_kernel(
     buf: SampleBuffer,
-    sample_id: wp.array(dtype=wp.int32),
-    ids: wp.array(dtype=wp.int32),  # (target pixel, direction, slot), -1: empty
-    weights: wp.array(dtype=wp.float32),
+    sample_id: wp.array(dtype=wp.vec2i),  # per sample: object, material (``sample_ids_kernel``)
+    object_ids: wp.array(dtype=wp.int32),  # (target pixel, direction, slot), -1: empty
+    object_weights: wp.array(dtype=wp.float32),
+    material_ids: wp.array(dtype=wp.int32),
+    material_weights: wp.array(dtype=wp.float32),
+    kinds: int,  # bit KIND_OBJECT, bit KIND_MATERIAL: the tables kept
     wave: int,
     tile_x0: int,
     tile_y0: int,
@@ -56,7 +88,8 @@ def coverage_gather_kernel(
     ext_h: int,
     margin: int,
 ):
-    """``film.gather_kernel``'s loops for the id tables: one source pixel per thread, its samples in order."""
+    """``film.gather_kernel``'s loops for the id tables: one source pixel per thread, its samples in order, both
+    tables at once (one pass over the weights)."""
     tid = wp.tid()
     slot = slot_of[tid]
     if slot < 0:
@@ -65,22 +98,41 @@ def coverage_gather_kernel(
     sy = tile_y0 + tid // tile_w
     side = 2 * margin + 1
     base = slot * wave
-    for oy in range(-margin, margin + 1):
+    objects = (kinds & (1 << KIND_OBJECT)) != 0
+    materials = (kinds & (1 << KIND_MATERIAL)) != 0
+    # the table of each direction's target (-1: outside the region), and per table the id and slot of the sample
+    # before: one pass over the samples, each read once
+    table = vec9i()
+    last_o = vec9i()
+    at_o = vec9i()
+    last_m = vec9i()
+    at_m = vec9i()
+    for d in range(side * side):
+        oy = d // side - margin
+        ox = d % side - margin
         ty = sy - oy - ext_y0
-        for ox in range(-margin, margin + 1):
-            tx = sx - ox - ext_x0
-            if ty >= 0 and ty < ext_h and tx >= 0 and tx < ext_w:
-                k = ((ty * ext_w + tx) * side * side + (oy + margin) * side + ox + margin) * SLOTS
-                for j in range(wave):
-                    w = buf.wx[base + j][1 - ox] * buf.wy[base + j][1 - oy]
-                    sid = sample_id[base + j]
-                    if w != 0.0 and sid >= 0:
-                        at = int(-1)
-                        for q in range(SLOTS):
-                            if at < 0:
-                                e = ids[k + q]
-                                if e == sid or e < 0:
-                                    at = q
-                        if at >= 0:
-                            ids[k + at] = sid
-                            weights[k + at] = weights[k + at] + w
+        tx = sx - ox - ext_x0
+        table[d] = -1
+        if ty >= 0 and ty < ext_h and tx >= 0 and tx < ext_w:
+            table[d] = ((ty * ext_w + tx) * side * side + d) * SLOTS
+        last_o[d] = -1
+        at_o[d] = -1
+        last_m[d] = -1
+        at_m[d] = -1
+    for j in range(wave):
+        sid = sample_id[base + j]
+        if sid[0] >= 0:
+            wx = buf.wx[base + j]
+            wy = buf.wy[base + j]
+            for d in range(side * side):
+                w = wx[1 - (d % side - margin)] * wy[1 - (d // side - margin)]
+                k = table[d]
+                if w != 0.0 and k >= 0:
+                    if objects:
+                        lo, ao = table_add(object_ids, object_weights, k, sid[0], w, last_o[d], at_o[d])
+                        last_o[d] = lo
+                        at_o[d] = ao
+                    if materials:
+                        lm, am = table_add(material_ids, material_weights, k, sid[1], w, last_m[d], at_m[d])
+                        last_m[d] = lm
+                        at_m[d] = am

@@ -128,10 +128,9 @@ class SampleBuffer:
     depth: wp.array(dtype=wp.float32)  # camera depth of the first hit (0 when nothing was hit)
     normal: wp.array(dtype=wp.vec3)  # world shading normal of the first hit
     albedo: wp.array(dtype=wp.vec3)
-    # per sample, ``extra`` RGB triples of further channels filtered as the colour is (the LPE vars' sums; one
-    # element when there are none), and the LPE vars' automaton states (``renderer.lpe.kernel``)
+    # per sample, ``extra`` RGB triples of further channels filtered as the colour is (the LPE vars' sums,
+    # ``renderer.lpe.kernel``; one element when there are none)
     extra: wp.array(dtype=wp.vec3)
-    lpe_state: wp.array(dtype=wp.int32)
     hits: wp.array(dtype=wp.vec3)  # per sample, the RGB triples of the vars of what it hit (``film.hit_vars``)
     # the instance, global triangle, barycentrics (b1, b2) and world point each sample saw first (instance -1:
     # none), when a render records them (Cryptomatte, primvar and id vars)
@@ -159,16 +158,14 @@ class TileAccum:
     hits: wp.array(dtype=wp.vec3)  # ... of each hit var's triple
 
 
-def new_sample_buffer(n: int, device: str, extra: int = 0, lpe_vars: int = 0, hits: bool = False,
+def new_sample_buffer(n: int, device: str, extra: int = 0, hits: bool = False,
                       hit_triples: int = 0) -> SampleBuffer:
-    """Room for n samples with ``extra`` further RGB triples, ``hit_triples`` of hit vars, hit records (``hits``)
-    and ``lpe_vars`` automaton states each, not cleared: a
-    wave writes every sample it later reads (the path tracing kernel its values, ``axis_weights_kernel`` its
-    weights) before the gather reads them."""
+    """Room for n samples with ``extra`` further RGB triples, ``hit_triples`` of hit vars and hit records
+    (``hits``) each, not cleared: a wave writes every sample it later reads (the path tracing kernel its values,
+    ``axis_weights_kernel`` its weights) before the gather reads them."""
     b = SampleBuffer()
     b.extra = wp.empty(max(1, n * extra), dtype=wp.vec3, device=device)
     b.hits = wp.empty(max(1, n * hit_triples), dtype=wp.vec3, device=device)
-    b.lpe_state = wp.empty(max(1, n * lpe_vars), dtype=wp.int32, device=device)
     b.hit_inst = wp.empty(n if hits else 1, dtype=wp.int32, device=device)
     b.hit_tri = wp.empty(n if hits else 1, dtype=wp.int32, device=device)
     b.hit_uv = wp.empty(n if hits else 1, dtype=wp.vec2, device=device)

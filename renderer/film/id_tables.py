@@ -73,16 +73,18 @@ def is_table(name: str) -> bool:
 
 def assemble_band(band_ids: list[np.ndarray], band_weights: list[np.ndarray], where: list[np.ndarray],
                   n_pixels: int) -> tuple[np.ndarray, np.ndarray]:
-    """The merged tables of the band pixels from every tile's (D, band pixels, SLOTS) partial tables: per pixel, the
-    directions in order, each tile's entries of a direction in tile order (one tile owns each direction's samples,
-    the others hold empty tables there)."""
+    """The merged tables of the band pixels from every tile's (D, band pixels, SLOTS) partial tables: per pixel, its
+    directions in order, each from the one tile that owns that direction's samples (the others hold empty tables
+    there, which are skipped)."""
     D, _, S = band_ids[0].shape
-    T = len(band_ids)
-    ids = np.full((n_pixels, D, T * S), -1, np.int32)
-    w = np.zeros((n_pixels, D, T * S), np.float32)
-    for t, (bi, bw, at) in enumerate(zip(band_ids, band_weights, where)):
-        ids[at, :, t * S:(t + 1) * S] = np.moveaxis(bi, 0, 1)
-        w[at, :, t * S:(t + 1) * S] = np.moveaxis(bw, 0, 1)
+    ids = np.full((n_pixels, D, S), -1, np.int32)
+    w = np.zeros((n_pixels, D, S), np.float32)
+    for bi, bw, at in zip(band_ids, band_weights, where):
+        bi, bw = np.moveaxis(bi, 0, 1), np.moveaxis(bw, 0, 1)  # (band pixels, D, S)
+        owned = bi[..., 0] >= 0  # a table's first slot fills first
+        rows, dirs = np.nonzero(owned)
+        ids[at[rows], dirs] = bi[rows, dirs]
+        w[at[rows], dirs] = bw[rows, dirs]
     return merge(ids.reshape(n_pixels, -1), w.reshape(n_pixels, -1))
 
 

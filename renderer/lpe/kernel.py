@@ -1,10 +1,13 @@
-"""Light path expressions in the path tracing kernel: every var's automaton stepped as the path grows.
+"""Light path expressions in the path tracing kernel: the vars' automata stepped as the path grows.
 
-A render with LPE vars uploads their automata as one flat table (``renderer.lpe.automaton.compile_set``) and keeps,
-per sample, one state per var (``SampleBuffer.lpe_state``) and one RGB sum per var (``SampleBuffer.extra``). The integrator steps every state by the symbol of each scattering event (``lpe_event``) and, for
-each contribution it adds to the beauty, adds the same value to every var whose automaton accepts the path closed
-by that contribution's last event(s) (``lpe_light``, ``lpe_light_after``). No strings, no per-path allocation: a
-table lookup per var and event. With no var (``count`` 0) the integrator calls none of this.
+A render with LPE vars uploads the product of their automata (``renderer.lpe.vars.compile_vars``: one state stands
+for every var's, and a bit mask per state says which vars accept) and keeps, per sample, that one state (a local
+of the kernel) and one RGB sum per var (``SampleBuffer.extra``). The integrator steps the state by the
+symbol of each scattering event (``lpe_event``) and, for each contribution it adds to the beauty, adds the same
+value to every var whose automaton accepts the path closed by that contribution's last event(s) (``lpe_light``,
+``lpe_light_after``). No strings, no per-path allocation: one table lookup per event whatever the number of vars
+(a lookup per var and event cost eight vars 12 % of a cornell frame). With no var (``count`` 0) the integrator
+calls none of this.
 
 Events are ``renderer.lpe.events`` symbols: (type, scattering, label). Lights carry their light group's label, so
 ``C.*<L.'key'>`` is the light group ``key``; emissive geometry (an ``O`` event) its instance's label.
@@ -37,9 +40,9 @@ class LpeTable:
     count: int  # vars; 0: no LPE work at all
     n_labels: int  # labels + 1 (label 0: none)
     n_symbols: int  # 24 * n_labels
-    table: wp.array(dtype=wp.int32)  # next global state: table[state * n_symbols + symbol]
-    accepting: wp.array(dtype=wp.int32)  # per global state, 1: a path ending here belongs to its var
-    start: wp.array(dtype=wp.int32)  # per var, its state after the camera event C
+    table: wp.array(dtype=wp.int32)  # the vars' product automaton: next state = table[state * n_symbols + symbol]
+    accepting: wp.array(dtype=wp.int64)  # per state, bit v: a path ending here belongs to var v
+    start: int  # the state after the camera event C
     light_label: wp.array(dtype=wp.int32)  # per light, the label (light group) of its events
     light_event: wp.array(dtype=wp.int32)  # per light, its event type: L, or O for emissive geometry
 
@@ -50,41 +53,41 @@ def lpe_symbol(lpe: LpeTable, kind: int, scatter: int, label: int):
 
 
 @wp.func
-def lpe_begin(lpe: LpeTable, state: wp.array(dtype=wp.int32), extra: wp.array(dtype=wp.vec3), sample: int):
-    """The sample's states after the camera event, its sums zeroed."""
+def lpe_begin(lpe: LpeTable, extra: wp.array(dtype=wp.vec3), sample: int):
+    """The sample's sums zeroed; its state after the camera event."""
     for v in range(lpe.count):
-        state[sample * lpe.count + v] = lpe.start[v]
         extra[sample * lpe.count + v] = wp.vec3(0.0)
+    return lpe.start
 
 
 @wp.func
-def lpe_event(lpe: LpeTable, state: wp.array(dtype=wp.int32), sample: int, symbol: int):
-    """Every var's state stepped by one scattering event of the path."""
-    for v in range(lpe.count):
-        k = sample * lpe.count + v
-        state[k] = lpe.table[state[k] * lpe.n_symbols + symbol]
+def lpe_event(lpe: LpeTable, state: int, symbol: int):
+    """The state stepped by one scattering event of the path (every var's at once)."""
+    return lpe.table[state * lpe.n_symbols + symbol]
 
 
 @wp.func
-def lpe_light(lpe: LpeTable, state: wp.array(dtype=wp.int32), extra: wp.array(dtype=wp.vec3), sample: int,
-              symbol: int, c: wp.vec3):
+def lpe_add(lpe: LpeTable, extra: wp.array(dtype=wp.vec3), sample: int, accepted: wp.int64, c: wp.vec3):
+    """``c`` added to the sum of every var whose bit is set in ``accepted``."""
+    if accepted != wp.int64(0):
+        for v in range(lpe.count):
+            if ((accepted >> wp.int64(v)) & wp.int64(1)) != wp.int64(0):
+                k = sample * lpe.count + v
+                extra[k] = extra[k] + c
+
+
+@wp.func
+def lpe_light(lpe: LpeTable, state: int, extra: wp.array(dtype=wp.vec3), sample: int, symbol: int, c: wp.vec3):
     """``c`` added to every var that accepts the path closed by the emission event ``symbol``."""
-    for v in range(lpe.count):
-        k = sample * lpe.count + v
-        s = lpe.table[state[k] * lpe.n_symbols + symbol]
-        if lpe.accepting[s] != 0:
-            extra[k] = extra[k] + c
+    lpe_add(lpe, extra, sample, lpe.accepting[lpe.table[state * lpe.n_symbols + symbol]], c)
 
 
 @wp.func
-def lpe_light_after(lpe: LpeTable, state: wp.array(dtype=wp.int32), extra: wp.array(dtype=wp.vec3),
-                    sample: int, vertex: int, symbol: int, c: wp.vec3):
+def lpe_light_after(lpe: LpeTable, state: int, extra: wp.array(dtype=wp.vec3), sample: int, vertex: int,
+                    symbol: int, c: wp.vec3):
     """``lpe_light`` for light reached through one more vertex (a shadow ray's: its event ``vertex`` first)."""
-    for v in range(lpe.count):
-        k = sample * lpe.count + v
-        s = lpe.table[lpe.table[state[k] * lpe.n_symbols + vertex] * lpe.n_symbols + symbol]
-        if lpe.accepting[s] != 0:
-            extra[k] = extra[k] + c
+    s = lpe.table[lpe.table[state * lpe.n_symbols + vertex] * lpe.n_symbols + symbol]
+    lpe_add(lpe, extra, sample, lpe.accepting[s], c)
 
 
 @wp.func
@@ -143,30 +146,30 @@ def clamp_factor(c: wp.vec3, limit: float):
 def empty_table(device: str) -> LpeTable:
     """No vars: the integrator skips every LPE step."""
     t = LpeTable()
-    t.count, t.n_labels, t.n_symbols = 0, 1, 24
+    t.count, t.n_labels, t.n_symbols, t.start = 0, 1, 24, 0
     one = wp.zeros(1, dtype=wp.int32, device=device)
-    t.table = t.accepting = t.start = t.light_label = t.light_event = one
+    t.table = t.light_label = t.light_event = one
+    t.accepting = wp.zeros(1, dtype=wp.int64, device=device)
     return t
 
 
-def upload_table(packed, after_camera: np.ndarray, light_label: np.ndarray, light_event: np.ndarray,
-                 device: str) -> LpeTable:
-    """``packed`` (``renderer.lpe.automaton.compile_set``'s numpy table), each var's state after the camera event,
-    and each light's label (index into the labels, 0: none) and event type, for the kernel."""
+def upload_table(compiled, device: str) -> LpeTable:
+    """A render's compiled vars (``renderer.lpe.vars.CompiledVars``: their product automaton and each light's label
+    and event type), for the kernel."""
     t = LpeTable()
-    t.count = len(packed.start)
-    t.n_labels = len(packed.labels) + 1
-    t.n_symbols = int(packed.n_symbols)
+    t.count = len(compiled.names)
+    t.n_labels = int(compiled.n_labels)
+    t.n_symbols = int(compiled.n_symbols)
+    t.start = int(compiled.start)
 
-    def ints(a):
-        a = np.ascontiguousarray(np.asarray(a, np.int32).ravel())
-        return wp.array(a if a.size else np.zeros(1, np.int32), dtype=wp.int32, device=device)
+    def ints(a, dtype=wp.int32, np_dtype=np.int32):
+        a = np.ascontiguousarray(np.asarray(a, np_dtype).ravel())
+        return wp.array(a if a.size else np.zeros(1, np_dtype), dtype=dtype, device=device)
 
-    t.table = ints(packed.next_state)
-    t.accepting = ints(np.asarray(packed.accepting, np.int32))
-    t.start = ints(after_camera)
-    t.light_label = ints(light_label)
-    t.light_event = ints(light_event)
+    t.table = ints(compiled.table)
+    t.accepting = ints(compiled.accepting, wp.int64, np.int64)
+    t.light_label = ints(compiled.light_label)
+    t.light_event = ints(compiled.light_event)
     return t
 
 

@@ -57,15 +57,55 @@ def render_vars(lpe: tuple[str, ...], light_groups: bool, lights) -> list[tuple[
     return list(out.items())
 
 
+MAX_PRODUCT_STATES = 1 << 16  # states of the vars' product automaton (typical sets need tens)
+
+
 @dataclass
 class CompiledVars:
-    """The vars' automata as numpy arrays (``renderer.lpe.kernel.upload_table`` uploads them)."""
+    """The vars' product automaton as numpy arrays (``renderer.lpe.kernel.upload_table`` uploads them): one state
+    stands for every var's state at once, so the kernel takes one step per event whatever the number of vars."""
 
-    names: list[str]  # layers, in var order
-    packed: object  # ``renderer.lpe.automaton.compile_set``'s table
-    after_camera: np.ndarray  # (vars,) int32: each var's state once the path's camera event is taken
+    names: list[str]  # layers, in var order (bit v of ``accepting``)
+    n_labels: int
+    n_symbols: int
+    table: np.ndarray  # (states * n_symbols,) int32: next state
+    accepting: np.ndarray  # (states,) int64: bit v set where var v accepts
+    start: int  # the state once the path's camera event is taken
     light_label: np.ndarray  # (lights,) int32: label index of each light's group, 0: none
     light_event: np.ndarray  # (lights,) int32: events.L, or events.O for emissive geometry
+
+
+def product(packed, after_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The reachable product of the vars' automata (``compile_set``'s table) from their states ``after_camera``:
+    (table, accepting masks); state 0 is the start. LpeError-free: a ValueError if it would pass
+    ``MAX_PRODUCT_STATES``."""
+    ns = packed.n_symbols
+    table = np.asarray(packed.next_state, np.int64)
+    accepting = np.asarray(packed.accepting, bool)
+    start = tuple(int(s) for s in after_camera)
+    index = {start: 0}
+    order = [start]
+    rows = []
+    symbols = np.arange(ns)
+    at = 0
+    while at < len(order):
+        states = np.asarray(order[at], np.int64)
+        nxt = table[states[:, None] * ns + symbols[None, :]]  # (vars, symbols)
+        row = np.empty(ns, np.int32)
+        for sym, key in enumerate(map(tuple, nxt.T.tolist())):
+            found = index.get(key)
+            if found is None:
+                found = index[key] = len(order)
+                order.append(key)
+                if len(order) > MAX_PRODUCT_STATES:
+                    raise ValueError(f"these {len(start)} light path expressions combine into more than "
+                                     f"{MAX_PRODUCT_STATES} states: render them in fewer layers at a time")
+            row[sym] = found
+        rows.append(row)
+        at += 1
+    bits = np.int64(1) << np.arange(len(start), dtype=np.int64)
+    masks = np.array([int(np.sum(bits[accepting[list(key)]])) for key in order], np.int64)
+    return np.concatenate(rows).astype(np.int32), masks
 
 
 def compile_vars(vars_: list[tuple[str, str]], lights) -> CompiledVars:
@@ -77,8 +117,9 @@ def compile_vars(vars_: list[tuple[str, str]], lights) -> CompiledVars:
     index = {g: i + 1 for i, g in enumerate(labels)}
     c = events.symbol(events.C, events.NONE, 0, n_labels)
     starts = np.asarray(packed.start, np.int64)
-    table = np.asarray(packed.next_state).ravel()
-    after = table[starts * packed.n_symbols + c].astype(np.int32)
+    after = np.asarray(packed.next_state)[starts * packed.n_symbols + c]
+    table, accepting = product(packed, after)
     light_label = np.array([index.get(lt.group, 0) for lt in lights], np.int32)
     light_event = np.array([events.O if lt.emissive_object else events.L for lt in lights], np.int32)
-    return CompiledVars([n for n, _ in vars_], packed, after, light_label, light_event)
+    return CompiledVars([n for n, _ in vars_], n_labels, packed.n_symbols, table, accepting, 0, light_label,
+                        light_event)

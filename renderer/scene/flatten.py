@@ -96,6 +96,8 @@ def flatten_still_instances(scene: Scene) -> Scene:
         normals=np.concatenate(normals) if has_normals else None,
         uvs=np.concatenate(uvs) if has_uvs else None,
         solid=np.concatenate(solid).astype(bool),
+        # which instance each triangle was (Cryptomatte and ids name the instances merged here)
+        source_instance=np.concatenate([np.full(b - a, idx, np.int32) for idx, (a, b) in ranges.items()]),
     )
     meshes = list(scene.meshes) + [merged]
     instances = [Instance(len(meshes) - 1, MotionTransform.static(np.eye(4)), name="<merged>")]
@@ -114,4 +116,5 @@ def flatten_still_instances(scene: Scene) -> Scene:
     used = sorted({i.mesh for i in instances})
     remap = {old: new for new, old in enumerate(used)}
     instances = [replace(i, mesh=remap[i.mesh]) for i in instances]
-    return replace(scene, meshes=[meshes[i] for i in used], instances=instances, lights=lights)
+    return replace(scene, meshes=[meshes[i] for i in used], instances=instances, lights=lights,
+                   instance_sources=tuple([-1] + keep))

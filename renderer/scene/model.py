@@ -92,6 +92,9 @@ class Mesh:
     # primvars a render asked for by name (``film.hit_vars``): per-corner (T, 3, C) float32 on these triangles,
     # or (C,) for a constant one
     primvars: dict[str, np.ndarray] = field(default_factory=dict)
+    # (T,) int32: the instance of the loaded scene each triangle comes from, for a mesh merged of several
+    # (``scene.flatten``); None: the mesh's own instances
+    source_instance: np.ndarray | None = None
 
     @property
     def deforming(self) -> bool:
@@ -454,6 +457,9 @@ class Scene:
     colors: object | None = None
     # CSG groups: the operation of each ("union", "intersection", "difference"); members name it on Instance
     csg_operations: list[str] = field(default_factory=list)
+    # after merging still instances (``scene.flatten``): each instance's index in the loaded scene, -1 for the
+    # merged one (its triangles say: ``Mesh.source_instance``); None: the loaded scene's instances themselves
+    instance_sources: tuple[int, ...] | None = None
     warnings: list[str] = field(default_factory=list)
     source: str = ""  # file it came from, for messages
 
