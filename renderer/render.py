@@ -200,7 +200,7 @@ def prepare(scene: Scene, options: RenderOptions, device: str = "cpu",
                          light_count=light_count, camera=cam, stats=stats, device=device, warnings=warnings,
                          media=media, geometry_key=geometry_key, flat=flat, materials_key=materials_key,
                          lpe_vars=lpe_vars, lpe_table=lpe)
-    return _with_hit_layout(prep)
+    return _with_record_tables(prep)
 
 
 def object_tables(flat: Scene, geometry, device: str) -> tuple[object, object]:
@@ -218,8 +218,9 @@ def object_tables(flat: Scene, geometry, device: str) -> tuple[object, object]:
             wp.array(tri_object, dtype=wp.int32, device=device))
 
 
-def _with_hit_layout(prep: PreparedScene) -> PreparedScene:
-    """``prep`` with the layout of its P and primvar vars (their widths from the meshes' primvars)."""
+def _with_record_tables(prep: PreparedScene) -> PreparedScene:
+    """``prep`` with what reading its first-hit records needs: the layout of its P and primvar vars (their widths
+    from the meshes' primvars) and, for Cryptomatte and ids, its ``object_tables``."""
     keys = tuple(k for k in prep.options.hit_vars if k not in hit_vars.ID_SOURCES)
     flat = prep.flat or prep.scene
     widths = {hit_vars.PRIMVAR + name: max((m.primvars[name].shape[-1] for m in flat.meshes if name in m.primvars),
@@ -249,7 +250,7 @@ def with_options(prep: PreparedScene, options: RenderOptions) -> PreparedScene:
     lpe_vars, lpe = prep.lpe_vars, prep.lpe_table
     if (options.lpe, options.light_groups) != (old.lpe, old.light_groups):
         lpe_vars, lpe = _lpe_tables(prep.flat or prep.scene, options, prep.device)
-    return _with_hit_layout(replace(prep, options=options, lpe_vars=lpe_vars, lpe_table=lpe))
+    return _with_record_tables(replace(prep, options=options, lpe_vars=lpe_vars, lpe_table=lpe))
 
 
 def render_tile(prep: PreparedScene, tile: Tile,

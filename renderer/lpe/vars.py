@@ -77,8 +77,7 @@ class CompiledVars:
 
 def product(packed, after_camera: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The reachable product of the vars' automata (``compile_set``'s table) from their states ``after_camera``:
-    (table, accepting masks); state 0 is the start. LpeError-free: a ValueError if it would pass
-    ``MAX_PRODUCT_STATES``."""
+    (table, accepting masks); state 0 is the start. A ValueError if it would pass ``MAX_PRODUCT_STATES``."""
     ns = packed.n_symbols
     table = np.asarray(packed.next_state, np.int64)
     accepting = np.asarray(packed.accepting, bool)
