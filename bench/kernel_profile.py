@@ -69,16 +69,18 @@ def code_bytes(obj: pathlib.Path) -> bytes:
     return b"".join(b[h[4]:h[4] + h[5]] for h in heads if h[2] & 4 and h[1] != 8)  # SHF_EXECINSTR, not NOBITS
 
 
-def load_profiled_integrator(cache: pathlib.Path, native: bool):
-    """Initialise Warp on our own cache, load the integrator with line tables; (its exec, kernel, production
-    object of the same source and flags or None)."""
+def load_profiled_integrator(cache: pathlib.Path, native: bool, layers: bool = False):
+    """Initialise Warp on our own cache, load the integrator (``layers``: its variant with compositing layers,
+    ``renderer.integrator_layers``) with line tables; (its exec, kernel, production object of the same source and
+    flags or None)."""
     import warp as wp
     wp.config.kernel_cache_dir = str(cache)
     from renderer.device import init_warp
     init_warp()
-    from renderer import integrator, kernel_cache
+    from renderer import integrator, integrator_layers, kernel_cache
     from renderer.sample_profile import compiling_in
-    mod = wp.get_module(integrator.__name__)
+    kernel = integrator_layers.trace_wave_layers_kernel if layers else integrator.trace_wave_kernel
+    mod = kernel.module
     # --native: Warp's default flags (config.cpu_compiler_flags: -march=native, its inlining thresholds) and the
     # sample profile, as ``drt warmup`` builds it; else the shipped portable build's
     flags = kernel_cache._native_flags(mod) if native else kernel_cache._portable_flags(mod)
@@ -97,7 +99,7 @@ def load_profiled_integrator(cache: pathlib.Path, native: bool):
         wp.load_module(mod, device="cpu")
     kernel_cache._chosen[mod.name] = "profiled"  # so that prepare()'s load_kernels() keeps this build
     print(f"# integrator loaded in {time.perf_counter() - t0:.1f} s, flags: {flags} {DEBUG_FLAGS}", file=sys.stderr)
-    return next(e for (ctx, _), e in mod.execs.items() if ctx is None), integrator.trace_wave_kernel, prod
+    return next(e for (ctx, _), e in mod.execs.items() if ctx is None), kernel, prod
 
 
 class Perf:
@@ -144,15 +146,16 @@ class Perf:
                 re.finditer(r"^\s*([0-9a-f]+)\s+(.*?)\s+\((.*)\)\s*$", out, re.M)]
 
 
-def render(args, kernel, perf: Perf) -> tuple[float, int]:
-    """Render frames on one thread until the kernel has run ``args.seconds``, sampled during its launches."""
+def render(args, kernel, perf: Perf, **options) -> tuple[float, int]:
+    """Render frames on one thread until the kernel has run ``args.seconds``, sampled during its launches;
+    ``options`` are further ``RenderOptions`` fields."""
     import warp as wp
     from renderer.options import RenderOptions
     from renderer.render import prepare, render_frame
     from renderer.usd.importer import load_scene
     path = pathlib.Path(args.scene) if ".usd" in args.scene else SCENES / f"{args.scene}.usda"
     prep = prepare(load_scene(path, motion_blur=not args.no_motion_blur),
-                   RenderOptions(width=args.width, height=args.height, spp=args.spp))
+                   RenderOptions(width=args.width, height=args.height, spp=args.spp, **options))
     launch, spent, frames = wp.launch, [0.0], 0
 
     def sampled(k, *a, **kw):

@@ -1,11 +1,12 @@
 #!/usr/bin/env python3
 """Write the integrator's sample profile (``renderer/profiles``) from perf samples of the bench scenes.
 
-    python bench/sample_profile.py [--scenes cornell,dof,motion,gloss,heavy] [--seconds 10] [-o PATH]
+    python bench/sample_profile.py [--scenes cornell,dof,motion,gloss,heavy] [--seconds 10] [-o DIRECTORY]
 
-Then ``drt warmup --prebuilt`` compiles the shipped kernels with it (``renderer.sample_profile``). Run it again
-after large changes to kernel code: the stored profile keeps guiding the functions a change left alone, and
-none of what is new.
+Two profiles: the plain kernel's (``renderer.integrator``) and the one of its variant with compositing layers
+(``renderer.integrator_layers``, sampled rendering eight LPEs and Cryptomatte). Then ``drt warmup --prebuilt``
+compiles the shipped kernels with them (``renderer.sample_profile``). Run it again after large changes to kernel
+code: a stored profile keeps guiding the functions a change left alone, and none of what is new.
 
 How: as ``bench/kernel_profile.py`` (whose machinery this reuses), the production build of the integrator is
 compiled with line tables, each scene is rendered on one thread while ``perf`` samples the kernel's launches,
@@ -32,6 +33,13 @@ import kernel_profile as kp
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+
+# the layers the kernel variant with LPE vars and first-hit records is profiled with: bench/aovs.py's eight LPEs
+# and Cryptomatte
+LAYERS = {"lpe": ("emit=C[LO]", "diffuse=C<RD>[LO]", "diffuse_indirect=C<RD>.+[LO]", "glossy=C<RG>.*[LO]",
+                  "specular=C<RS>.*[LO]", "transmission=C<T.>.*[LO]", "volume=CV.*[LO]", "all=C.*[LO]"),
+          "cryptomatte": ("object", "material", "asset")}
 
 
 def function_lines(cpp: pathlib.Path) -> dict[str, int]:
@@ -120,16 +128,9 @@ def profile_text(roots: dict) -> str:
     return "\n".join(out) + "\n"
 
 
-def main() -> None:
-    from renderer.sample_profile import PROFILES
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scenes", default="cornell,dof,motion,gloss,heavy")
-    ap.add_argument("--seconds", type=float, default=10.0, help="kernel time sampled per scene")
-    ap.add_argument("-o", "--output", default=str(PROFILES / "renderer.integrator.prof"))
-    ap.add_argument("--cache", default=str(pathlib.Path(tempfile.gettempdir()) / "drt-kernel-profile"))
-    args = ap.parse_args()
-    [kp.tool(*names) for names in (("perf",), ("llvm-nm", "nm"), ("llvm-symbolizer",))]
-    exe, kernel, _prod = kp.load_profiled_integrator(pathlib.Path(args.cache), False)
+def profile_module(kernel, exe, scenes: list[str], seconds: float, options: dict, output: pathlib.Path) -> None:
+    """Sample ``kernel`` (loaded with line tables, ``exe`` its module's code) on each scene, write its module's
+    profile to ``output``."""
     obj = pathlib.Path(exe.binary_path)
     cpp = obj.parent / f"{obj.parent.name}.cpp"
     syms = kp.code_symbols(obj)
@@ -138,15 +139,14 @@ def main() -> None:
     ranges = sorted((o, o + size, name) for name, (o, size, _g) in syms.items())
     end = ranges[-1][1]
     samples = collections.Counter()
-    for scene in args.scenes.split(","):
-        run = argparse.Namespace(scene=scene, width=160, height=90, spp=16, seconds=args.seconds,
-                                 no_motion_blur=False)
+    for scene in scenes:
+        run = argparse.Namespace(scene=scene, width=160, height=90, spp=16, seconds=seconds, no_motion_blur=False)
         with tempfile.TemporaryDirectory() as tmp:
             perf = kp.Perf(pathlib.Path(tmp), 4000)
-            kp.render(run, kernel, perf)
+            kp.render(run, kernel, perf, **options)
             got = [ip - base for ip, _ in perf.samples() if 0 <= ip - base < end]
         samples.update(got)
-        print(f"# {scene}: {len(got)} samples in the kernel's code", file=sys.stderr)
+        print(f"# {kernel.key}, {scene}: {len(got)} samples in the kernel's code", file=sys.stderr)
 
     def top_of(off: int) -> str | None:
         return next((name for o, e, name in ranges if o <= off < e), None)
@@ -154,12 +154,26 @@ def main() -> None:
     stacks = inline_stacks(obj, sorted(samples))
     roots, dropped = build_profile(samples, stacks, cpp, top_of)
     text = profile_text(roots)
-    out = pathlib.Path(args.output)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(text)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    output.write_text(text)
     total = sum(samples.values())
-    print(f"wrote {out}: {total - sum(dropped.values())} of {total} samples, {len(text.splitlines())} lines, "
+    print(f"wrote {output}: {total - sum(dropped.values())} of {total} samples, {len(text.splitlines())} lines, "
           f"{len(roots)} function(s); left out: {dict(dropped)}")
+
+
+def main() -> None:
+    from renderer.sample_profile import PROFILES
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenes", default="cornell,dof,motion,gloss,heavy")
+    ap.add_argument("--seconds", type=float, default=10.0, help="kernel time sampled per scene")
+    ap.add_argument("-o", "--output", default=str(PROFILES), help="directory of the profiles")
+    ap.add_argument("--cache", default=str(pathlib.Path(tempfile.gettempdir()) / "drt-kernel-profile"))
+    args = ap.parse_args()
+    [kp.tool(*names) for names in (("perf",), ("llvm-nm", "nm"), ("llvm-symbolizer",))]
+    for layers, options in ((False, {}), (True, LAYERS)):
+        exe, kernel, _prod = kp.load_profiled_integrator(pathlib.Path(args.cache), False, layers)
+        profile_module(kernel, exe, args.scenes.split(","), args.seconds, options,
+                       pathlib.Path(args.output) / f"{kernel.module.name}.prof")
 
 
 if __name__ == "__main__":

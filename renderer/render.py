@@ -23,7 +23,7 @@ from typing import Callable
 import numpy as np
 import warp as wp
 
-from renderer import integrator, kernel_cache
+from renderer import integrator, integrator_layers, kernel_cache
 from renderer.accel import build_kernels, quantize, triangle_kernels, wide
 from renderer.accel.quads import order_for_quads
 from renderer.accel.upload import GeometryStats, upload_geometry
@@ -37,6 +37,7 @@ from renderer.film.exr import timecode_fields, write_exr
 from renderer.film.tiles import Tile, auto_tile_size, split_tiles
 from renderer.framing import Framing, resolve_framing
 from renderer.integrator import PathSettings, Wave, trace_wave_kernel
+from renderer.integrator_layers import trace_wave_layers_kernel
 from renderer.lights.table import upload_lights
 from renderer.media import upload as media_upload
 from renderer.media.upload import MediaUpload, upload_media
@@ -101,7 +102,8 @@ def resolve_resolution(scene: Scene, options: RenderOptions) -> tuple[int, int]:
 
 
 # every Warp module a render launches kernels of (hierarchy build, integrator, film)
-RENDER_MODULES = (build_kernels, triangle_kernels, wide, quantize, integrator, film, coverage, media_upload)
+RENDER_MODULES = (build_kernels, triangle_kernels, wide, quantize, integrator, integrator_layers, film, coverage,
+                  media_upload)
 
 
 def load_kernels(device: str = "cpu") -> dict[str, str]:
@@ -318,6 +320,8 @@ def render_tile(prep: PreparedScene, tile: Tile,
     settings.frame_s = prep.scene.shutter.frame_s
     settings.seed = wp.uint32(opts.seed)
     settings.record_hits = records
+    # the kernel without the LPE and record code when neither is asked for (``integrator.trace_wave_kernel_variant``)
+    trace = trace_wave_layers_kernel if records or extra else trace_wave_kernel
     slot_of = np.full(sw * sh, -1, np.int32)
     # the tile's own pixels among the sample pixels (its samples-per-pixel count and progress)
     mine = np.zeros((sh, sw), bool)
@@ -342,7 +346,7 @@ def render_tile(prep: PreparedScene, tile: Tile,
         launch.region_x0, launch.region_y0, launch.region_w = sx0, sy0, sw
         launch.start, launch.count = start, wave
         launch.counters = counters
-        wp.launch(trace_wave_kernel, dim=pixels.size * wave, device=dev,
+        wp.launch(trace, dim=pixels.size * wave, device=dev,
                   inputs=[prep.geometry, prep.materials, prep.textures, prep.lights, prep.media.media,
                           prep.camera.params, buf,
                           settings, launch, prep.lpe_table])
