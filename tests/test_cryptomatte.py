@@ -323,3 +323,34 @@ def test_object_material_and_asset_names_at_import(tmp_path):
     seat = names["object"].index("/World/Set/Chair/Geom/Seat")
     used = {int(m) for m in np.unique(scene.meshes[scene.instances[seat].mesh].material_ids)}
     assert [materials[m] for m in used] == ["/World/Looks/Wood"]
+
+
+def _merge_reference(ids: np.ndarray, weights: np.ndarray, keep: int) -> tuple[np.ndarray, np.ndarray]:
+    """``id_tables.merge`` by its definition, one pixel at a time: float64 sums per id in entry order, then by
+    weight (float32) descending, id ascending."""
+    out_ids = np.full((ids.shape[0], keep), -1, np.int32)
+    out_w = np.zeros((ids.shape[0], keep), np.float32)
+    for p in range(ids.shape[0]):
+        sums: dict[int, float] = {}
+        for i, w in zip(ids[p], weights[p]):
+            if i >= 0:
+                sums[int(i)] = sums.get(int(i), 0.0) + float(w)
+        ranked = sorted(((-np.float32(s), i) for i, s in sums.items()))[:keep]
+        for r, (neg_w, i) in enumerate(ranked):
+            out_ids[p, r], out_w[p, r] = i, -neg_w
+    return out_ids, out_w
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_merged_tables_hold_each_id_once_with_its_summed_weight_heaviest_first(seed):
+    from renderer.film.id_tables import merge
+    rng = np.random.default_rng(seed)
+    P, N, keep = 300, int(rng.integers(1, 73)), int(rng.integers(1, 17))
+    ids = rng.integers(-1, int(rng.integers(1, 40)), (P, N)).astype(np.int32)
+    # ties of equal weights (ordered by id), zero weights, and plain random ones
+    weights = (rng.choice(np.array([0.0, 0.25, 0.5, 3.0], np.float32), (P, N)) if seed % 2
+               else rng.random((P, N)).astype(np.float32))
+    got_ids, got_w = merge(ids, weights, keep)
+    want_ids, want_w = _merge_reference(ids, weights, keep)
+    assert np.array_equal(got_ids, want_ids)
+    assert np.array_equal(got_w.view(np.int32), want_w.view(np.int32))

@@ -136,3 +136,40 @@ def coverage_gather_kernel(
                         lm, am = table_add(material_ids, material_weights, k, sid[1], w, last_m[d], at_m[d])
                         last_m[d] = lm
                         at_m[d] = am
+
+
+@wp.kernel
+def merge_kernel(ids: wp.array2d(dtype=wp.int32), weights: wp.array2d(dtype=wp.float32), keep: int,
+                 run_ids: wp.array2d(dtype=wp.int32), run_sums: wp.array2d(dtype=wp.float64),
+                 out_ids: wp.array2d(dtype=wp.int32), out_weights: wp.array2d(dtype=wp.float32)):
+    """One pixel's entries (-1: empty) merged (``id_tables.merge``): each id's weights summed in float64 in entry
+    order (``run_*``: scratch, a row per pixel), then the ``keep`` heaviest ids (ties: smaller id first) written
+    in order into ``out_*`` (filled with -1 / 0 beforehand)."""
+    p = wp.tid()
+    n = ids.shape[1]
+    runs = int(0)
+    for j in range(n):
+        i = ids[p, j]
+        if i >= 0:
+            k = int(0)
+            while k < runs and run_ids[p, k] != i:  # a pixel sees a few ids: a linear search
+                k += 1
+            if k == runs:
+                run_ids[p, k] = i
+                run_sums[p, k] = wp.float64(0.0)
+                runs += 1
+            run_sums[p, k] = run_sums[p, k] + wp.float64(weights[p, j])
+    for r in range(wp.min(keep, runs)):  # selection: the heaviest of the runs not yet written
+        best = r
+        best_w = wp.float32(run_sums[p, r])
+        for k in range(r + 1, runs):
+            w = wp.float32(run_sums[p, k])
+            if w > best_w or (w == best_w and run_ids[p, k] < run_ids[p, best]):
+                best = k
+                best_w = w
+        best_id = run_ids[p, best]
+        run_ids[p, best] = run_ids[p, r]
+        run_sums[p, best] = run_sums[p, r]
+        run_ids[p, r] = best_id
+        out_ids[p, r] = best_id
+        out_weights[p, r] = best_w

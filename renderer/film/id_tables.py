@@ -1,5 +1,5 @@
-"""Per-pixel id tables (Cryptomatte's coverage), in numpy: merging per-direction tables, tile arrays and the
-frame's band (``renderer.film.coverage`` fills the tables in its kernels; this module needs no Warp).
+"""Per-pixel id tables (Cryptomatte's coverage): merging per-direction tables, tile arrays and the
+frame's band (``renderer.film.coverage`` fills the tables in its kernels, and merges them).
 
 A pixel's tables are merged in direction order, weights summed per id in float64 and the entries sorted by weight
 (then id), and the first ``KEEP`` kept: a pure function of the tables, so the frame's bits do not depend on the
@@ -8,6 +8,7 @@ tiling (``borders``).
 from __future__ import annotations
 
 import numpy as np
+import warp as wp
 
 KEEP = 16  # entries a pixel keeps after merging (Cryptomatte writes at most 16 ranks)
 PREFIX = "cov."  # tile array names: cov.<kind>.ids / cov.<kind>.weights
@@ -15,33 +16,27 @@ PREFIX = "cov."  # tile array names: cov.<kind>.ids / cov.<kind>.weights
 
 def merge(ids: np.ndarray, weights: np.ndarray, keep: int = KEEP) -> tuple[np.ndarray, np.ndarray]:
     """Tables (P, N) of ids and weights (entries in direction order; -1 empty) merged per pixel: (P, keep) with each
-    id once, its weights summed in float64, sorted by weight descending then id ascending; -1 / 0 padding."""
+    id once, its weights summed in float64 in entry order, sorted by weight descending then id ascending; -1 / 0
+    padding. A Warp kernel, one pixel per thread (``coverage.merge_kernel``): in numpy, sorts of the whole frame
+    took 0.45 s of a 640x360 frame's asset layer and 1.2 s of its tiles' tables."""
     P, N = ids.shape
     out_ids = np.full((P, keep), -1, np.int32)
     out_w = np.zeros((P, keep), np.float32)
     if P == 0 or N == 0:
         return out_ids, out_w
-    rows = np.repeat(np.arange(P), N)
-    flat_ids = ids.reshape(-1).astype(np.int64)
-    flat_w = weights.reshape(-1).astype(np.float64)
-    used = flat_ids >= 0
-    rows, flat_ids, flat_w = rows[used], flat_ids[used], flat_w[used]
-    if rows.size == 0:
-        return out_ids, out_w
-    order = np.lexsort((flat_ids, rows))  # stable: equal ids keep their direction order
-    rows, flat_ids, flat_w = rows[order], flat_ids[order], flat_w[order]
-    starts = np.flatnonzero(np.r_[True, (rows[1:] != rows[:-1]) | (flat_ids[1:] != flat_ids[:-1])])
-    sums = np.add.reduceat(flat_w, starts)
-    r, i = rows[starts], flat_ids[starts]
-    w32 = sums.astype(np.float32)
-    order = np.lexsort((i, -w32.astype(np.float64), r))
-    r, i, w32 = r[order], i[order], w32[order]
-    first = np.flatnonzero(np.r_[True, r[1:] != r[:-1]])
-    rank = np.arange(r.size) - np.repeat(first, np.diff(np.r_[first, r.size]))
-    ok = rank < keep
-    out_ids[r[ok], rank[ok]] = i[ok]
-    out_w[r[ok], rank[ok]] = w32[ok]
-    return out_ids, out_w
+    from renderer import kernel_cache
+    from renderer.device import init_warp
+    from renderer.film import coverage
+    init_warp()
+    kernel_cache.load_modules((coverage,))  # the shipped build when no other is cached (a no-op once loaded)
+    ids_out = wp.array(out_ids, dtype=wp.int32, device="cpu")
+    w_out = wp.array(out_w, dtype=wp.float32, device="cpu")
+    wp.launch(coverage.merge_kernel, dim=P, device="cpu",
+              inputs=[wp.array(np.ascontiguousarray(ids, np.int32), dtype=wp.int32, device="cpu"),
+                      wp.array(np.ascontiguousarray(weights, np.float32), dtype=wp.float32, device="cpu"), keep,
+                      wp.empty((P, N), dtype=wp.int32, device="cpu"), wp.empty((P, N), dtype=wp.float64, device="cpu"),
+                      ids_out, w_out])
+    return ids_out.numpy(), w_out.numpy()
 
 
 def merge_directions(ids: np.ndarray, weights: np.ndarray, keep: int = KEEP) -> tuple[np.ndarray, np.ndarray]:
