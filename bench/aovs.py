@@ -3,9 +3,10 @@
     python bench/aovs.py [--scene /work/shared/bench/scenes/cornell.usda] [--res 320 180] [--spp 32] [--repeat 3]
 
 One process, one prepared scene: the renders differ only in the options (``render.with_options``), interleaved and
-repeated, best time of each kept (a frame's render and its EXR channels). Goals (issue 46): eight LPEs at most 10 % slower than neither,
-Cryptomatte (object, material, asset) at most 5 %, and neither the same as before (its kernels skip every LPE and
-id step). The eight LPEs partition the beauty (checked at the end).
+repeated, best time of each kept (a frame's render and its EXR channels). Goals: eight LPEs at most 10 % slower
+than neither, Cryptomatte (object, material, asset) at most 5 %. A render with neither runs the kernel generated
+without the layers' code (``integrator.trace_wave_kernel_variant``). The eight LPEs partition the beauty (checked
+at the end).
 """
 from __future__ import annotations
 

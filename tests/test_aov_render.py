@@ -318,6 +318,19 @@ def test_lpe_light_group_and_cryptomatte_layers_have_the_same_bits_in_any_tiling
     assert len(manifests) == 3 * 4 and manifests == {k: b.attributes[k] for k in manifests}
 
 
+def test_asking_for_layers_leaves_the_beauty_bits_as_they_are(room_file):
+    """Layers are rendered by a kernel variant of their own (``renderer.integrator_layers``): the beauty, depth,
+    normal and albedo it writes must be those of the plain kernel, bit for bit."""
+    options = dict(width=48, height=32, spp=16)
+    plain = render(room_file, **options)
+    layered = render(room_file, lpe=("diffuse=C<RD>.*[LO]",), light_groups=True, cryptomatte=("object",),
+                     **options)
+    assert len(layered.channels) > len(plain.channels)
+    for c in plain.channels:
+        assert plain.channels[c].tobytes() == layered.channels[c].tobytes(), c
+    assert beauty(plain.channels).max() > 0.0
+
+
 # -- command line ------------------------------------------------------------------------------------------------
 
 
