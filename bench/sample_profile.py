@@ -2,6 +2,7 @@
 """Write the integrator's sample profile (``renderer/profiles``) from perf samples of the bench scenes.
 
     python bench/sample_profile.py [--scenes cornell,dof,motion,gloss,heavy] [--seconds 10] [-o DIRECTORY]
+        [--kernels plain,layers]
 
 Two profiles: the plain kernel's (``renderer.integrator``) and the one of its variant with compositing layers
 (``renderer.integrator_layers``, sampled rendering eight LPEs and Cryptomatte). Then ``drt warmup --prebuilt``
@@ -168,9 +169,12 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=10.0, help="kernel time sampled per scene")
     ap.add_argument("-o", "--output", default=str(PROFILES), help="directory of the profiles")
     ap.add_argument("--cache", default=str(pathlib.Path(tempfile.gettempdir()) / "drt-kernel-profile"))
+    ap.add_argument("--kernels", default="plain,layers", help="which profiles to take: plain, layers or both")
     args = ap.parse_args()
     [kp.tool(*names) for names in (("perf",), ("llvm-nm", "nm"), ("llvm-symbolizer",))]
     for layers, options in ((False, {}), (True, LAYERS)):
+        if ("layers" if layers else "plain") not in args.kernels.split(","):
+            continue
         exe, kernel, _prod = kp.load_profiled_integrator(pathlib.Path(args.cache), False, layers)
         profile_module(kernel, exe, args.scenes.split(","), args.seconds, options,
                        pathlib.Path(args.output) / f"{kernel.module.name}.prof")

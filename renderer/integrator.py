@@ -100,6 +100,7 @@ from renderer.shading.bsdf import (
     bsdf_albedo_hint,
     bsdf_setup,
     lobes_eval,
+    lobes_eval_diffuse,
     lobes_eval_split,
     lobes_pdf,
     lobes_sample,
@@ -688,8 +689,10 @@ def trace_wave_kernel_variant(name: str, layers: bool, module: str | None = None
                                     if lpe_on:
                                         # the diffuse and glossy lobes' shares, scaled as the sum was
                                         scale = clamp_factor(raw, nee_clamp) * (cos_i * w / (p_sel * pdf_l))
-                                        fd, fs = lobes_eval_split(lobes, wi)
-                                        if lights.lobe_mults != 0:
+                                        fd = lobes_eval_diffuse(lobes, wi)  # f's first term: one lobe more
+                                        fs = f - fd
+                                        if lights.lobe_mults != 0:  # f is the lobes times their multipliers
+                                            fd, fs = lobes_eval_split(lobes, wi)
                                             mult = lights.lobe_mult[li]
                                             fd = fd * mult[0]
                                             fs = fs * mult[1]

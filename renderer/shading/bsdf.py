@@ -360,6 +360,19 @@ def lobes_eval_split(b: BsdfLobes, wi: wp.vec3):
 
 
 @wp.func
+def lobes_eval_diffuse(b: BsdfLobes, wi: wp.vec3) -> wp.vec3:
+    """The diffuse lobe's term of ``lobes_eval``, computed as it computes it (its first term: ``lobes_eval`` minus
+    this is the other lobes' share, never negative), without evaluating the others."""
+    if b.valid == 0:
+        return wp.vec3(0.0)
+    wl = wp.transpose(b.frame) * wi
+    if _leaks(b, wl[2], wi) or wl[2] <= 0.0:
+        return wp.vec3(0.0)
+    att = _coat_att(b.cc, b.wo[2]) * _coat_att(b.cc, wl[2])
+    return diffuse_eval(b.kd, b.f0, b.f90, b.wo, wl) * (att / (1.0 - b.cc * W_COAT_DIFFUSE_K))
+
+
+@wp.func
 def lobes_pdf(b: BsdfLobes, wi: wp.vec3) -> float:
     """Solid-angle density with which ``lobes_sample`` returns a non-delta sample in direction wi."""
     if b.valid == 0:
