@@ -31,16 +31,14 @@ import sys
 import tempfile
 
 import kernel_profile as kp
+from aovs import EIGHT
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 
-# the layers the kernel variant with LPE vars and first-hit records is profiled with: bench/aovs.py's eight LPEs
-# and Cryptomatte
-LAYERS = {"lpe": ("emit=C[LO]", "diffuse=C<RD>[LO]", "diffuse_indirect=C<RD>.+[LO]", "glossy=C<RG>.*[LO]",
-                  "specular=C<RS>.*[LO]", "transmission=C<T.>.*[LO]", "volume=CV.*[LO]", "all=C.*[LO]"),
-          "cryptomatte": ("object", "material", "asset")}
+# the layers the kernel variant with LPE vars and first-hit records is profiled with: bench/aovs.py's
+LAYERS = {"lpe": EIGHT, "cryptomatte": ("object", "material", "asset")}
 
 
 def function_lines(cpp: pathlib.Path) -> dict[str, int]:

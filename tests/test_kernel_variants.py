@@ -22,6 +22,11 @@ LAYER_CODE = {"lpe_begin": r"\blpe_begin_\d+\(", "lpe_light": r"\blpe_light_\d+\
               "hit_uv": r"\.hit_uv\)", "hit_p": r"\.hit_p\)"}
 
 
+def forward_start(source: str, kernel):
+    """Where ``kernel``'s CPU forward function begins in its module's C++."""
+    return re.search(rf"static void {kernel.key}_[0-9a-f]{{8}}_cpu_kernel_forward\(", source)
+
+
 def module_source(kernel) -> str:
     """The C++ Warp generates for ``kernel``'s module (its functions and kernels), CPU."""
     from warp._src import context
@@ -30,12 +35,12 @@ def module_source(kernel) -> str:
     mod.get_module_hash()
     builder = context.ModuleBuilder(mod, mod.options, hasher=mod.hashers[mod.options["block_dim"]])
     source = builder.codegen("cpu")
-    assert re.search(rf"static void {kernel.key}_[0-9a-f]{{8}}_cpu_kernel_forward\(", source), kernel.key
+    assert forward_start(source, kernel), kernel.key
     return source
 
 
 def layer_code_in(source: str, kernel) -> set[str]:
-    start = re.search(rf"static void {kernel.key}_[0-9a-f]{{8}}_cpu_kernel_forward\(", source).start()
+    start = forward_start(source, kernel).start()
     forward = source[start:source.index("\n}\n", start)]
     found = set()
     for name, pattern in LAYER_CODE.items():

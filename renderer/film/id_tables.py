@@ -20,17 +20,15 @@ def merge(ids: np.ndarray, weights: np.ndarray, keep: int = KEEP) -> tuple[np.nd
     padding. A Warp kernel, one pixel per thread (``coverage.merge_kernel``): in numpy, sorts of the whole frame
     took 0.45 s of a 640x360 frame's asset layer and 1.2 s of its tiles' tables."""
     P, N = ids.shape
-    out_ids = np.full((P, keep), -1, np.int32)
-    out_w = np.zeros((P, keep), np.float32)
     if P == 0 or N == 0:
-        return out_ids, out_w
+        return np.full((P, keep), -1, np.int32), np.zeros((P, keep), np.float32)
     from renderer import kernel_cache
     from renderer.device import init_warp
     from renderer.film import coverage
     init_warp()
     kernel_cache.load_modules((coverage,))  # the shipped build when no other is cached (a no-op once loaded)
-    ids_out = wp.array(out_ids, dtype=wp.int32, device="cpu")
-    w_out = wp.array(out_w, dtype=wp.float32, device="cpu")
+    ids_out = wp.full((P, keep), -1, dtype=wp.int32, device="cpu")
+    w_out = wp.zeros((P, keep), dtype=wp.float32, device="cpu")
     wp.launch(coverage.merge_kernel, dim=P, device="cpu",
               inputs=[wp.array(np.ascontiguousarray(ids, np.int32), dtype=wp.int32, device="cpu"),
                       wp.array(np.ascontiguousarray(weights, np.float32), dtype=wp.float32, device="cpu"), keep,
