@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
-"""Benchmarks: prints figures, asserts nothing. ``python bench/bench.py [--spp N] [--scenes a,b]``.
+"""Benchmarks: prints figures, asserts nothing. ``python bench/bench.py [--spp N] [--res W H] [--scenes a,b]``.
 
-For the scenes in ../shared/bench/scenes (640x360, ANCHORS.md settings): samples/s and rays/s at 2 threads
+First the CPU model and ISA level the figures were taken on. For the scenes in ../shared/bench/scenes (640x360,
+ANCHORS.md settings; ``--res`` another size for them and the production shot): samples/s and rays/s at 2 threads
 against Blender Cycles' and Mitsuba 3 LLVM's figures on the same machine kind (ANCHORS.md); a production scene
 from ../shared/usd-assets (the usd-wg teapot layout: 494 instanced, subdivided teapots) with its USD load and
 flatten/build times; every scene also against live Cycles, rendered in the same run, when $BPY names a Python with
@@ -56,6 +57,33 @@ def DistantLight "BenchSun"
 """
 
 
+def cpu_description() -> str:
+    """The CPU model, the x86-64 ISA level its flags reach, and its widest vectors (/proc/cpuinfo): the figures
+    depend on them (the shipped kernels target x86-64-v3, AVX2; ``drt warmup`` builds for the host)."""
+    model, flags = "unknown CPU", set()
+    try:
+        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "model name" and model == "unknown CPU":
+                model = value.strip()
+            elif key.strip() == "flags" and not flags:
+                flags = set(value.split())
+    except OSError:
+        pass
+    levels = {  # the psABI's x86-64 micro-architecture levels, by the cpuinfo flags they need
+        "x86-64-v2": {"cx16", "lahf_lm", "popcnt", "sse4_1", "sse4_2", "ssse3"},
+        "x86-64-v3": {"avx", "avx2", "bmi1", "bmi2", "f16c", "fma", "abm", "movbe", "xsave"},
+        "x86-64-v4": {"avx512f", "avx512bw", "avx512cd", "avx512dq", "avx512vl"},
+    }
+    level = "x86-64"
+    for name, need in levels.items():
+        if not need <= flags:
+            break
+        level = name
+    widest = "AVX-512 (zmm)" if "avx512f" in flags else "AVX2 (ymm)" if "avx2" in flags else "SSE (xmm)"
+    return f"CPU: {model}, {os.cpu_count()} logical CPUs; ISA {level}, widest vectors {widest}"
+
+
 def anchors(column: int) -> dict[str, float]:
     """Samples/s per scene from ANCHORS.md's first table: column 0 Cycles 5.2, 1 Mitsuba scalar, 2 Mitsuba LLVM."""
     out = {}
@@ -75,9 +103,9 @@ def cycles_anchors() -> dict[str, float]:
 
 
 def live_cycles_seconds(bpy: str, scene: pathlib.Path, spp: int, *, motion: bool = False,
-                        fixups: bool = False) -> float | None:
+                        fixups: bool = False, res: tuple[int, int] = (640, 360)) -> float | None:
     """Seconds Cycles (Blender's ``bpy`` at ``bpy``, CPU, 2 threads, its defaults) takes to render ``scene`` at
-    640x360 and ``spp``, BVH build included, as ANCHORS.md measured it; None when it fails. ``motion`` turns on
+    ``res`` and ``spp``, BVH build included, as ANCHORS.md measured it; None when it fails. ``motion`` turns on
     its motion blur; ``fixups`` rebuilds what Blender's USD import drops (``noise.blender_fixups``), as the
     anchors' and ``noise.py``'s renders do for the bench scenes."""
     env = dict(os.environ)
@@ -86,8 +114,8 @@ def live_cycles_seconds(bpy: str, scene: pathlib.Path, spp: int, *, motion: bool
 
         env["DRT_BLENDER_FIXUPS"] = json.dumps(blender_fixups(str(scene)))
     with tempfile.TemporaryDirectory() as tmp:
-        p = subprocess.run([bpy, str(ROOT / "bench" / "cycles_render.py"), str(scene), f"{tmp}/c.exr", "640", "360",
-                            str(spp), "1"] + (["motion"] if motion else []), capture_output=True, text=True, env=env)
+        p = subprocess.run([bpy, str(ROOT / "bench" / "cycles_render.py"), str(scene), f"{tmp}/c.exr", str(res[0]),
+                            str(res[1]), str(spp), "1"] + (["motion"] if motion else []), capture_output=True, text=True, env=env)
     for line in p.stdout.splitlines():
         if line.startswith("{"):
             return float(json.loads(line)["seconds"])
@@ -95,21 +123,21 @@ def live_cycles_seconds(bpy: str, scene: pathlib.Path, spp: int, *, motion: bool
     return None
 
 
-def production_figures(scenes: pathlib.Path, spp: int, bpy: str | None):
-    """Our load / prepare / render figures for the teapot layout shot at 640x360, and live Cycles' render seconds
+def production_figures(scenes: pathlib.Path, spp: int, bpy: str | None, res: tuple[int, int] = (640, 360)):
+    """Our load / prepare / render figures for the teapot layout shot at ``res``, and live Cycles' render seconds
     on it (same size, samples and threads) when ``bpy`` names a Python with Blender's bpy."""
     cycles_seconds = None
     with tempfile.TemporaryDirectory() as tmp:
         shot = pathlib.Path(tmp) / "shot.usda"
         shot.write_text(PRODUCTION_SHOT.format(camera=scenes / "teapotScene_camera.usd",
                                                layout=scenes / "teapotScene_layout.usd"))
-        r = render(shot, spp=spp, threads=2)
+        r = render(shot, spp=spp, threads=2, res=res)
         if bpy:
-            cycles_seconds = live_cycles_seconds(bpy, shot, spp)
+            cycles_seconds = live_cycles_seconds(bpy, shot, spp, res=res)
     return r, cycles_seconds
 
 
-def render(path, *, spp, threads, motion_blur=True, dof=True, tile=64, repeats=1):
+def render(path, *, spp, threads, motion_blur=True, dof=True, tile=64, repeats=1, res=(640, 360)):
     from renderer.options import RenderOptions
     from renderer.render import prepare, render_frame
     from renderer.usd.importer import load_scene
@@ -117,7 +145,7 @@ def render(path, *, spp, threads, motion_blur=True, dof=True, tile=64, repeats=1
     t0 = time.perf_counter()
     scene = load_scene(path, motion_blur=motion_blur)
     t1 = time.perf_counter()
-    prep = prepare(scene, RenderOptions(width=640, height=360, spp=spp, dof=dof))
+    prep = prepare(scene, RenderOptions(width=res[0], height=res[1], spp=spp, dof=dof))
     t2 = time.perf_counter()
     best = None
     for _ in range(repeats):
@@ -278,6 +306,8 @@ def bvh_build_figures(path: pathlib.Path, repeats: int = 3):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--spp", type=int, default=64)
+    ap.add_argument("--res", type=int, nargs=2, default=(640, 360), metavar=("W", "H"),
+                    help="image size of the bench scenes and the production shot (the anchors are 640x360)")
     ap.add_argument("--scenes", default="cornell,dof,motion,gloss,heavy")
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--skip-compile", action="store_true")
@@ -293,7 +323,9 @@ def main() -> None:
     cycles = cycles_anchors()
     mitsuba = anchors(2)
     spp = args.spp
-    print(f"# drt benchmark: 640x360, {spp} spp, path tracing (max depth 8, MIS), scenes from {scenes}")
+    res = tuple(args.res)
+    print(f"# drt benchmark: {res[0]}x{res[1]}, {spp} spp, path tracing (max depth 8, MIS), scenes from {scenes}")
+    print(f"# {cpu_description()}")
     from renderer.render import load_kernels
 
     builds = ", ".join(sorted(set(load_kernels().values())))  # host-tuned ("native") once `drt warmup` ran here
@@ -306,13 +338,14 @@ def main() -> None:
           f"{'vs Mitsuba':>10}")
     results = {}
     for name in args.scenes.split(","):
-        r = render(scenes / f"{name}.usda", spp=spp, threads=2, repeats=args.repeats)
+        r = render(scenes / f"{name}.usda", spp=spp, threads=2, repeats=args.repeats, res=res)
         results[name] = r
         cyc, mi = cycles.get(name), mitsuba.get(name)
         live = float("nan")
         if bpy:  # side by side, the same minutes: the anchors are another day's (noise between days ~25 %)
-            live_s = live_cycles_seconds(bpy, scenes / f"{name}.usda", spp, motion=name == "motion", fixups=True)
-            live = 640 * 360 * spp / live_s if live_s else float("nan")
+            live_s = live_cycles_seconds(bpy, scenes / f"{name}.usda", spp, motion=name == "motion", fixups=True,
+                                         res=res)
+            live = res[0] * res[1] * spp / live_s if live_s else float("nan")
         st = r["stats"]
         print(f"{name:8} {st.triangles:9d} {r['load']:7.2f} {st.build_seconds:7.2f} {r['seconds']:8.2f} "
               f"{r['sps'] / 1e6:10.3f} {r['rps'] / 1e6:8.3f} {cyc / 1e6 if cyc else float('nan'):7.2f} "
@@ -320,9 +353,9 @@ def main() -> None:
               f"{mi / 1e6 if mi else float('nan'):12.2f} {r['sps'] / mi if mi else float('nan'):9.2f}x  "
               f"(targets: 2x Cycles)")
     if not args.skip_production and PRODUCTION.is_dir():
-        r, cyc_s = production_figures(PRODUCTION, args.production_spp, bpy)
+        r, cyc_s = production_figures(PRODUCTION, args.production_spp, bpy, res)
         st = r["stats"]
-        samples = 640 * 360 * args.production_spp
+        samples = res[0] * res[1] * args.production_spp
         vs = (f"live Cycles {cyc_s:.2f} s = {samples / cyc_s / 1e6:.3f} Msamples/s, "
               f"ours {r['sps'] * cyc_s / samples:.2f}x" if cyc_s
               else "Cycles: set BPY to a Python with bpy to measure it side by side")

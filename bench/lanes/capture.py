@@ -8,7 +8,7 @@ import warp as wp
 
 from renderer.accel.csg import csg_closest
 from renderer.accel.intersect import BIG, Geometry, intersect_closest
-from renderer.accel.surface import display_diffuse, shading_normal, surface_at
+from renderer.accel.surface import display_diffuse, hit_geometry, shading_normal, surface_at
 from renderer.camera import CameraParams, camera_ray
 from renderer.integrator import FLAG_DELTA, RR_START, finite3, offset_origin, regularized_params, roughness_of_pdf
 from renderer.sampling.sobol import (
@@ -24,7 +24,7 @@ from renderer.sampling.sobol import (
     sample_camera_pair,
 )
 from renderer.shading.bsdf import bsdf_setup, lobes_sample
-from renderer.shading.materials import Materials, eval_material_cone
+from renderer.shading.materials import HitGeometry, Materials, eval_material_cone
 from renderer.shading.raycone import bounce_spread, camera_cone, uv_footprint
 from renderer.shading.textures import Textures
 from renderer.struct_refs import by_reference
@@ -88,8 +88,11 @@ def capture_kernel(geo: Geometry, mats: Materials, tex: Textures, cam: CameraPar
         else:
             sp = surface_at(geo, hit.inst, hit.tri, hit.b1, hit.b2, hit.ng, origin, rd, hit.t, s)
             cone_w = cone_w + cone_spread * hit.t
+            hg = HitGeometry()
+            if mats.geo_driven[sp.material] != 0:
+                hg = hit_geometry(geo, hit.inst, sp, s, cone_w)
             ms = eval_material_cone(mats, tex, sp.material, sp.uv, s,
-                                    uv_footprint(cone_w, sp.uv_density, wp.dot(sp.ng, rd)))
+                                    uv_footprint(cone_w, sp.uv_density, wp.dot(sp.ng, rd)), hg)
             ms.diffuse_color = display_diffuse(geo, mats, sp.material, hit.inst, hit.tri, hit.b1, hit.b2,
                                                ms.diffuse_color)
             ns = shading_normal(sp, ms)
