@@ -29,7 +29,7 @@ from renderer.accel.quads import order_for_quads
 from renderer.accel.upload import GeometryStats, upload_geometry
 from renderer.camera import CameraSetup, ndc_matrix, setup_camera
 from renderer.color import ColorSpaces
-from renderer.device import init_warp
+from renderer.device import denormals_flushed, init_warp
 from renderer.errors import Cancelled, SettingsError
 from renderer.film import borders, coverage, denoise, film, hit_vars, id_tables
 from renderer.film.adaptive import Convergence
@@ -272,7 +272,16 @@ def render_tile(prep: PreparedScene, tile: Tile,
     ``Cancelled`` from it stops the render. ``time_budget`` (seconds) stops sampling before the wave that would
     overrun it (progressive rendering; the result then depends on the machine's speed). Samples per pixel are
     ``options.spp`` at most, fewer where adaptive sampling found a pixel converged (``sums["spp"]``).
+
+    The thread computes with denormals flushed to zero meanwhile (``device.denormals_flushed``).
     """
+    with denormals_flushed():
+        return _sampled_tile(prep, tile, on_wave, time_budget, shared_borders)
+
+
+def _sampled_tile(prep: PreparedScene, tile: Tile, on_wave: Callable[[int, int], None] | None,
+                  time_budget: float | None, shared_borders: bool) -> TileSums:
+    """``render_tile``'s work."""
     opts = prep.options
     W, H = prep.width, prep.height
     if not (0 <= tile.x0 < tile.x1 <= W and 0 <= tile.y0 < tile.y1 <= H):
