@@ -164,7 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def add_warmup_command(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    text = ("compile the render kernels for this machine's CPU into Warp's kernel cache, once per machine (~20 s): "
+    text = ("compile the render kernels for this machine's CPU into Warp's kernel cache, once per machine (about 2 min): "
             "later renders use them, 2-5 %% faster than the portable kernels shipped with the package")
     w = sub.add_parser("warmup", help=text, description=(text[0].upper() + text[1:] + ".").replace("%%", "%"))
     w.add_argument("--prebuilt", action="store_true",
