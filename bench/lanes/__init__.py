@@ -1,4 +1,4 @@
-"""SIMD lanes inside Warp, proven or killed (issue 48): next-event estimation one record per thread against an
+"""SIMD lanes inside Warp, proven or killed: next-event estimation one record per thread against an
 in-thread loop over 64 records, and Embree's ray packets against single rays.
 
     python -m bench.lanes [--scene cornell] [--width 320 --spp 16] [--repeats 5]
@@ -35,11 +35,15 @@ in-thread loop over 64 records, and Embree's ray packets against single rays.
    (``rtcOccluded8``/``16``) from the same Warp kernels (function pointers and native snippets, as
    ``accel.embree``). Hits are compared.
 
+5. **Whole frames**: ``python -m bench.lanes.bound`` renders the bench scenes with next-event estimation, or all of
+   the shading, made to cost nothing in patched copies of the renderer: what lanes in those stages could give a
+   frame at most (``bound``).
+
 Run from the worktree root with ``PYTHONPATH=$PWD``; the first run compiles the capture kernel (~1 min) and the
 NEE kernels per target. ``--count`` needs valgrind and a C compiler (as ``bench/instructions.py``).
 
 Modules: ``records`` (the records' layout and views), ``capture`` (part 1), ``nee_scalar``, ``nee_lanes`` and
 ``nee_soa`` (part 2's kernels), ``builds`` (targets, variants, their modules compiled apart, timings), ``evidence``
-(part 3), ``embree_packets`` (part 4), ``scene`` (the prepared scene) and ``__main__`` (the command line; the
-compile and callgrind children re-enter it).
+(part 3), ``embree_packets`` (part 4), ``scene`` (the prepared scene), ``__main__`` (the command line; the
+compile and callgrind children re-enter it) and ``bound`` (part 5, a command of its own).
 """
