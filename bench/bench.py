@@ -114,8 +114,9 @@ def live_cycles_seconds(bpy: str, scene: pathlib.Path, spp: int, *, motion: bool
 
         env["DRT_BLENDER_FIXUPS"] = json.dumps(blender_fixups(str(scene)))
     with tempfile.TemporaryDirectory() as tmp:
-        p = subprocess.run([bpy, str(ROOT / "bench" / "cycles_render.py"), str(scene), f"{tmp}/c.exr", str(res[0]),
-                            str(res[1]), str(spp), "1"] + (["motion"] if motion else []), capture_output=True, text=True, env=env)
+        cmd = [bpy, str(ROOT / "bench" / "cycles_render.py"), str(scene), f"{tmp}/c.exr", str(res[0]), str(res[1]),
+               str(spp), "1"] + (["motion"] if motion else [])
+        p = subprocess.run(cmd, capture_output=True, text=True, env=env)
     for line in p.stdout.splitlines():
         if line.startswith("{"):
             return float(json.loads(line)["seconds"])
