@@ -30,7 +30,7 @@ from renderer.accel.upload import GeometryStats, upload_geometry
 from renderer.camera import CameraSetup, ndc_matrix, setup_camera
 from renderer.color import ColorSpaces
 from renderer.device import denormals_flushed, init_warp
-from renderer.errors import Cancelled, SettingsError
+from renderer.errors import SettingsError
 from renderer.film import borders, coverage, denoise, film, hit_vars, id_tables
 from renderer.film.adaptive import Convergence
 from renderer.film.exr import timecode_fields, write_exr
@@ -42,7 +42,7 @@ from renderer.lights.table import upload_lights
 from renderer.media import upload as media_upload
 from renderer.media.upload import MediaUpload, upload_media
 from renderer.motion.transform import matrix_at
-from renderer.options import MAX_PIXELS, MAX_SPP, TIME_FILTERS, RenderOptions
+from renderer.options import MAX_PIXELS, TIME_FILTERS, RenderOptions
 from renderer.scene.flatten import flatten_still_instances
 from renderer.scene.model import LIGHT_MESH, Scene
 from renderer.shading.materials import upload_material_textures, upload_materials
