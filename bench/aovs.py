@@ -23,7 +23,7 @@ EIGHT = ("emit=C[LO]", "diffuse=C<RD>[LO]", "diffuse_indirect=C<RD>.+[LO]", "glo
 
 
 def main() -> None:
-    from renderer.options import RenderOptions
+    from renderer.settings.options import RenderOptions
     from renderer.render import frame_image, load_kernels, prepare, render_frame, with_options
     from renderer.usd.importer import load_scene
 

@@ -139,7 +139,7 @@ def production_figures(scenes: pathlib.Path, spp: int, bpy: str | None, res: tup
 
 
 def render(path, *, spp, threads, motion_blur=True, dof=True, tile=64, repeats=1, res=(640, 360)):
-    from renderer.options import RenderOptions
+    from renderer.settings.options import RenderOptions
     from renderer.render import prepare, render_frame
     from renderer.usd.importer import load_scene
 
@@ -176,7 +176,7 @@ def faster_motion(scene, factor: float):
 def paired_seconds(variants: dict, *, spp: int, threads: int = 2, rounds: int = 3) -> dict:
     """Best render seconds of each variant (name -> (Scene, depth of field on)), rendered in turn ``rounds``
     times, so that drift in the machine's speed over the run falls on all of them alike."""
-    from renderer.options import RenderOptions
+    from renderer.settings.options import RenderOptions
     from renderer.render import prepare, render_frame
 
     preps = {k: prepare(sc, RenderOptions(width=640, height=360, spp=spp, dof=dof))
@@ -191,7 +191,7 @@ def paired_seconds(variants: dict, *, spp: int, threads: int = 2, rounds: int = 
 def thread_scaling(scene, *, spp: int, rounds: int = 3) -> float:
     """One thread's best render seconds over two threads', the two rendered in turn ``rounds`` times (one prepared
     scene, 64-pixel tiles: 60 tiles at 640x360, so the last tile's tail is small)."""
-    from renderer.options import RenderOptions
+    from renderer.settings.options import RenderOptions
     from renderer.render import prepare, render_frame
 
     prep = prepare(scene, RenderOptions(width=640, height=360, spp=spp))
@@ -210,7 +210,7 @@ def gloss_noise_at_equal_time(scenes, cycles_sps: float, reference_spp: int = 10
     """
     import numpy as np
 
-    from renderer.options import RenderOptions
+    from renderer.settings.options import RenderOptions
     from renderer.render import frame_channels, prepare, render_frame
     from renderer.usd.importer import load_scene
 
@@ -232,7 +232,7 @@ def gloss_noise_at_equal_time(scenes, cycles_sps: float, reference_spp: int = 10
     return budget, spp, seconds, rmse
 
 
-COMPILE_MODULES = ("renderer.integrator", "renderer.film.film", "renderer.accel.build_kernels",
+COMPILE_MODULES = ("renderer.integrator.path", "renderer.film.film", "renderer.accel.build_kernels",
                    "renderer.accel.triangle_kernels", "renderer.accel.wide")
 
 
@@ -241,7 +241,7 @@ def first_compile_seconds() -> dict[str, tuple[float, float]]:
     process (compilation runs in-process on one thread, so CPU s is the compile work however busy the machine)."""
     with tempfile.TemporaryDirectory() as cache:
         code = ("import importlib, time, warp as wp; wp.config.kernel_cache_dir = %r\n"
-                "from renderer.device import init_warp; init_warp()\n"
+                "from renderer.kernels.device import init_warp; init_warp()\n"
                 "for name in %r:\n"
                 "    m = importlib.import_module(name); w = time.perf_counter(); c = time.process_time()\n"
                 "    wp.load_module(m, device='cpu')\n"
@@ -257,7 +257,7 @@ def first_compile_seconds() -> dict[str, tuple[float, float]]:
 
 def first_render_seconds() -> tuple[float, float]:
     """Wall seconds of the README's demo command in a fresh process, first with an empty Warp kernel cache (a fresh
-    install: the kernels shipped in renderer/prebuilt seed it), then again with that cache warm."""
+    install: the kernels shipped in renderer/kernels/prebuilt seed it), then again with that cache warm."""
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [sys.executable, "-m", "renderer.cli", "render", str(ROOT / "examples" / "demo.usda"), "-o",
                os.path.join(tmp, "demo.exr"), "--spp", "64", "--quiet"]
@@ -317,7 +317,7 @@ def main() -> None:
     ap.add_argument("--skip-production", action="store_true")
     ap.add_argument("--skip-scaling", action="store_true", help="skip 1 -> 2 thread scaling per scene")
     args = ap.parse_args()
-    from renderer.device import init_warp
+    from renderer.kernels.device import init_warp
 
     init_warp()
     scenes = SHARED / "scenes"
@@ -330,7 +330,7 @@ def main() -> None:
     from renderer.render import load_kernels
 
     builds = ", ".join(sorted(set(load_kernels().values())))  # host-tuned ("native") once `drt warmup` ran here
-    print(f"# render kernels: {builds} (renderer.kernel_cache)")
+    print(f"# render kernels: {builds} (renderer.kernels.cache)")
     bpy = os.environ.get("BPY")
     if not bpy:
         print("# Cycles: the ANCHORS.md figures (another day); set BPY to a Python with bpy to render it side by side")

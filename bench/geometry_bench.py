@@ -81,7 +81,7 @@ def author(kind: str, path: pathlib.Path) -> int:
 
 
 def child(kind: str, spp: int, width: int) -> dict:
-    from renderer.options import RenderOptions
+    from renderer.settings.options import RenderOptions
     from renderer.render import prepare, render_frame
     from renderer.usd.importer import load_scene
 

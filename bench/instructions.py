@@ -63,11 +63,11 @@ def child(lib: str, scene: str, blur: bool, dof: bool, speed: float, size: int, 
     sys.path.insert(0, str(ROOT))
     sys.path.insert(0, str(ROOT / "bench"))
     toggle = ctypes.CDLL(lib)
-    from renderer.device import init_warp
+    from renderer.kernels.device import init_warp
 
     init_warp()
     from renderer import render
-    from renderer.options import RenderOptions
+    from renderer.settings.options import RenderOptions
     from renderer.render import prepare, render_frame
     from renderer.usd.importer import load_scene
 

@@ -71,14 +71,15 @@ def code_bytes(obj: pathlib.Path) -> bytes:
 
 def load_profiled_integrator(cache: pathlib.Path, native: bool, layers: bool = False):
     """Initialise Warp on our own cache, load the integrator (``layers``: its variant with compositing layers,
-    ``renderer.integrator_layers``) with line tables; (its exec, kernel, production object of the same source and
+    ``renderer.integrator.layers``) with line tables; (its exec, kernel, production object of the same source and
     flags or None)."""
     import warp as wp
     wp.config.kernel_cache_dir = str(cache)
-    from renderer.device import init_warp
+    from renderer.kernels.device import init_warp
     init_warp()
-    from renderer import integrator, integrator_layers, kernel_cache
-    from renderer.sample_profile import compiling_in
+    from renderer.integrator import layers as integrator_layers, path as integrator
+    from renderer.kernels import cache as kernel_cache
+    from renderer.kernels.profile import compiling_in
     kernel = integrator_layers.trace_wave_layers_kernel if layers else integrator.trace_wave_kernel
     mod = kernel.module
     # --native: Warp's default flags (config.cpu_compiler_flags: -march=native, its inlining thresholds) and the
@@ -150,7 +151,7 @@ def render(args, kernel, perf: Perf, **options) -> tuple[float, int]:
     """Render frames on one thread until the kernel has run ``args.seconds``, sampled during its launches;
     ``options`` are further ``RenderOptions`` fields."""
     import warp as wp
-    from renderer.options import RenderOptions
+    from renderer.settings.options import RenderOptions
     from renderer.render import prepare, render_frame
     from renderer.usd.importer import load_scene
     path = pathlib.Path(args.scene) if ".usd" in args.scene else SCENES / f"{args.scene}.usda"

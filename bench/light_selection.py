@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from test_lights import row_of_lights_scene  # noqa: E402
 
 from renderer.lights.table import upload_lights  # noqa: E402
-from renderer.options import RenderOptions  # noqa: E402
+from renderer.settings.options import RenderOptions  # noqa: E402
 from renderer.render import frame_channels, prepare, render_frame  # noqa: E402
 from renderer.usd.importer import load_scene  # noqa: E402
 

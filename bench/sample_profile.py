@@ -1,12 +1,12 @@
 #!/usr/bin/env python3
-"""Write the integrator's sample profile (``renderer/profiles``) from perf samples of the bench scenes.
+"""Write the integrator's sample profile (``renderer/kernels/profiles``) from perf samples of the bench scenes.
 
     python bench/sample_profile.py [--scenes cornell,dof,motion,gloss,heavy] [--seconds 10] [-o DIRECTORY]
         [--kernels plain,layers]
 
-Two profiles: the plain kernel's (``renderer.integrator``) and the one of its variant with compositing layers
-(``renderer.integrator_layers``, sampled rendering eight LPEs and Cryptomatte). Then ``drt warmup --prebuilt``
-compiles the shipped kernels with them (``renderer.sample_profile``). Run it again after large changes to kernel
+Two profiles: the plain kernel's (``renderer.integrator.path``) and the one of its variant with compositing layers
+(``renderer.integrator.layers``, sampled rendering eight LPEs and Cryptomatte). Then ``drt warmup --prebuilt``
+compiles the shipped kernels with them (``renderer.kernels.profile``). Run it again after large changes to kernel
 code: a stored profile keeps guiding the functions a change left alone, and none of what is new.
 
 How: as ``bench/kernel_profile.py`` (whose machinery this reuses), the production build of the integrator is
@@ -161,7 +161,7 @@ def profile_module(kernel, exe, scenes: list[str], seconds: float, options: dict
 
 
 def main() -> None:
-    from renderer.sample_profile import PROFILES
+    from renderer.kernels.profile import PROFILES
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenes", default="cornell,dof,motion,gloss,heavy")
     ap.add_argument("--seconds", type=float, default=10.0, help="kernel time sampled per scene")

@@ -152,7 +152,7 @@ def make_scatter_scene(path: pathlib.Path, count: float) -> int:
 
 def run_case(path: str, spp: int) -> dict:
     """Load, build and render one scene in this process; the figures as a dict."""
-    from renderer.options import RenderOptions
+    from renderer.settings.options import RenderOptions
     from renderer.render import load_kernels, prepare, render_frame
     from renderer.usd.importer import load_scene
 

@@ -27,7 +27,7 @@ import make_examples as m  # noqa: E402
 
 from renderer.media.grids import field_bounds  # noqa: E402
 from renderer.media.openvdb import read_field  # noqa: E402
-from renderer.options import RenderOptions  # noqa: E402
+from renderer.settings.options import RenderOptions  # noqa: E402
 from renderer.render import prepare, render_frame  # noqa: E402
 from renderer.usd.importer import load_scene  # noqa: E402
 

@@ -44,7 +44,7 @@ def render_tile(path: pathlib.Path, size: int, spp: int, frame: float | None = N
     """Linear RGB (size, size, 3) of one scene, letterboxed into a square."""
     from pxr import Usd
 
-    from renderer.options import RenderOptions
+    from renderer.settings.options import RenderOptions
     from renderer.render import frame_channels, prepare, render_frame
     from renderer.usd.importer import load_scene
 
@@ -78,7 +78,7 @@ def main() -> int:
     ap.add_argument("--columns", type=int, default=6)
     ap.add_argument("-o", "--output", default=str(ROOT / "docs" / "contact_sheet.png"))
     args = ap.parse_args()
-    from renderer.device import init_warp
+    from renderer.kernels.device import init_warp
     from service.api.preview import srgb8
 
     init_warp()

@@ -1,6 +1,6 @@
 """``drt``: the command line. ``drt render SCENE [-o OUT.exr] [...]`` renders a frame or a range of frames, with
 husk's flags (``-f/-n/-i``, ``-s``, ``-c``, ``--res``, ``-V a``), to ``-o`` or to the render settings' products;
-``drt warmup`` compiles the render kernels tuned for this machine's CPU (``renderer.kernel_cache``).
+``drt warmup`` compiles the render kernels tuned for this machine's CPU (``renderer.kernels.cache``).
 
 A range renders in one process: the stage is opened once, the kernels load once, and a frame whose geometry or
 materials did not change reuses the hierarchy and textures of the one before (``render.prepare``'s ``reuse``).
@@ -24,7 +24,7 @@ import signal
 import sys
 import time
 
-from renderer.options import SETTINGS, SETTINGS_TABLE, SHORTHANDS, Setting
+from renderer.settings.options import SETTINGS, SETTINGS_TABLE, SHORTHANDS, Setting
 
 
 class _Parser(argparse.ArgumentParser):
@@ -86,7 +86,7 @@ class _AppendChoices(argparse.Action):
 
 
 def add_setting_flags(p: argparse.ArgumentParser, exclude: tuple[str, ...] = ()) -> None:
-    """One flag per row of ``renderer.options.SETTINGS_TABLE`` (``drt render`` and ``drt submit`` alike), with its
+    """One flag per row of ``renderer.settings.options.SETTINGS_TABLE`` (``drt render`` and ``drt submit`` alike), with its
     aliases, and the shorthands for several (``--res W H``). A flag not given is absent from the namespace
     (``given_settings``), so defaults come from the table alone."""
     for s in SETTINGS_TABLE:
@@ -168,7 +168,7 @@ def add_warmup_command(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
             "later renders use them, 2-5 %% faster than the portable kernels shipped with the package")
     w = sub.add_parser("warmup", help=text, description=(text[0].upper() + text[1:] + ".").replace("%%", "%"))
     w.add_argument("--prebuilt", action="store_true",
-                   help="instead, rebuild the portable kernels shipped in renderer/prebuilt (for maintainers, after "
+                   help="instead, rebuild the portable kernels shipped in renderer/kernels/prebuilt (for maintainers, after "
                         "a change to kernel code)")
     return w
 
@@ -280,7 +280,7 @@ def _si(x: float) -> str:
 
 def request_from_args(args: argparse.Namespace):
     """The RenderRequest that ``drt render``'s flags describe."""
-    from renderer.request import RenderRequest
+    from renderer.settings.request import RenderRequest
 
     return RenderRequest.from_settings(args.scene, args.frame, given_settings(args))
 
@@ -360,7 +360,8 @@ def _targets(args, products: list, frame: float, warn) -> list[tuple[str, object
 def cmd_render(args: argparse.Namespace) -> int:
     """Render the frames, each to its outputs; in a range, a failed frame is reported and the others render."""
     from renderer.errors import RenderError
-    from renderer.render import default_threads, load_kernels
+    from renderer.integrator.frame import default_threads
+    from renderer.kernels.loading import load_kernels
     from renderer.usd.stage import open_stage
     from renderer.usd.products import default_frame, resolve_settings_path
 
@@ -410,8 +411,8 @@ class _Run:
 
     def snapshot(self) -> None:
         """Write the frame in progress, its finished tiles (the rest black), to its outputs (SIGUSR1)."""
-        from renderer.products import write_product
-        from renderer.render import assemble
+        from renderer.output.var_channels import write_product
+        from renderer.integrator.frame import assemble
 
         if self.in_progress is None:
             return
@@ -429,8 +430,9 @@ class _Run:
 
     def _checkpoints(self, request, prep, members, tile_size: int):
         """The frame's tile checkpoints (``--checkpoint``) and the tiles an earlier run left, by index."""
-        from renderer.checkpoint import FrameCheckpoints
-        from renderer.render import TileSums, split_tiles
+        from renderer.output.checkpoint import FrameCheckpoints
+        from renderer.film.tiles import split_tiles
+        from renderer.integrator.tile import TileSums
 
         if not self.args.checkpoint:
             return None, {}
@@ -449,8 +451,9 @@ class _Run:
     def frame(self, frame: float) -> None:
         from dataclasses import replace
 
-        from renderer.products import UNWRITTEN, needs, unwritten, with_needs, write_product
-        from renderer.render import auto_tile_size, render_frame
+        from renderer.output.var_channels import UNWRITTEN, needs, unwritten, with_needs, write_product
+        from renderer.film.tiles import auto_tile_size
+        from renderer.integrator.frame import render_frame
         from renderer.usd.products import read_products
 
         args, base = self.args, self.base
@@ -523,8 +526,8 @@ class _Run:
 def cmd_warmup(args: argparse.Namespace) -> int:
     import warp as wp
 
-    from renderer.kernel_cache import PREBUILT_ROOT, warm_native, write_prebuilt
-    from renderer.render import RENDER_MODULES
+    from renderer.kernels.cache import PREBUILT_ROOT, warm_native, write_prebuilt
+    from renderer.kernels.loading import RENDER_MODULES
 
     t = time.perf_counter()
     if args.prebuilt:
@@ -550,7 +553,7 @@ def render_main(args: argparse.Namespace) -> int:
     """Run ``drt render`` or ``drt warmup`` with parsed arguments under the CLI's error contract; returns the
     exit code."""
     try:
-        from renderer.device import init_warp
+        from renderer.kernels.device import init_warp
 
         init_warp()
         return cmd_warmup(args) if args.command == "warmup" else cmd_render(args)

@@ -1,7 +1,7 @@
 """The service's wire format (pydantic v2): what clients send and what they get back.
 
 ``schemas`` knows nothing of the database or the queue; of the renderer it reads only the settings table
-(``renderer.options``, pure Python), from which ``RenderSettings`` is derived. Settings keys are named like the
+(``renderer.settings.options``, pure Python), from which ``RenderSettings`` is derived. Settings keys are named like the
 ``drt render`` flags.
 """
 from .jobs import (ErrorBody, FramePublic, FrameState, Health, JobList, JobPublic, JobState, ProductPublic,

@@ -5,7 +5,7 @@ Keys follow the ``drt render`` flags (``--no-motion-blur`` is ``"motion_blur": f
 relative to the frame), ``focal_length`` is in the camera's USD units (tenths of a scene unit, like the
 ``focalLength`` attribute), ``focus_distance`` in scene units, ``f_stop`` unitless (0 = pinhole).
 
-Every field but ``frames`` is a row of the renderer's settings table (``renderer.options.SETTINGS_TABLE``, pure
+Every field but ``frames`` is a row of the renderer's settings table (``renderer.settings.options.SETTINGS_TABLE``, pure
 Python): its default, bounds, unit and help are written there once and reach OpenAPI from here. Bounds are the
 hard ones of the format; the service adds configurable limits (frames, tiles per job).
 """
@@ -16,7 +16,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, create_model, field_validator, model_validator
 
-from renderer.options import MAX_LPES, SETTINGS, SETTINGS_TABLE, Setting, resolve_given
+from renderer.settings.options import MAX_LPES, SETTINGS, SETTINGS_TABLE, Setting, resolve_given
 
 MAX_FRAMES = 100_000
 MAX_TIME = 1.0e9  # |time code| bound: keeps frame arithmetic exact enough and rejects nonsense early
@@ -111,7 +111,7 @@ class _SettingsBase(_Strict):
 
     @model_validator(mode="after")
     def _dependent_defaults(self):
-        # The time-limit rule of renderer.options.resolve_given: a time-limited job's spp, if not given, is the cap.
+        # The time-limit rule of renderer.settings.options.resolve_given: a time-limited job's spp, if not given, is the cap.
         given = {k: getattr(self, k) for k in self.model_fields_set if k in SETTINGS}
         spp = resolve_given(given).get("spp")
         if "spp" not in given and spp is not None:
@@ -131,7 +131,7 @@ class _SettingsBase(_Strict):
         return {s.name: getattr(self, s.name) for s in SETTINGS_TABLE}
 
 
-# Every field but ``frames`` comes from the renderer's settings table (renderer/options.py).
+# Every field but ``frames`` comes from the renderer's settings table (renderer/settings/options.py).
 RenderSettings = create_model(
     "RenderSettings", __base__=_SettingsBase, __doc__="How to render each frame (everything that affects the pixels).",
     **{s.name: _field(s) for s in SETTINGS_TABLE})

@@ -7,7 +7,7 @@ and keys the worker's scene cache. It never holds pydantic objects (workers need
 
 **Products.** A frame is rendered once, with the overrides of its render settings' first RenderProduct (as
 ``RenderRequest.product`` None says), and every raster product that shares those overrides is written from that
-render, each with its RenderVars as layers (``renderer.products``, as ``drt render`` writes them). A product with
+render, each with its RenderVars as layers (``renderer.output.var_channels``, as ``drt render`` writes them). A product with
 overrides of its own (another camera, resolution, ...) would need a render of its own: the service names it in a
 warning and leaves it to ``drt render``. A stage without products writes one image, named after the scene file.
 """
@@ -17,8 +17,8 @@ import dataclasses
 import os
 from dataclasses import dataclass
 
-from renderer.options import RenderOptions
-from renderer.request import RenderRequest
+from renderer.settings.options import RenderOptions
+from renderer.settings.request import RenderRequest
 from schemas import JobCreate
 
 
@@ -27,14 +27,14 @@ class RenderSpec:
     scene_sha256: str
     # Its scene_path is the stored upload (inspection), or the upload's file name (tasks: workers use their copy).
     request: RenderRequest
-    # what the products' RenderVars alone need rendered (``renderer.products.needs``: AOVs, LPE, Cryptomatte and
+    # what the products' RenderVars alone need rendered (``renderer.output.var_channels.needs``: AOVs, LPE, Cryptomatte and
     # hit items; in request.options too, but not asked for by the job)
     product_aovs: tuple[str, ...] = ()
 
     @classmethod
     def from_settings(cls, settings: JobCreate, scene_path: str, scene_sha256: str,
                       product_aovs: tuple[str, ...] = ()) -> "RenderSpec":
-        from renderer.products import with_needs
+        from renderer.output.var_channels import with_needs
 
         request = RenderRequest.from_settings(scene_path, None, settings.render_settings())
         options, extra = with_needs(request.options, product_aovs)
@@ -97,7 +97,7 @@ def frame_products(stage, request: RenderRequest, frame: float, warn) -> list[Fr
     products and vars it leaves out. RenderError when the settings have products but none to write."""
     from renderer.cli import expand_frame
     from renderer.errors import RenderError
-    from renderer.products import UNWRITTEN, unwritten
+    from renderer.output.var_channels import UNWRITTEN, unwritten
     from renderer.usd.products import read_products, resolve_settings_path
 
     products = read_products(stage, resolve_settings_path(stage, request.settings_prim, lambda *a: None), frame)

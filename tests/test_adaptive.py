@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from renderer.film.adaptive import Convergence, pixel_error
-from renderer.options import RenderOptions
+from renderer.settings.options import RenderOptions
 from renderer.render import Tile, frame_channels, prepare, render_frame, render_tile
 from test_render_tiles import make_scene
 

@@ -317,7 +317,7 @@ def test_stand_ins_get_their_triangles_where_the_shape_cannot_be_used(tmp_path):
     """A still implicit prim arrives as its shape and a one-triangle stand-in. An emissive one (a light samples its
     triangles) and the operands of a CSG group get exactly the tessellation the importer made before; a stand-in
     that stops being usable after import (a light made of it through the library) gets it when prepared."""
-    from renderer.options import RenderOptions
+    from renderer.settings.options import RenderOptions
     from renderer.render import prepare
 
     stage = stages.new_stage(tmp_path / "s.usda")
@@ -413,7 +413,7 @@ def test_a_sphere_covers_exactly_its_disc_in_an_orthographic_view(tmp_path):
     """Coverage through the whole render path (camera, walk, film): the alpha of a unit sphere seen orthographically
     integrates to pi (seeds 0 and 1: +1.0e-4, +0.5e-4). Its 4032-triangle tessellation covered 0.165 % less (a
     64-gon silhouette), five times this tolerance."""
-    from renderer.options import RenderOptions
+    from renderer.settings.options import RenderOptions
     from renderer.render import frame_channels, prepare, render_frame
 
     stage = stages.new_stage(tmp_path / "disc.usda")

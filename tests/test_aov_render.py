@@ -12,7 +12,7 @@ from pxr import Gf, Kind, Sdf, Usd, UsdGeom, UsdLux, UsdShade
 import stages
 from test_cli import assert_one_line_error, drt
 from renderer.film import cryptomatte as cm
-from renderer.options import RenderOptions
+from renderer.settings.options import RenderOptions
 from renderer.render import frame_image, prepare, render_frame
 from renderer.usd.importer import load_scene
 
@@ -319,7 +319,7 @@ def test_lpe_light_group_and_cryptomatte_layers_have_the_same_bits_in_any_tiling
 
 
 def test_asking_for_layers_leaves_the_beauty_bits_as_they_are(room_file):
-    """Layers are rendered by a kernel variant of their own (``renderer.integrator_layers``): the beauty, depth,
+    """Layers are rendered by a kernel variant of their own (``renderer.integrator.layers``): the beauty, depth,
     normal and albedo it writes must be those of the plain kernel, bit for bit."""
     options = dict(width=48, height=32, spp=16)
     plain = render(room_file, **options)

@@ -127,7 +127,7 @@ def test_renderer_imports_and_parses_without_the_service_libraries():
     """A library user installs `drt` without the [service] extra: the renderer and `drt render` still work."""
     r = run_without({"fastapi", "starlette", "sqlalchemy", "dask", "distributed", "uvicorn", "httpx", "pydantic",
                      "pydantic_settings"}, """
-        import renderer.render, renderer.request, renderer.usd.importer, renderer.cli
+        import renderer.render, renderer.settings.request, renderer.usd.importer, renderer.cli
         from renderer.cli import build_parser
         args = build_parser().parse_args(["render", "x.usda", "-o", "x.exr", "--f-stop", "2.8"])
         req = renderer.cli.request_from_args(args)
@@ -216,10 +216,10 @@ def test_the_client_imports_with_its_extra_alone():
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# Render settings: declared once, in renderer/options.py's table; everything else is derived from it.
+# Render settings: declared once, in renderer/settings/options.py's table; everything else is derived from it.
 
 def _setting_cases():
-    from renderer.options import SETTINGS_TABLE
+    from renderer.settings.options import SETTINGS_TABLE
 
     return [pytest.param(s, id=s.name) for s in SETTINGS_TABLE]
 
@@ -316,7 +316,7 @@ def test_the_wire_format_and_openapi_derive_each_setting_from_the_table(s):
     assert s.name in str(_OPENAPI)
 
 
-SETTINGS_HOME = ROOT / "renderer" / "options.py"
+SETTINGS_HOME = ROOT / "renderer" / "settings" / "options.py"
 SCENE_MODEL = ROOT / "renderer" / "scene" / "model.py"  # what a loaded scene holds (a camera's own f-stop), not settings
 
 
@@ -324,7 +324,7 @@ def test_no_setting_is_declared_outside_the_table():
     """No flag string of a setting is written anywhere but the table, and no record that carries settings (a class with
     three or more fields named like settings: a pydantic model, a dataclass) gives one a literal default: such
     records take ``options.default_of`` (the table's default), or no default."""
-    from renderer.options import SETTINGS_TABLE
+    from renderer.settings.options import SETTINGS_TABLE
 
     flags = {s.cli_flag for s in SETTINGS_TABLE}
     names = {s.name for s in SETTINGS_TABLE}
@@ -346,4 +346,4 @@ def test_no_setting_is_declared_outside_the_table():
                 for f in fields:
                     if f.value is not None and getattr(getattr(f.value, "func", None), "id", "") != "default_of":
                         bad.append(f"{p.relative_to(ROOT)}:{f.lineno}: {node.name}.{f.target.id}")
-    assert not bad, "settings declared outside renderer/options.py:\n" + "\n".join(bad)
+    assert not bad, "settings declared outside renderer/settings/options.py:\n" + "\n".join(bad)

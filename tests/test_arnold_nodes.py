@@ -7,7 +7,7 @@ from PIL import Image
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, Vt
 
 import stages
-from renderer.options import RenderOptions
+from renderer.settings.options import RenderOptions
 from renderer.render import frame_channels, prepare, render_frame
 from renderer.usd.importer import load_scene
 

@@ -7,7 +7,7 @@ import pathlib
 import numpy as np
 import pytest
 
-from renderer.options import RenderOptions
+from renderer.settings.options import RenderOptions
 from renderer.render import frame_channels, prepare, render_frame
 from renderer.usd.importer import load_scene
 

@@ -1,4 +1,4 @@
-"""Colour management (renderer/color.py, renderer/usd/color.py): every colour is converted once, at load, into the
+"""Colour management (renderer/core/color.py, renderer/usd/color.py): every colour is converted once, at load, into the
 RenderSettings' renderingColorSpace through OpenColorIO; the EXR says which primaries it holds.
 
 Expected values come from OpenColorIO itself (its built-in config), independently of the code under test: a
@@ -12,7 +12,7 @@ import pytest
 from pxr import Gf, Sdf, Usd, UsdLux, UsdRender, UsdShade
 
 import stages
-from renderer.color import ColorSpaces, to_display
+from renderer.core.color import ColorSpaces, to_display
 from renderer.errors import SettingsError
 from renderer.film.exr import read_exr
 from renderer.render import RenderOptions, frame_attributes, prepare, render_frame, write_frame
@@ -186,7 +186,7 @@ def test_rendering_spaces_that_cannot_be_rendered_in_are_refused(tmp_path):
 
 
 def test_the_config_comes_from_the_option_else_ocio_else_the_builtin(monkeypatch, tmp_path):
-    from renderer.color import config_name
+    from renderer.core.color import config_name
 
     monkeypatch.delenv("OCIO", raising=False)
     assert config_name() == "ocio://default"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from renderer.options import RenderOptions
+from renderer.settings.options import RenderOptions
 from renderer.render import frame_channels, prepare, render_frame
 from renderer.scene import tessellate_curves as tc
 from renderer.scene import tessellate_points as tp

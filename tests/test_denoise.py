@@ -6,7 +6,7 @@ import pytest
 
 from renderer.errors import SettingsError
 from renderer.film import denoise
-from renderer.options import RenderOptions
+from renderer.settings.options import RenderOptions
 from renderer.render import frame_channels, prepare, render_frame
 from test_render_tiles import make_scene
 

@@ -217,8 +217,8 @@ def test_purposes_from_the_settings_and_from_the_command_line(tmp_path):
 
 def test_a_frame_reuses_the_hierarchy_of_the_one_before_while_the_geometry_is_still(tmp_path):
     from renderer.render import render_frame
-    from renderer.request import RenderRequest
-    from renderer.options import RenderOptions
+    from renderer.settings.request import RenderRequest
+    from renderer.settings.options import RenderOptions
     from renderer.usd.stage import open_stage
 
     stage = stages.new_stage(tmp_path / "a.usda")

@@ -1,11 +1,11 @@
-"""Files written all at once (``renderer.files``): the whole new file or the old one, never a part, nothing left over."""
+"""Files written all at once (``renderer.core.files``): the whole new file or the old one, never a part, nothing left over."""
 from __future__ import annotations
 
 import os
 
 import pytest
 
-from renderer.files import atomic_write, replacing
+from renderer.core.files import atomic_write, replacing
 
 
 def test_a_write_replaces_the_file_with_a_normal_mode_and_leaves_no_temporary(tmp_path):

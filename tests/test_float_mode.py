@@ -8,9 +8,9 @@ import pytest
 import warp as wp
 
 import renderer.render as render_module
-from renderer.device import FTZ_DAZ, denormals_flushed, init_warp, thread_mxcsr
+from renderer.kernels.device import FTZ_DAZ, denormals_flushed, init_warp, thread_mxcsr
 from renderer.film.tiles import Tile
-from renderer.options import RenderOptions
+from renderer.settings.options import RenderOptions
 from renderer.render import prepare, render_frame, render_tile
 
 from test_render_tiles import make_scene

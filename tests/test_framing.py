@@ -6,10 +6,10 @@ import pytest
 from pxr import Gf, Sdf, Usd, UsdRender
 
 import stages
-from renderer.camera import conform_aperture
+from renderer.camera.lens import conform_aperture
 from renderer.film.exr import read_exr
-from renderer.framing import resolve_framing, window_pixels
-from renderer.options import RenderOptions
+from renderer.camera.framing import resolve_framing, window_pixels
+from renderer.settings.options import RenderOptions
 from renderer.render import frame_channels, prepare, render_frame, write_frame
 from renderer.usd.importer import load_scene
 

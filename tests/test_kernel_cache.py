@@ -1,4 +1,4 @@
-"""The render kernels shipped compiled ahead (``renderer.kernel_cache``): a fresh cache renders without compiling,
+"""The render kernels shipped compiled ahead (``renderer.kernels.cache``): a fresh cache renders without compiling,
 the host-tuned build wins once it is cached, and a stale or missing prebuilt falls back to compiling.
 
 Each case runs in a process of its own with an empty Warp kernel cache, and Warp's compiler replaced by one that
@@ -33,14 +33,14 @@ import warp as wp
 if os.environ.get("CACHE"):
     wp.config.kernel_cache_dir = os.environ["CACHE"]
 sys.path.insert(0, os.environ["TINY_DIR"])
-from renderer.device import init_warp
+from renderer.kernels.device import init_warp
 init_warp()
 import warp._src.build as build
 if os.environ.get("NO_COMPILE"):
     def refuse(*a, **k):
         raise RuntimeError("compiled although a build was expected in the cache")
     build.build_cpu = refuse
-from renderer import kernel_cache, sample_profile
+from renderer.kernels import cache as kernel_cache, profile as sample_profile
 if os.environ.get("PROFILES"):  # sample profiles of the tiny module
     sample_profile.PROFILES = pathlib.Path(os.environ["PROFILES"])
 action = os.environ["ACTION"]
@@ -96,7 +96,7 @@ def _run(tmp: pathlib.Path, action: str, cache: pathlib.Path | None, *, no_compi
 
 
 def _host_is_v3() -> bool:
-    from renderer.kernel_cache import host_has_x86_64_v3
+    from renderer.kernels.cache import host_has_x86_64_v3
 
     return host_has_x86_64_v3()
 
@@ -107,11 +107,11 @@ def _needs_v3():
 
 
 def test_a_fresh_cache_renders_with_the_shipped_kernels_without_compiling(tmp_path):
-    """The build in renderer/prebuilt matches the source: run ``drt warmup --prebuilt`` after changing
+    """The build in renderer/kernels/prebuilt matches the source: run ``drt warmup --prebuilt`` after changing
     kernel code, or the first render of every fresh install compiles for ~20 s."""
     import warp as wp
 
-    from renderer.kernel_cache import prebuilt_dir
+    from renderer.kernels.cache import prebuilt_dir
 
     _needs_v3()
     if not prebuilt_dir().is_dir():
@@ -121,8 +121,8 @@ def test_a_fresh_cache_renders_with_the_shipped_kernels_without_compiling(tmp_pa
     except AssertionError as e:
         if "compiled although" not in str(e):
             raise
-        raise AssertionError("the kernels in renderer/prebuilt do not match the source: run "
-                             "`drt warmup --prebuilt` and commit renderer/prebuilt\n" + str(e)) from None
+        raise AssertionError("the kernels in renderer/kernels/prebuilt do not match the source: run "
+                             "`drt warmup --prebuilt` and commit renderer/kernels/prebuilt\n" + str(e)) from None
     assert set(out["loaded"].values()) == {"prebuilt"}, out
     assert out["mean"] > 0.0
 
@@ -161,7 +161,7 @@ def test_drt_warmup_makes_later_renders_load_the_host_tuned_kernels(tmp_path):
     p = subprocess.run([sys.executable, "-m", "renderer.cli", "warmup"], capture_output=True, text=True,
                        timeout=600, env=dict(os.environ, PYTHONPATH=str(ROOT)))
     assert p.returncode == 0, p.stderr
-    from renderer.render import RENDER_MODULES
+    from renderer.kernels.loading import RENDER_MODULES
 
     assert p.stdout.startswith(f"{len(RENDER_MODULES)} render kernel modules for this CPU in "), p.stdout
     out = _run(tmp_path, "kernels", None, no_compile=True)

@@ -11,8 +11,8 @@ import re
 import pytest
 import warp as wp
 
-from renderer import integrator, integrator_layers
-from renderer.device import init_warp
+from renderer.integrator import layers as integrator_layers, path as integrator
+from renderer.kernels.device import init_warp
 
 # the layers' functions called anywhere in the module, and the sample buffer's first-hit fields written by the
 # kernel (the struct's own helpers name its fields in every module)

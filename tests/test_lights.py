@@ -189,7 +189,7 @@ def row_of_lights_scene(tmp_path, n=1000):
 def test_a_row_of_a_thousand_lights_is_quieter_than_power_selection_and_unbiased(tmp_path):
     from dataclasses import replace
 
-    from renderer.options import RenderOptions
+    from renderer.settings.options import RenderOptions
     from renderer.render import frame_channels, prepare, render_frame
     from renderer.usd.importer import load_scene
     path, xs = row_of_lights_scene(tmp_path)

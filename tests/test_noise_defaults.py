@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from renderer.options import RenderOptions
+from renderer.settings.options import RenderOptions
 from renderer.render import frame_attributes, prepare, render_frame
 from test_render_tiles import make_scene
 

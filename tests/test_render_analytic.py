@@ -8,7 +8,7 @@ from pxr import Gf
 from scipy.optimize import minimize_scalar
 
 import stages
-from renderer.options import RenderOptions
+from renderer.settings.options import RenderOptions
 from renderer.render import Tile, frame_channels, prepare, render_frame, render_tile
 from renderer.usd.importer import load_scene
 

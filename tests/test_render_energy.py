@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import stages
-from renderer.options import RenderOptions
+from renderer.settings.options import RenderOptions
 from renderer.render import frame_channels, prepare, render_frame
 from renderer.usd.importer import load_scene
 

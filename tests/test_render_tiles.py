@@ -13,7 +13,7 @@ from renderer.film.exr import read_exr
 from renderer.film.tiles import Tile, auto_tile_size, split_tiles, tile_count
 from renderer.motion.shutter import Shutter
 from renderer.motion.transform import MotionTransform, make_transform
-from renderer.options import RenderOptions
+from renderer.settings.options import RenderOptions
 from renderer.render import (assemble, frame_image, prepare, render_frame, render_tile, with_options,
                              write_frame)
 from renderer.scene.model import (LIGHT_RECT, LIGHT_SPHERE, Camera, Instance, Light, Material, Mesh, Scene)

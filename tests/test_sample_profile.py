@@ -1,4 +1,4 @@
-"""The integrator's sample profile (``renderer.sample_profile``) and its writer (``bench/sample_profile.py``): names
+"""The integrator's sample profile (``renderer.kernels.profile``) and its writer (``bench/sample_profile.py``): names
 follow today's hashes, flags name the file as each build needs it, and the text is LLVM's sample-profile format
 with counts that add up. (That a profile reaches clang and Warp loads the result: ``test_kernel_cache``.)"""
 from __future__ import annotations
@@ -10,8 +10,8 @@ import sys
 
 import pytest
 
-from renderer import sample_profile
-from renderer.sample_profile import profile_flags, renew_names
+from renderer.kernels import profile as sample_profile
+from renderer.kernels.profile import profile_flags, renew_names
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
@@ -110,12 +110,12 @@ def test_the_writer_counts_line_offsets_per_inline_call_site_and_folds_what_has_
     assert (leaf["name"], leaf["at"], leaf["body"]) == ("leaf_0", 2, {1: 5, 2: 3})
 
 
-@pytest.mark.skipif(not (sample_profile.PROFILES / "renderer.integrator.prof").is_file(), reason="no profile")
+@pytest.mark.skipif(not (sample_profile.PROFILES / "renderer.integrator.path.prof").is_file(), reason="no profile")
 def test_the_shipped_profile_is_well_formed_and_names_todays_integrator():
     import warp as wp
 
-    from renderer import integrator
-    from renderer.device import init_warp
+    from renderer.integrator import path as integrator
+    from renderer.kernels.device import init_warp
 
     init_warp()
     mod = wp.get_module(integrator.__name__)

@@ -9,7 +9,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from renderer.film.film import resolve
-from renderer.options import RenderOptions
+from renderer.settings.options import RenderOptions
 from renderer.render import prepare, render_frame
 from renderer.shading import materials as M
 from renderer.shading import textures as T

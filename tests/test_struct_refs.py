@@ -1,4 +1,4 @@
-"""The scene structs pass by reference in the integrator's generated C++ (``renderer.struct_refs``).
+"""The scene structs pass by reference in the integrator's generated C++ (``renderer.kernels.struct_refs``).
 
 The patch is a speed measure (about a quarter of a sample was struct copies); these tests fail when a Warp release
 changes its generated code so that the patch no longer applies, instead of the renderer silently slowing down.
@@ -10,12 +10,12 @@ import re
 import pytest
 import warp as wp
 
-from renderer import integrator
+from renderer.integrator import path as integrator
 from renderer.accel.intersect import Geometry
-from renderer.device import init_warp
+from renderer.kernels.device import init_warp
 from renderer.lights.table import Lights
 from renderer.shading.materials import Materials
-from renderer.struct_refs import references
+from renderer.kernels.struct_refs import references
 
 
 @pytest.fixture(scope="module")

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from renderer.accel.triangle_kernels import leaf_triangles, triangle_boxes
-from renderer.device import init_warp
+from renderer.kernels.device import init_warp
 
 
 def test_triangle_boxes_equal_numpy_min_max_at_every_key():

@@ -7,7 +7,7 @@ import pytest
 from pxr import Gf, Sdf, UsdGeom, UsdShade, Vt
 
 import stages
-from renderer.options import RenderOptions
+from renderer.settings.options import RenderOptions
 from renderer.render import frame_channels, prepare, render_frame
 from renderer.usd.importer import load_scene
 

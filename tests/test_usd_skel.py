@@ -10,7 +10,7 @@ from pxr import Gf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
 
 import stages
 from renderer.motion.transform import matrix_at
-from renderer.options import RenderOptions
+from renderer.settings.options import RenderOptions
 from renderer.render import frame_channels, prepare, render_frame
 from renderer.usd.importer import load_scene
 

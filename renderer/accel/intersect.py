@@ -28,8 +28,8 @@ from renderer.accel.quantize import QNode, q_entries
 from renderer.accel.wide import (WideBoxes, dist_stack_t, entries, far_to_near, leaf_range, root_entered,
                                  wide_stack_t)
 from renderer.motion.kernels import MotionKeys, find_segment, keys_matrix
-from renderer.struct_refs import by_reference
-from renderer.vector_code import VECTOR_TYPES_CPP
+from renderer.kernels.struct_refs import by_reference
+from renderer.kernels.vector_code import VECTOR_TYPES_CPP
 
 BIG = 3.4e38
 

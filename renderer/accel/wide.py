@@ -29,8 +29,8 @@ import numpy as np
 import warp as wp
 
 from renderer.accel.build import Bvh
-from renderer.struct_refs import scratch
-from renderer.vector_code import VECTOR_TYPES_CPP
+from renderer.kernels.struct_refs import scratch
+from renderer.kernels.vector_code import VECTOR_TYPES_CPP
 
 wp.set_module_options({"enable_backward": False})
 

@@ -21,7 +21,7 @@ Conventions at the boundary (the OpenEXR 3.x Python binding decides most attribu
   sequences of str -> stringvector, ``OpenEXR.TimeCode`` -> timecode. ``framesPerSecond`` accepts a number and is
   stored as the closest simple rational (23.976 -> 24000/1001, see ``fps_to_rational``); ``timeCode`` accepts an
   ``OpenEXR.TimeCode`` or an ``(hours, minutes, seconds, frame)`` tuple (see ``timecode_from_frame``).
-- **Atomic writes** (``renderer.files``). The file is written to a temporary file in the target directory, fsynced
+- **Atomic writes** (``renderer.core.files``). The file is written to a temporary file in the target directory, fsynced
   and renamed over the target, so readers see the old file or the complete new one, never a partial one.
 """
 from __future__ import annotations
@@ -36,7 +36,7 @@ import numpy as np
 import OpenEXR
 
 from renderer.film.cryptomatte import is_rank_channel
-from renderer.files import replacing
+from renderer.core.files import replacing
 
 HALF_MAX = 65504.0
 FLOAT_MAX = float(np.finfo(np.float32).max)

@@ -21,13 +21,13 @@ import numpy as np
 import warp as wp
 
 from renderer.sampling.warps import sin_cos
-from renderer.struct_refs import by_reference
-from renderer.vector_code import VECTOR_TYPES_CPP
+from renderer.kernels.struct_refs import by_reference
+from renderer.kernels.vector_code import VECTOR_TYPES_CPP
 
 # Rendering needs no gradients: no adjoint code (half the compile time and code size).
 wp.set_module_options({"enable_backward": False})
 
-from renderer.options import FILTERS
+from renderer.settings.options import FILTERS
 
 FILTER_BOX = FILTERS["box"]
 FILTER_TRIANGLE = FILTERS["triangle"]

@@ -22,8 +22,8 @@ def merge(ids: np.ndarray, weights: np.ndarray, keep: int = KEEP) -> tuple[np.nd
     P, N = ids.shape
     if P == 0 or N == 0:
         return np.full((P, keep), -1, np.int32), np.zeros((P, keep), np.float32)
-    from renderer import kernel_cache
-    from renderer.device import init_warp
+    from renderer.kernels import cache as kernel_cache
+    from renderer.kernels.device import init_warp
     from renderer.film import coverage
     init_warp()
     kernel_cache.load_modules((coverage,))  # the shipped build when no other is cached (a no-op once loaded)

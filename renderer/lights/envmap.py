@@ -17,7 +17,7 @@ import math
 import numpy as np
 import warp as wp
 
-from renderer.struct_refs import by_reference
+from renderer.kernels.struct_refs import by_reference
 
 
 @by_reference

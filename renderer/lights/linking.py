@@ -18,7 +18,7 @@ from renderer.accel.intersect import Geometry
 from renderer.accel.occlusion import linked_transmittance
 from renderer.shading.materials import Materials
 from renderer.shading.textures import Textures
-from renderer.struct_refs import by_reference
+from renderer.kernels.struct_refs import by_reference
 
 MAX_GROUPS = 31  # link groups per mask (bits of an int32)
 FALLOFF_STEPS = 8  # slices of a shadow:falloff zone, each with the fade strength at its middle

@@ -26,7 +26,7 @@ from renderer.accel.build import build_bvh
 from renderer.accel.wide import WideBoxes, box_records, collapse
 from renderer.motion.transform import matrices_at
 from renderer.scene.model import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_DISTANT, LIGHT_DOME, LIGHT_RECT, LIGHT_SPHERE
-from renderer.struct_refs import by_reference
+from renderer.kernels.struct_refs import by_reference
 
 TREE_MIN = 8  # area lights from which the still ones are walked in a tree (fewer: one by one is as fast)
 PAD = 1.0e-4  # relative growth of each light's box

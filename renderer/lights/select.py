@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from renderer.struct_refs import by_reference
+from renderer.kernels.struct_refs import by_reference
 
 MAX_CLUSTERS = 64
 

@@ -42,7 +42,7 @@ from renderer.sampling.warps import (
     square_to_uniform_triangle,
     to_world,
 )
-from renderer.vector_code import VECTOR_TYPES_CPP
+from renderer.kernels.vector_code import VECTOR_TYPES_CPP
 
 XU_RADICAND_MIN = wp.constant(1.0e-30)  # sample_rect: fu^2 + b0^2 - 1 at least this (never a 0 / 0)
 

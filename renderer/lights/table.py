@@ -36,7 +36,7 @@ from renderer.scene.model import (
     Scene,
     Shaping,
 )
-from renderer.struct_refs import by_reference
+from renderer.kernels.struct_refs import by_reference
 
 
 @by_reference

@@ -18,7 +18,7 @@ import numpy as np
 import warp as wp
 
 from renderer.lpe import events
-from renderer.struct_refs import by_reference
+from renderer.kernels.struct_refs import by_reference
 
 wp.set_module_options({"enable_backward": False})
 

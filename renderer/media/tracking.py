@@ -38,7 +38,7 @@ from renderer.media.phase import G_MAX
 from renderer.motion.kernels import MotionKeys, keys_matrix
 from renderer.sampling.sobol import sample_1d, sample_2d
 from renderer.shading.materials import Materials
-from renderer.struct_refs import by_reference
+from renderer.kernels.struct_refs import by_reference
 
 wp.set_module_options({"enable_backward": False})
 

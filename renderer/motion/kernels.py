@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from renderer.struct_refs import by_reference
+from renderer.kernels.struct_refs import by_reference
 
 
 @by_reference

@@ -78,7 +78,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from renderer.vector_code import VECTOR_TYPES_CPP
+from renderer.kernels.vector_code import VECTOR_TYPES_CPP
 
 DIM_FILM = 0  # the camera's 11D request
 DIM_LIGHT_BASE = 11  # first dimension of bounce 0

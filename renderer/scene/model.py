@@ -453,7 +453,7 @@ class Scene:
     up_axis: str = "Y"
     render_settings: RenderSettingsInfo = field(default_factory=RenderSettingsInfo)
     volumes: list[Volume] = field(default_factory=list)  # participating media (UsdVol), see ``renderer.media``
-    # the colour spaces every colour was converted with (renderer.color.ColorSpaces); None: linear Rec.709
+    # the colour spaces every colour was converted with (renderer.core.color.ColorSpaces); None: linear Rec.709
     colors: object | None = None
     # CSG groups: the operation of each ("union", "intersection", "difference"); members name it on Instance
     csg_operations: list[str] = field(default_factory=list)

@@ -32,7 +32,7 @@ import warp as wp
 
 from renderer.scene.model import Material, Mesh, Texture
 from renderer.shading.textures import OUTPUT_RGB, OUTPUTS, WRAP_MODES, Textures, texture_fetch_lod, upload_textures
-from renderer.struct_refs import by_reference
+from renderer.kernels.struct_refs import by_reference
 
 # No gradients are ever taken: no adjoint code (half the compile time and code size).
 wp.set_module_options({"enable_backward": False})

@@ -10,7 +10,7 @@ reads) as float32 and decodes sRGB to linear at load time, so every lookup is li
 * "auto8" (MaterialX image nodes, Arnold's "auto") decodes every 8-bit image, grey ones too, and keeps float;
   any other name (a colour space of the OpenColorIO config: "ACEScg", "lin_p3d65_scene", "g22_rec709"...) keeps
   the stored values and names the space in ``LoadedImage.colorspace``: the importer converts them into the
-  rendering colour space (``renderer.color``), as it converts sRGB-decoded texels from linear Rec.709.
+  rendering colour space (``renderer.core.color``), as it converts sRGB-decoded texels from linear Rec.709.
 * Images are stored **bottom row first**: texel (i, j) has its centre at st = ((i + 0.5) / W, (j + 0.5) / H),
   the UsdUVTexture convention of ``st`` with its origin at the bottom-left (the top-left pixel of a PNG is at
   st ~ (0, 1)).
@@ -40,7 +40,7 @@ import numpy as np
 import warp as wp
 
 from renderer.scene.model import Texture
-from renderer.struct_refs import by_reference
+from renderer.kernels.struct_refs import by_reference
 
 # No gradients are ever taken: no adjoint code (half the compile time and code size).
 wp.set_module_options({"enable_backward": False})

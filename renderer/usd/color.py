@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from pxr import Sdf, Usd
 
-from renderer.color import LINEAR_REC709, ColorSpaces
+from renderer.core.color import LINEAR_REC709, ColorSpaces
 
 
 def is_color(attr) -> bool:

@@ -28,7 +28,7 @@ import os
 import numpy as np
 from pxr import Gf, Tf, Usd, UsdGeom, UsdLux, UsdRender, UsdShade
 
-from renderer.color import ColorSpaces
+from renderer.core.color import ColorSpaces
 from renderer.errors import SceneError, SettingsError
 from renderer.motion.shutter import Shutter
 from renderer.scene import model as sc
@@ -77,7 +77,7 @@ def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_pa
     refined to ``subdivision_level`` (0..6), or by default to a level chosen from the camera for an image
     ``image_width`` pixels wide (default: the render settings' width, else 640). Colours are converted into the
     render settings' ``renderingColorSpace`` (default linear Rec.709) through the OpenColorIO config
-    ``ocio_config`` (default ``$OCIO``, else OpenColorIO's built-in one; ``renderer.color``). Raises SceneError
+    ``ocio_config`` (default ``$OCIO``, else OpenColorIO's built-in one; ``renderer.core.color``). Raises SceneError
     (one-line message) for a missing or malformed file or a bad camera path.
 
     The render settings are those of ``settings_path`` (see ``camera.settings_prim``) with the overrides of its

@@ -32,7 +32,7 @@ from __future__ import annotations
 import numpy as np
 from pxr import Ar, UsdGeom, UsdLux
 
-from renderer.color import LINEAR_REC709
+from renderer.core.color import LINEAR_REC709
 from renderer.lights import dome_formats, ies
 from renderer.lights.envmap import latlong_mean
 from renderer.motion.transform import MotionTransform

@@ -15,7 +15,7 @@ import numpy as np
 
 from pxr import Ar, Sdf, Usd, UsdShade
 
-from renderer.color import LINEAR_REC709, ColorSpaces
+from renderer.core.color import LINEAR_REC709, ColorSpaces
 from renderer.scene.model import Texture
 from renderer.shading.textures import (MAX_TEXTURE_SIZE, TEXTURE_BUDGET, ImageError, LoadedImage, image_texture,
                                        read_image)

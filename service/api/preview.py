@@ -1,7 +1,7 @@
 """Preview PNGs: the frame so far (finished tiles; the rest black), tone-mapped for a screen.
 
 Tone mapping is deliberately plain: the EXR's linear, premultiplied colour (over black), from its rendering colour
-space through OpenColorIO's sRGB display with its un-tone-mapped view (``renderer.color.to_display``: Rec.709
+space through OpenColorIO's sRGB display with its un-tone-mapped view (``renderer.core.color.to_display``: Rec.709
 primaries, the sRGB transfer curve), clamped to [0, 1]; large frames are shrunk to ``MAX_SIDE`` pixels on their
 long side. A frame still rendering (its tiles) is shown as linear Rec.709: the rendering space is in the EXR's
 header, written when the frame is done.
@@ -23,7 +23,7 @@ MAX_SIDE = 1024
 
 def srgb8(rgb: np.ndarray, rendering: str | None = None, config: str | None = None) -> np.ndarray:
     """Linear ``rgb`` in the rendering colour space ``rendering`` (default linear Rec.709) as 8-bit sRGB."""
-    from renderer.color import to_display
+    from renderer.core.color import to_display
 
     x = np.nan_to_num(np.asarray(rgb, np.float32), nan=0.0, posinf=1.0, neginf=0.0)
     x = np.clip(to_display(x, rendering, config), 0.0, 1.0)

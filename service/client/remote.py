@@ -14,7 +14,7 @@ import time
 import uuid
 from pathlib import Path
 
-from renderer.files import atomic_write
+from renderer.core.files import atomic_write
 
 DEFAULT_SERVER = "http://127.0.0.1:8000"
 TERMINAL = ("succeeded", "failed", "canceled")

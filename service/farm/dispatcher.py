@@ -44,7 +44,8 @@ from sqlalchemy.exc import IntegrityError
 from renderer.film import film
 from renderer.film.borders import check_tile
 from renderer.film.tiles import Tile, split_tiles
-from renderer.render import TileSums, assemble
+from renderer.integrator.frame import assemble
+from renderer.integrator.tile import TileSums
 from schemas import JobCreate, JobState, product_name
 
 from ..queue import states as sm

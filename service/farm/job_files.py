@@ -10,7 +10,7 @@ any that would leave the frame's folder, whoever asks.
 Only the service reads and writes them (workers return tiles as task results and never see this directory). A
 tile's index is its place in the frame's grid (``renderer.film.tiles.split_tiles``).
 
-A checkpoint is written to a temporary file in its directory and renamed over its name (``renderer.checkpoint``), so a
+A checkpoint is written to a temporary file in its directory and renamed over its name (``renderer.output.checkpoint``), so a
 file that exists is complete: a service killed at any moment resumes from the tiles on disk, and assembling them
 gives the same bits as rendering the frame in one go (``render_tile`` is a pure function of scene, options and
 tile).
@@ -20,7 +20,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from renderer.checkpoint import load_tile, save_tile  # noqa: F401 - the tile files' format is the renderer's
+from renderer.output.checkpoint import load_tile, save_tile  # noqa: F401 - the tile files' format is the renderer's
 from schemas import product_name
 
 

@@ -38,7 +38,7 @@ from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 
-from renderer.files import atomic_write
+from renderer.core.files import atomic_write
 from renderer.film.tiles import Tile
 
 from ..spec import FrameProduct, RenderSpec, frame_products
@@ -197,7 +197,7 @@ def _one_line(e: BaseException) -> str:
 def prepared(spec: RenderSpec, frame: float, scene: ScenePackage, capacity: int = 2):
     """The PreparedScene of one frame of a job, from this process's cache or freshly loaded and prepared; a
     cached one prepared for a job that sampled differently (seed, spp, ...) takes this job's options."""
-    from renderer.render import with_options
+    from renderer.prepared import with_options
 
     key = (spec.scene_sha256, spec.cache_key(frame))
     options = spec.options()
@@ -212,8 +212,8 @@ def prepared(spec: RenderSpec, frame: float, scene: ScenePackage, capacity: int 
             with _cache_lock:
                 prep = _cache.get(key)
             if prep is None:
-                from renderer.device import init_warp
-                from renderer.render import prepare
+                from renderer.kernels.device import init_warp
+                from renderer.prepared import prepare
 
                 init_warp()
                 prep = prepare(local_scene(scene).load(spec, frame), options)
@@ -322,7 +322,7 @@ def render_tile_task(task: TileTask, scene: ScenePackage) -> dict:
     """The task's tiles' sums, in its order: ``{"arrays": [per tile], "seconds": [per tile], "rays",
     "nonfinite", "pid"}``, or ``{"stopped": True}``, or ``{"error"}``."""
     from renderer.errors import Cancelled, RenderError
-    from renderer.render import render_tile, tile_time_budget
+    from renderer.integrator.tile import render_tile, tile_time_budget
 
     background_priority()
     arrays, seconds, rays, nonfinite = [], [], 0, 0
@@ -379,11 +379,11 @@ class ProductImage:
 
 
 def frame_image_task(task: FrameTask, scene: ScenePackage) -> dict:
-    """The frame's products from its sums (``renderer.products.product_image``: each one's EXR channels, header
+    """The frame's products from its sums (``renderer.output.var_channels.product_image``: each one's EXR channels, header
     attributes and windows as plain values): ``{"products": [ProductImage]}`` or ``{"error"}``. The service writes
     them with the renderer's writer, so each EXR has the same bits as ``drt render``'s."""
     from renderer.errors import RenderError
-    from renderer.products import product_image
+    from renderer.output.var_channels import product_image
 
     try:
         prep = prepared(task.spec, task.frame, scene, task.cache_size)
@@ -401,7 +401,8 @@ def whole_frame_task(render_tiles, task: TileTask, scene: ScenePackage) -> dict:
     """Every tile of a frame and then its image, in one task (a frame small enough for one batch): the tiles
     as ``render_tiles`` (the tile task) renders them, assembled, and ``frame_image_task``'s result from the sums,
     plus the tiles' ``seconds``. The same bits as tile tasks, checkpoints and an assembly task give."""
-    from renderer.render import TileSums, assemble
+    from renderer.integrator.frame import assemble
+    from renderer.integrator.tile import TileSums
 
     tiles = render_tiles(task, scene)
     if "arrays" not in tiles:

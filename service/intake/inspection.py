@@ -73,8 +73,8 @@ def inspect_task(task: InspectTask) -> dict:
             return {"error": problem}
         from pxr import Usd
 
-        from renderer.options import MAX_PIXELS
-        from renderer.render import resolve_resolution
+        from renderer.settings.options import MAX_PIXELS
+        from renderer.prepared import resolve_resolution
 
         frames = task.frames
         stages = Usd.StageCache()  # the products are read from the stage the frame loaded from: opened once
@@ -98,9 +98,9 @@ def inspect_task(task: InspectTask) -> dict:
 
 
 def _product_aovs(spec: RenderSpec, frame: float, warnings: list[str]) -> list[str]:
-    """What the RenderVars of the frame's products need rendered (``renderer.products.needs``: AOVs, LPE,
+    """What the RenderVars of the frame's products need rendered (``renderer.output.var_channels.needs``: AOVs, LPE,
     Cryptomatte and hit items; ``spec.frame_products``); what it leaves out joins ``warnings``."""
-    from renderer.products import needs
+    from renderer.output.var_channels import needs
     from renderer.usd.stage import open_stage
 
     def warn(message: str) -> None:

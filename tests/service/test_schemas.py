@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import pytest
 
-from renderer.options import SETTINGS_TABLE, TIME_LIMITED_SPP
+from renderer.settings.options import SETTINGS_TABLE, TIME_LIMITED_SPP
 from schemas import FrameRange, JobCreate
 from service.errors import ApiError
 from service.spec import RenderSpec

@@ -36,7 +36,7 @@ def test_flags_become_settings():
 
 def test_a_time_limit_without_spp_is_capped_alike_by_submit_render_and_a_plain_post():
     from renderer.cli import request_from_args
-    from renderer.options import TIME_LIMITED_SPP
+    from renderer.settings.options import TIME_LIMITED_SPP
 
     render = request_from_args(build_parser().parse_args(["render", "s.usda", "-o", "o.exr", "--time-limit", "5"]))
     assert render.options.spp == JobCreate(**settings("--time-limit", "5")).spp == JobCreate(time_limit=5).spp \

@@ -19,12 +19,12 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from renderer.framing import Framing
+from renderer.camera.framing import Framing
 from renderer.motion.kernels import MotionKeys, keys_matrix, upload_keys
 from renderer.motion.transform import matrix_at
 from renderer.sampling.warps import square_to_uniform_disk_concentric
 from renderer.scene.model import Camera
-from renderer.struct_refs import by_reference
+from renderer.kernels.struct_refs import by_reference
 
 
 @by_reference

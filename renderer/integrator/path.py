@@ -15,7 +15,7 @@ medium) are walked by delta tracking along every ray before its surface: a real 
 (``FLAG_VOLUME``), lit like a surface vertex by light sampling and phase sampling combined with MIS; shadow rays
 take the media's transmittance (ratio tracking). Samples with NaN/Inf radiance are counted and zeroed; ``clamp``
 (off by default) limits a sample's radiance to cut fireflies, never silently. When a render asks for them (and
-then in a kernel variant of its own, ``renderer.integrator_layers``), each contribution is also handed to the LPE
+then in a kernel variant of its own, ``renderer.integrator.layers``), each contribution is also handed to the LPE
 vars whose automata accept its path (``renderer.lpe.kernel``), and the first surface a sample sees is recorded
 for Cryptomatte and the vars of what it hit.
 
@@ -35,7 +35,7 @@ from renderer.accel.intersect import BIG, Geometry, intersect_closest, safe_inve
 from renderer.accel.occlusion import transmittance
 from renderer.accel.surface import display_diffuse, hit_geometry, shading_normal, surface_at
 from renderer.accel.wide import entries, leaf_range, wide_stack_t
-from renderer.camera import CameraParams, camera_ray
+from renderer.camera.lens import CameraParams, camera_ray
 from renderer.film.film import SampleBuffer
 from renderer.lights.sample import (
     area_light_hit,
@@ -72,7 +72,7 @@ from renderer.media.tracking import (
     interior_transmittance,
     sample_media,
 )
-from renderer.options import TIME_FILTERS
+from renderer.settings.options import TIME_FILTERS
 from renderer.sampling.sobol import (
     BOUNCE_LIGHT_CHOICE,
     BOUNCE_LOBE,
@@ -108,7 +108,7 @@ from renderer.shading.bsdf import (
 from renderer.shading.materials import HitGeometry, Materials, MaterialSample, beer_lambert, eval_material_cone
 from renderer.shading.raycone import bounce_spread, camera_cone, uv_footprint
 from renderer.shading.textures import Textures
-from renderer.struct_refs import by_reference
+from renderer.kernels.struct_refs import by_reference
 
 # Rendering needs no gradients: no adjoint code (half the compile time and code size).
 wp.set_module_options({"enable_backward": False})
@@ -791,6 +791,6 @@ def trace_wave_kernel_variant(name: str, layers: bool, module: str | None = None
     return kernel
 
 
-# the kernel of every render that asks for no LPE var and no first-hit record (renderer.integrator_layers: of those
+# the kernel of every render that asks for no LPE var and no first-hit record (renderer.integrator.layers: of those
 # that do)
 trace_wave_kernel = trace_wave_kernel_variant("trace_wave_kernel", False)

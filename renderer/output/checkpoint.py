@@ -15,11 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from renderer.files import atomic_write
+from renderer.core.files import atomic_write
 
 
 def save_tile(path: Path, arrays: dict[str, np.ndarray]) -> None:
-    """Write a tile checkpoint atomically (``renderer.files``: a file that exists is complete).
+    """Write a tile checkpoint atomically (``renderer.core.files``: a file that exists is complete).
     FileNotFoundError if its directory is gone."""
     with atomic_write(path) as f:
         np.savez(f, **arrays)

@@ -1,6 +1,6 @@
 """Sample-based profile-guided optimisation of the render kernels: the profile clang reads when it compiles one.
 
-``renderer/profiles/<module>.prof`` is an LLVM sample profile (text format) of a module's kernel: how often each
+``renderer/kernels/profiles/<module>.prof`` is an LLVM sample profile (text format) of a module's kernel: how often each
 line of its generated C++ ran, per inline call site, measured with ``perf`` on the bench scenes by
 ``bench/sample_profile.py``. Given it (``-fprofile-sample-use``), clang lays the hot paths out straight and keeps
 cold code out of their way; the integrator renders 1-12 % faster with the same pixels (the profile changes where
@@ -25,7 +25,7 @@ import pathlib
 import re
 import tempfile
 
-from renderer.files import atomic_write
+from renderer.core.files import atomic_write
 
 PROFILES = pathlib.Path(__file__).parent / "profiles"
 # -debug-info-kind=line-directives-only: the debug locations a sample profile is matched by, without DWARF in the

@@ -182,7 +182,7 @@ def product_channels(prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = ()
     """A product's EXR channels and the names of those stored as HALF. A product without vars holds what a plain
     render writes (``frame_channels``: the beauty and the AOVs asked for); with vars, its vars, then the AOVs asked
     for on the command line (``user_aovs``) and the denoised layer if asked."""
-    from renderer.render import frame_channels
+    from renderer.output.frame import frame_channels
 
     plain = frame_channels(replace(prep, options=replace(prep.options, aovs=tuple(user_aovs))), sums)
     plain = {n: a for n, a in plain.items() if not n.startswith(VAR_LAYER)}  # other products' vars
@@ -225,7 +225,7 @@ def product_image(prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = (),
     stored as HALF: ``product_channels``, and the Cryptomatte layers its vars or the command line ask for. Made
     where the prepared frame is (a worker of the service), written elsewhere with ``image.write(path,
     half=halves)``, the same bits as ``write_product``."""
-    from renderer.render import FrameImage, cryptomatte_channels, frame_attributes, frame_windows
+    from renderer.output.frame import cryptomatte_channels, frame_attributes, frame_windows, FrameImage
 
     channels, halves = product_channels(prep, sums, vars_, user_aovs=user_aovs, half=half)
     kinds = needed_cryptomatte(vars_) + tuple(user_cryptomatte) if vars_ else None  # None: all asked for

@@ -4,7 +4,7 @@ Warp compiles a module's generated C++ the first time it is used and keeps the o
 by the module's source hash and compiler flags. For the integrator that is ~2 s of code generation and ~15 s of
 clang on this 2-core machine, so a fresh install used to spend ~19 s before its first pixel. The package
 therefore ships the render modules compiled ahead for a portable target, **x86-64-v3** (AVX2, FMA, BMI2: x86
-CPUs since 2013-2015), in ``renderer/prebuilt/<Warp version>/``. They seed Warp's cache, so the first render
+CPUs since 2013-2015), in ``renderer/kernels/prebuilt/<Warp version>/``. They seed Warp's cache, so the first render
 loads them in a fraction of a second.
 
 For each module, ``load_modules`` takes the first that applies:
@@ -15,7 +15,7 @@ For each module, ``load_modules`` takes the first that applies:
 2. the **shipped portable** build, when it was built from this source by this Warp and the CPU has x86-64-v3;
 3. otherwise a host-tuned **compile**, as Warp does by default (a stale prebuilt, another Warp, another CPU).
 
-``drt warmup --prebuilt`` rebuilds ``renderer/prebuilt`` after a change to kernel code;
+``drt warmup --prebuilt`` rebuilds ``renderer/kernels/prebuilt`` after a change to kernel code;
 ``tests/test_kernel_cache.py`` fails while the shipped build does not match the source.
 
 A module with a sample profile (``sample_profile``: the integrator) is compiled with it, host-tuned or portable.
@@ -32,7 +32,7 @@ import types
 
 import warp as wp
 
-from renderer.sample_profile import compiling_in, profile_flags, write_profile
+from renderer.kernels.profile import compiling_in, profile_flags, write_profile
 
 PREBUILT_ROOT = pathlib.Path(__file__).parent / "prebuilt"
 # Warp's default inlining flags (9000 keeps the integrator's call tree inlined: 35-40 % faster than LLVM's

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from renderer.options import RenderOptions
+from renderer.settings.options import RenderOptions
 from renderer.scene.model import Scene
 
 DEFAULT_WIDTH = 640  # pixels, when neither the flags nor the stage say

@@ -17,8 +17,8 @@ import os
 from dataclasses import dataclass, field
 
 from renderer.film.hit_vars import primvar_names
-from renderer.options import SETTINGS, RenderOptions, check_settings, default_of, resolve_given
-from renderer.render import PreparedScene, prepare
+from renderer.settings.options import SETTINGS, RenderOptions, check_settings, default_of, resolve_given
+from renderer.prepared import prepare, PreparedScene
 from renderer.scene.model import Scene
 from renderer.usd.importer import load_scene
 
