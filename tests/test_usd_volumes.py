@@ -159,3 +159,98 @@ def test_other_volume_shaders_render_the_default_fog_with_a_warning(tmp_path):
     sc = load_scene(tmp_path / "other.usda")
     assert sc.volumes[0].medium.scattering == (1.0, 1.0, 1.0)
     assert any("PxrVolume" in w for w in sc.warnings)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Channels matched by fieldName (Arnold's and Karma's authoring: density_channel names the grid in the file)
+# ----------------------------------------------------------------------------------------------------------------
+
+def slab_file(tmp_path, d=2.0, h=0.1, half=2.0, thickness=0.5):
+    """A constant-density slab z in [-thickness/2, thickness/2], |x|, |y| < half: optical depth d x thickness along
+    z (trilinear: a hat per voxel, so n voxels of size h integrate to n h); its grid is named as Maya's Bifrost and
+    Houdini's exports name theirs, with a small temperature grid beside it."""
+    n, nxy = int(round(thickness / h)), int(round(2 * half / h))
+    return write_vdb(tmp_path / "bifrost.vdb", [
+        {"name": "voxel_fog_density", "data": np.full((nxy, nxy, n), d, np.float32), "voxel_size": h,
+         "translation": (-half + h / 2, -half + h / 2, -thickness / 2 + h / 2)},
+        {"name": "voxel_fog_temperature", "data": blob(1.0), "voxel_size": h},
+    ])
+
+
+def arnold_volume_material(stage, **inputs):
+    """A Material whose ``outputs:arnold:volume`` is an ``arnold:standard_volume`` shader, as Arnold's USD exports
+    write it; ``inputs`` are the shader's inputs (str: String, float: Float)."""
+    mat = UsdShade.Material.Define(stage, "/World/Looks/Smoke")
+    sh = UsdShade.Shader.Define(stage, "/World/Looks/Smoke/standard_volume")
+    sh.CreateIdAttr("arnold:standard_volume")
+    for name, value in inputs.items():
+        kind = Sdf.ValueTypeNames.String if isinstance(value, str) else Sdf.ValueTypeNames.Float
+        sh.CreateInput(name, kind).Set(value)
+    mat.CreateOutput("arnold:volume", Sdf.ValueTypeNames.Token).ConnectToSource(sh.ConnectableAPI(), "volume")
+    return mat
+
+
+def channel_stage(tmp_path, **inputs):
+    """A Volume whose ``field:density`` holds the grid ``voxel_fog_density`` and ``field:temperature`` the grid
+    ``voxel_fog_temperature``, bound to a standard_volume with ``inputs``, in a dome of radiance 1 seen from z = 4
+    (36 mm square aperture, 50 mm lens: tan(half fov) = 0.36)."""
+    file = slab_file(tmp_path)
+    stage = stages.new_stage(tmp_path / "channels.usda")
+    stages.camera(stage, translate=(0, 0, 4), focal_mm=50, h_ap_mm=36, v_ap_mm=36, tenths_per_mm=0.01)
+    stages.dome_light(stage, intensity=1.0)
+    mat = arnold_volume_material(stage, **inputs)
+    add_volume(stage, "/World/Smoke", file, {"density": ("voxel_fog_density", None),
+                                             "temperature": ("voxel_fog_temperature", None)}, mat)
+    stage.Save()
+    return load_scene(tmp_path / "channels.usda")
+
+
+def render_rgb(scene, **opts):
+    from renderer.render import RenderOptions, frame_channels, prepare, render_frame
+    prep = prepare(scene, RenderOptions(unbiased=True, **opts))
+    ch = frame_channels(prep, render_frame(prep, tile_size=32, threads=2).sums)
+    return np.stack([ch["R"], ch["G"], ch["B"]], -1)
+
+
+def test_a_density_channel_naming_the_grid_in_the_file_renders_its_transmittance(tmp_path):
+    """density_channel = the fieldName (not the relationship name): a pure absorber (scatter 0) of extinction 2
+    per unit, 0.5 thick, in front of a dome of radiance 1 passes exp(-1 / cos theta) along each camera ray."""
+    sc = channel_stage(tmp_path, density_channel="voxel_fog_density", scatter=0.0)
+    assert [v.name for v in sc.volumes] == ["/World/Smoke"]
+    assert not [w for w in sc.warnings if "olume" in w], sc.warnings
+    rgb = render_rgb(sc, width=16, height=16, spp=256, max_depth=4)
+    x = ((np.arange(16) + 0.5) / 16 * 2 - 1) * 0.36
+    cos = 1.0 / np.sqrt(1 + x[None, :] ** 2 + x[:, None] ** 2)
+    expect = np.exp(-2.0 * 0.5 / cos)
+    centre = (slice(2, 14), slice(2, 14))
+    np.testing.assert_allclose(rgb[centre].mean(axis=(0, 1)), expect[centre].mean(), rtol=0.03)
+    assert np.isfinite(rgb).all()
+
+
+def test_a_channel_naming_no_field_warns_once_with_the_channel_and_the_fields(tmp_path):
+    sc = channel_stage(tmp_path, density_channel="smoke", scatter_color_channel="Cd")
+    assert sc.volumes == []
+    mine = [w for w in sc.warnings if "/World/Smoke" in w]
+    assert len(mine) == 1, sc.warnings
+    assert "density channel 'smoke'" in mine[0] and "scatter_color channel 'Cd'" in mine[0]
+    assert "field:density = 'voxel_fog_density'" in mine[0] and "field:temperature = 'voxel_fog_temperature'" in mine[0]
+
+
+def test_a_relationship_name_outranks_another_fields_grid_name(tmp_path):
+    """UsdVol's rule first: the relationship named as the channel wins over a field whose fieldName is the channel;
+    a channel no relationship is named after finds its field by fieldName (here the blackbody's temperature)."""
+    file = write_vdb(tmp_path / "rank.vdb", [{"name": "density", "data": blob(2.0)},
+                                             {"name": "smoke", "data": blob(5.0)},
+                                             {"name": "temperature", "data": blob(1.5)}])
+    stage = stages.new_stage(tmp_path / "rank.usda")
+    stages.camera(stage, translate=(0, 0, 5))
+    mat = arnold_volume_material(stage, density_channel="smoke", temperature_channel="temperature", emission=1.0)
+    add_volume(stage, "/World/Fire", file, {"smoke": ("density", None), "other": ("smoke", None),
+                                            "heat_field": ("temperature", None)}, mat)
+    stage.Save()
+    sc = load_scene(tmp_path / "rank.usda")
+    assert [v.name for v in sc.volumes] == ["/World/Fire"], sc.warnings
+    v = sc.volumes[0]
+    assert float(v.density.values[0]) == 2.0  # field:smoke's grid 'density', not field:other's grid 'smoke' (5)
+    assert v.temperature is not None and float(v.temperature.values[0]) == 1.5  # field:heat_field by its fieldName
+    assert not [w for w in sc.warnings if "/World/Fire" in w], sc.warnings

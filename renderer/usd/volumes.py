@@ -7,9 +7,14 @@ skipped with a warning.
 ``Field3DAsset`` fields and other field types are named in a warning. Fields shared by several Volumes (instances)
 are read once.
 
-Roles: the density is the field the material names (Arnold's ``density_channel``) else the relationship
-``field:density``; temperature, emission (``emission_channel``, by default ``heat``) likewise; a velocity is
-``vel``, ``v`` or ``velocity``.
+Channels: the material names the field of each role (Arnold's ``density_channel``, ``temperature_channel``,
+``emission_channel``, ``scatter_color_channel``; by default ``density``, ``temperature``, ``heat``, none; a velocity
+is ``vel``, ``v`` or ``velocity``). A channel is matched first against the Volume's relationship names (UsdVol's
+rule: ``field:density`` feeds the shader's density input), then against its fields' ``fieldName`` (the grid's name
+in the file, as Arnold's USD reader matches it), in relationship-name order (``match_channel``). A Volume with
+one field and no blackbody emission takes that field as its density whatever its names. A needed channel that matches
+nothing is named in one warning with the Volume's fields (relationship and ``fieldName``); a matched
+``scatter_color_channel`` warns that a per-voxel albedo is not modelled.
 
 Materials (``outputs:volume`` of the bound material, or its ``arnold:volume`` / ``mtlx:volume``):
 
@@ -37,6 +42,7 @@ from renderer.usd.reads import reads
 from renderer.usd.texture_files import resolve_asset
 
 VELOCITY_NAMES = ("vel", "v", "velocity")
+DEFAULT_CHANNELS = {"density": "density", "temperature": "temperature", "emission": "heat", "scatter_color": ""}
 VOLUME_OUTPUTS = ("volume", "arnold:volume", "mtlx:volume")
 
 
@@ -96,34 +102,59 @@ class VolumeReader:
     @reads("Volume")
     def volume(self, prim, transform) -> Volume | None:
         """The Volume of a prim placed by ``transform`` (a MotionTransform), or None (with a warning)."""
-        vol = UsdVol.Volume(prim)
-        fields = {str(k): v for k, v in vol.GetFieldPaths().items()}
+        fields = {str(k): v for k, v in UsdVol.Volume(prim).GetFieldPaths().items()}
         path = str(prim.GetPath())
         medium, channels = self.material(prim)
         stage = prim.GetStage()
+        grid_names = {rel: _field_name(stage.GetPrimAtPath(target), self.frame) for rel, target in fields.items()}
+        unmatched: list[str] = []  # "<role> channel '<name>'" of each needed channel that names no field
 
-        def role(names, vector=False):
-            for n in names:
-                if n in fields:
-                    fp = stage.GetPrimAtPath(fields[n])
-                    if not fp:
-                        self.warn("volume field relationships to missing prims ignored", f"{path} ({n})")
-                        return None
-                    return self.field(fp, vector)
-            return None
+        def find(key: str) -> str | None:
+            channel = channels.get(key, DEFAULT_CHANNELS[key])
+            rel = match_channel(channel, fields, grid_names)
+            if rel is None:
+                unmatched.append(f"{key} channel '{channel}'")
+            return rel
 
-        density = role([channels.get("density", "density")])
-        if density is None and len(fields) == 1 and not medium.blackbody_intensity:
-            density = role(list(fields))  # a lone field of another name is the density
-        temperature = role([channels.get("temperature", "temperature")]) if medium.blackbody_intensity > 0 else None
-        emission = role([channels.get("emission", "heat")]) if max(medium.emission) > 0 and not \
-            medium.emission_from_density else None
-        velocity = role(VELOCITY_NAMES, vector=True)
-        if density is None and temperature is None and emission is None:
-            self.warn("volumes without a readable density (or emission) field skipped", path)
+        def read(rel: str | None, vector=False) -> VolumeField | None:
+            return None if rel is None else self._read_relationship(stage, path, rel, fields[rel], vector)
+
+        density_rel = find("density")
+        if density_rel is None and len(fields) == 1 and not medium.blackbody_intensity:
+            unmatched.clear()
+            density_rel = next(iter(fields))  # a lone field of another name is the density
+        density = read(density_rel)
+        temperature = read(find("temperature")) if medium.blackbody_intensity > 0 else None
+        emits = max(medium.emission) > 0 and not medium.emission_from_density
+        emission = read(find("emission")) if emits else None
+        if channels.get("scatter_color") and find("scatter_color") is not None:
+            self.warn("volume scatter colour channels not modelled: the constant scatter_color used",
+                      f"{path} (scatter_color channel '{channels['scatter_color']}')")
+        velocity = read(next(filter(None, (match_channel(n, fields, grid_names) for n in VELOCITY_NAMES)), None),
+                        vector=True)
+        skipped = density is None and temperature is None and emission is None
+        self._report(path, skipped, unmatched, grid_names)
+        if skipped:
             return None
         return Volume(path, transform, medium, density=density, temperature=temperature, emission=emission,
                       velocity=velocity)
+
+    def _read_relationship(self, stage, path: str, rel: str, target, vector: bool) -> VolumeField | None:
+        fp = stage.GetPrimAtPath(target)
+        if not fp:
+            self.warn("volume field relationships to missing prims ignored", f"{path} (field:{rel})")
+            return None
+        return self.field(fp, vector)
+
+    def _report(self, path: str, skipped: bool, unmatched: list[str], grid_names: dict) -> None:
+        """One warning for a Volume whose channels found no field, or that has no readable field at all."""
+        listing = f"{path}: {', '.join(unmatched)} (fields: {_field_listing(grid_names)})"
+        if skipped and unmatched:
+            self.warn("volumes whose channels name none of their fields skipped", listing)
+        elif skipped:
+            self.warn("volumes without a readable density (or emission) field skipped", path)
+        elif unmatched:
+            self.warn("volume channels that name none of the volume's fields ignored", listing)
 
     # -- materials ------------------------------------------------------------------------------------------------
     @reads("Material", "outputs:volume")
@@ -150,6 +181,34 @@ class VolumeReader:
             return mtlx_volume(shader, self.frame, self.warn, self.colors)
         self.warn("volume shaders not modelled: default fog", f"{shader.GetPath()} ({sid or '?'})")
         return VolumeMedium(name=str(mat.GetPath())), {}
+
+
+def match_channel(channel: str, fields: dict, grid_names: dict[str, str]) -> str | None:
+    """The relationship (its name without ``field:``) whose field a shader's channel names, or None.
+
+    First the relationship of that name (UsdVol's rule: the relationship name ties a field to the shader's input),
+    then the first relationship, in name order, whose field's ``fieldName`` (its grid's name in the file) is the
+    channel: Arnold's volume shaders name grids as the file does.
+    """
+    if not channel:
+        return None
+    if channel in fields:
+        return channel
+    return next((rel for rel in sorted(fields) if grid_names.get(rel) == channel), None)
+
+
+def _field_name(prim, frame: float) -> str | None:
+    """A field prim's ``fieldName`` ('' when unauthored), None when the prim is missing or not a field asset."""
+    if not prim or not prim.IsA(UsdVol.FieldAsset):
+        return None
+    return str(UsdVol.FieldAsset(prim).GetFieldNameAttr().Get(frame) or "")
+
+
+def _field_listing(grid_names: dict[str, str | None]) -> str:
+    """The fields of a Volume for a message: ``field:density = 'voxel_fog_density', ...``."""
+    shown = [f"field:{rel} = " + (f"'{name}'" if name is not None else "(no field asset)")
+             for rel, name in sorted(grid_names.items())]
+    return ", ".join(shown) or "none"
 
 
 def _input(shader, name: str, frame: float, default, colors=None):
@@ -180,8 +239,7 @@ def standard_volume(shader, frame: float, colors=None) -> tuple[VolumeMedium, di
     med = VolumeMedium(density_scale=g("density", 1.0), absorption=tuple(extinction * (1.0 - albedo)),
                        scattering=tuple(extinction * albedo), anisotropy=g("scatter_anisotropy", 0.0),
                        name=str(shader.GetPath()))
-    channels = {"density": g("density_channel", "density"), "temperature": g("temperature_channel", "temperature"),
-                "emission": g("emission_channel", "heat")}
+    channels = {key: g(f"{key}_channel", default) for key, default in DEFAULT_CHANNELS.items()}
     if mode == "blackbody":  # emission (0 by default: none) weighs the blackbody radiance
         med.temperature_scale = g("temperature", 1.0) * g("blackbody_kelvin", 5000.0)
         med.blackbody_intensity = g("emission", 0.0) * g("blackbody_intensity", 1.0)
