@@ -259,7 +259,7 @@ def first_render_seconds() -> tuple[float, float]:
     """Wall seconds of the README's demo command in a fresh process, first with an empty Warp kernel cache (a fresh
     install: the kernels shipped in renderer/kernels/prebuilt seed it), then again with that cache warm."""
     with tempfile.TemporaryDirectory() as tmp:
-        cmd = [sys.executable, "-m", "renderer.cli", "render", str(ROOT / "examples" / "demo.usda"), "-o",
+        cmd = [sys.executable, "-m", "service.cli", "render", str(ROOT / "examples" / "demo.usda"), "-o",
                os.path.join(tmp, "demo.exr"), "--spp", "64", "--quiet"]
         env = dict(os.environ, PYTHONPATH=str(ROOT), WARP_CACHE_PATH=os.path.join(tmp, "cache"))
         times = []

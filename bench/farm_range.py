@@ -25,7 +25,7 @@ REPO = Path(__file__).absolute().parents[1]
 def drt(*args, cwd) -> float:
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]))
     t = time.perf_counter()
-    r = subprocess.run([sys.executable, "-m", "renderer.cli", "render", *map(str, args), "--quiet"], cwd=cwd,
+    r = subprocess.run([sys.executable, "-m", "service.cli", "render", *map(str, args), "--quiet"], cwd=cwd,
                        env=env, capture_output=True, text=True)
     if r.returncode != 0:
         raise SystemExit(r.stderr)

@@ -46,7 +46,7 @@ def grid_scene(src: str, n: int) -> str:
 
 
 def render_seconds(scene: Path, args) -> float:
-    out = subprocess.run([sys.executable, "-m", "renderer.cli", "render", str(scene), "-o", str(scene.with_suffix(".exr")),
+    out = subprocess.run([sys.executable, "-m", "service.cli", "render", str(scene), "-o", str(scene.with_suffix(".exr")),
                           "--width", str(args.width), "--height", str(args.height), "--spp", str(args.spp)],
                          capture_output=True, text=True, check=True)
     return float(re.search(r"([0-9.]+) s render", out.stdout + out.stderr).group(1))

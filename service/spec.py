@@ -95,7 +95,7 @@ def default_product_name(scene_name: str) -> str:
 def frame_products(stage, request: RenderRequest, frame: float, warn) -> list[FrameProduct]:
     """The products one render of ``frame`` writes (see the module docstring); ``warn(message)`` hears of the
     products and vars it leaves out. RenderError when the settings have products but none to write."""
-    from renderer.cli import expand_frame
+    from renderer.output.names import expand_frame
     from renderer.errors import RenderError
     from renderer.output.var_channels import UNWRITTEN, unwritten
     from renderer.usd.products import read_products, resolve_settings_path

@@ -19,7 +19,7 @@ from renderer.film.exr import read_exr
 
 def drt(*args, cwd=None):
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
-    return subprocess.run([sys.executable, "-m", "renderer.cli", *map(str, args)], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "service.cli", *map(str, args)], capture_output=True, text=True,
                           cwd=cwd, env=env, timeout=600)
 
 
@@ -166,7 +166,9 @@ def test_a_failed_frame_is_reported_and_the_others_render(tmp_path):
 
 
 def test_frame_ranges_and_output_patterns():
-    from renderer.cli import _frame_list, build_parser, expand_frame, frames_from_args
+    from renderer.output.names import expand_frame
+    from service.cli.flags import frame_list as _frame_list, frames_from_args
+    from service.cli.main import build_parser
 
     assert _frame_list("1-10x2") == [1, 3, 5, 7, 9]
     assert _frame_list("1:2x0.5") == [1, 1.5, 2]
@@ -185,7 +187,8 @@ def test_frame_ranges_and_output_patterns():
 
 
 def test_husk_spellings_of_settings():
-    from renderer.cli import build_parser, request_from_args
+    from service.cli.flags import request_from_args
+    from service.cli.main import build_parser
 
     args = build_parser().parse_args(["render", "s.usda", "-c", "/Cam", "-s", "/Render/S", "--res", "64", "32",
                                       "--purpose", "default,proxy"])
@@ -256,7 +259,7 @@ def test_a_killed_checkpointed_render_resumes_to_the_same_pixels(shot, tmp_path)
     assert r.returncode == 0, r.stderr
     assert not (tmp_path / "whole" / "img.exr.drt-tiles").exists()  # removed once the frame is written
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
-    proc = subprocess.Popen([sys.executable, "-m", "renderer.cli", *map(str, args)], cwd=tmp_path / "killed",
+    proc = subprocess.Popen([sys.executable, "-m", "service.cli", *map(str, args)], cwd=tmp_path / "killed",
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     tiles = tmp_path / "killed" / "img.exr.drt-tiles"
     deadline = time.monotonic() + 300
@@ -279,7 +282,7 @@ def test_sigusr1_writes_a_snapshot_of_the_frame_in_progress(shot, tmp_path):
     args = ["render", shot, "-s", "/Render/Preview", "-o", "img.exr", "--res", 96, 72, "--spp", 64, "--tile", 8,
             "--threads", 1, "-f", 2, "-V", "a", "--aov", "spp"]
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
-    proc = subprocess.Popen([sys.executable, "-m", "renderer.cli", *map(str, args)], cwd=tmp_path, env=env,
+    proc = subprocess.Popen([sys.executable, "-m", "service.cli", *map(str, args)], cwd=tmp_path, env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     lines = []
     for line in proc.stderr:  # once a fifth of the frame is done, ask for a snapshot

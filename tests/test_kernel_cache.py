@@ -158,7 +158,7 @@ def test_without_a_matching_prebuilt_the_kernels_are_compiled(tmp_path):
 
 def test_drt_warmup_makes_later_renders_load_the_host_tuned_kernels(tmp_path):
     """In Warp's own cache (where a user's renders look): the first run compiles, later ones only load."""
-    p = subprocess.run([sys.executable, "-m", "renderer.cli", "warmup"], capture_output=True, text=True,
+    p = subprocess.run([sys.executable, "-m", "service.cli", "warmup"], capture_output=True, text=True,
                        timeout=600, env=dict(os.environ, PYTHONPATH=str(ROOT)))
     assert p.returncode == 0, p.stderr
     from renderer.kernels.loading import RENDER_MODULES

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from service.cli import build_parser
+from service.cli.main import build_parser
 from service.settings import ServiceSettings
 
 DOCKER = Path(__file__).resolve().parents[2] / "docker"

@@ -4,8 +4,9 @@ from __future__ import annotations
 import pytest
 
 from schemas import JobCreate
-from service.cli import build_parser
-from service.client.remote import ClientError, settings_from_args
+from service.cli.main import build_parser
+from service.cli.client import settings_from_args
+from service.client.remote import ClientError
 
 
 def settings(*argv) -> dict:
@@ -35,7 +36,7 @@ def test_flags_become_settings():
 
 
 def test_a_time_limit_without_spp_is_capped_alike_by_submit_render_and_a_plain_post():
-    from renderer.cli import request_from_args
+    from service.cli.flags import request_from_args
     from renderer.settings.options import TIME_LIMITED_SPP
 
     render = request_from_args(build_parser().parse_args(["render", "s.usda", "-o", "o.exr", "--time-limit", "5"]))
