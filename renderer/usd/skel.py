@@ -7,6 +7,10 @@ local-to-world transform, not its own. Keys: the shutter ends, every joint-anima
 and skinning-primvar sample inside it, and ``CURVE_KEYS`` evenly spaced times when the skeleton moves (joint
 rotations are slerped by UsdSkel, so points travel on arcs between samples).
 
+Bindings come from the outermost SkelRoot above a gprim with native instances traversed as instance proxies, so
+an instanced character asset (itself a SkelRoot) below an agent's SkelRoot is skinned by that agent's Skeleton,
+and each instance of a prototype by its own (``Skinning.binding``).
+
 A mesh's own ``skel:joints`` (any order, even the skeleton's) makes UsdSkel give it a joint mapper, which the
 normals use too. What UsdSkel cannot do degrades alone, with one warning each: blend shapes it cannot apply are
 left out, authored normals it cannot skin give way to the renderer's own; only when the points themselves cannot
@@ -48,11 +52,20 @@ class Skinning:
         self.cache = UsdSkel.Cache()
         self._roots: set[str] = set()
         self._targets: dict[str, SkinBinding] = {}
+        self._invalid: dict[str, str] = {}  # target path -> the Skeleton whose joints UsdSkel cannot read
 
     def binding(self, prim) -> SkinBinding | None:
-        """The skinning of a prim, or None if it is not skinned (no SkelRoot above it, no joint influences)."""
-        root = UsdSkel.Root.Find(prim)
-        if not root:
+        """The skinning of a prim, or None if it is not skinned (no SkelRoot above it, no joint influences).
+
+        Bindings are computed from the *outermost* SkelRoot above the prim, as ``UsdSkel.BakeSkinning`` does: a
+        character asset whose root prim is a SkelRoot, referenced below an agent's SkelRoot (a crowd agent's
+        instanceable ``geometry``), is a nested SkelRoot with no binding of its own; its meshes inherit the agent's
+        ``skel:skeleton``. Instance proxies are traversed, so every instance of a prototype is skinned by the
+        Skeleton above it. A prim with joint influences or blend shapes that no Skeleton skins is named in one
+        warning (it is drawn as authored)."""
+        root = outermost_root(prim)
+        if root is None:
+            self._unskinned(prim, "no SkelRoot above it")
             return None
         key = str(root.GetPath())
         if key not in self._roots:
@@ -62,11 +75,23 @@ class Skinning:
             for b in self.cache.ComputeSkelBindings(root, predicate):
                 skel = b.GetSkeleton()
                 skel_query = self.cache.GetSkelQuery(skel)
-                if not skel_query:
-                    continue
                 for q in b.GetSkinningTargets():
-                    self._targets[str(q.GetPrim().GetPath())] = SkinBinding(q, skel_query, skel.GetPrim())
-        return self._targets.get(str(prim.GetPath()))
+                    if skel_query:
+                        self._targets[str(q.GetPrim().GetPath())] = SkinBinding(q, skel_query, skel.GetPrim())
+                    else:
+                        self._invalid[str(q.GetPrim().GetPath())] = str(skel.GetPath())
+        path = str(prim.GetPath())
+        found = self._targets.get(path)
+        if found is None:
+            skel = self._invalid.get(path)
+            self._unskinned(prim, f"Skeleton {skel} unreadable" if skel else "no Skeleton bound")
+        return found
+
+    def _unskinned(self, prim, reason: str) -> None:
+        """One warning naming a prim that authors skinning (joint influences, blend shapes) nothing skins."""
+        if any(_authored(prim, name) for name in ("primvars:skel:jointIndices", "skel:blendShapes")):
+            self.warn("prims with skinning data that no Skeleton skins drawn as authored",
+                      f"{prim.GetPath()} ({reason})")
 
     def key_times(self, prim, b: SkinBinding) -> np.ndarray:
         sh = self.shutter
@@ -173,3 +198,20 @@ class Skinning:
                 return None
             out.append(np.array(m, np.float64))
         return np.stack(out)
+
+
+def outermost_root(prim) -> UsdSkel.Root | None:
+    """The outermost SkelRoot at or above a prim (instance proxies included), or None."""
+    root = UsdSkel.Root.Find(prim)
+    if not root:
+        return None
+    while True:
+        outer = UsdSkel.Root.Find(root.GetPrim().GetParent())
+        if not outer:
+            return root
+        root = outer
+
+
+def _authored(prim, name: str) -> bool:
+    # HasAttribute first: half the cost of GetAttribute on the many prims that have no skinning at all
+    return prim.HasAttribute(name) and prim.GetAttribute(name).HasAuthoredValue()
