@@ -22,7 +22,7 @@ volumes.vdb by fieldName, the default fog material) drifting through the shutter
 shadow from a rect light; a fireball (the same file's second "density" grid, fieldIndex 1, and its temperature
 grid under Arnold's standard_volume, blackbody emission); a ball of milky glass filled with a homogeneous
 scattering medium (drt:scatterColor). volumes.vdb is written with OpenVDB's own Python module (as the tests
-write theirs: tests/vdb_files.py), so it is re-made only where that module is installed.
+write theirs: tests/helpers/vdb_files.py), so it is re-made only where that module is installed.
 """
 import math
 import pathlib

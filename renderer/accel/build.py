@@ -18,7 +18,7 @@ The topology is chosen by binned SAH with **time-averaged areas**: primitives ar
 centroid, but every bin keeps the union of its boxes *per key*, and the area of a candidate child is the mean
 over the keys of its per-key union's half area, which is the area the traversal will actually meet, averaged
 over the shutter (exact at the keys; between keys the blended box is what the mean approximates). One
-representative box per primitive does worse over the shutter (measured in ``tests/test_accel_build.py``, SAH
+representative box per primitive does worse over the shutter (measured in ``tests/renderer/accel/test_accel_build.py``, SAH
 cost averaged over 3 keys, 3000 boxes): the union over keys stretches fast movers along their path so SAH
 groups them by sweep (+10..20%), and the key-average box puts a mover among still primitives near its mid
 position, whose nodes then stretch with it at the other keys (+5..10% against the union when a fifth of the

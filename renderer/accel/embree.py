@@ -21,7 +21,7 @@ surfaces) stays in our hierarchy; the walks reach a mesh through ``intersect.mes
 ``occlusion.mesh_transmittance``, which choose. ``DRT_EMBREE=0`` turns it off.
 
 Embree's hit is a pure function of the ray and the mesh: its builders are deterministic, so every process that
-builds the same mesh returns the same bits (``tests/test_embree.py`` builds with one and with two threads).
+builds the same mesh returns the same bits (``tests/renderer/accel/test_embree.py`` builds with one and with two threads).
 """
 from __future__ import annotations
 

@@ -16,7 +16,7 @@ For each module, ``load_modules`` takes the first that applies:
 3. otherwise a host-tuned **compile**, as Warp does by default (a stale prebuilt, another Warp, another CPU).
 
 ``drt warmup --prebuilt`` rebuilds ``renderer/kernels/prebuilt`` after a change to kernel code;
-``tests/test_kernel_cache.py`` fails while the shipped build does not match the source.
+``tests/renderer/kernels/test_kernel_cache.py`` fails while the shipped build does not match the source.
 
 A module with a sample profile (``sample_profile``: the integrator) is compiled with it, host-tuned or portable.
 """

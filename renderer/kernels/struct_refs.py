@@ -12,7 +12,7 @@ Structs marked ``@by_reference`` are read-only in device code (only their arrays
 reference is exact. The rewrite touches only lines of the exact shape Warp 1.x emits: a function parameter
 ``    Geometry_<hash> var_geo,`` becomes ``Geometry_<hash> &var_geo,``, a kernel's
 ``Geometry_<hash> var_geo = _wp_args->geo;`` binds a reference. On any other shape it changes nothing (the
-kernels are then slower, never wrong); ``tests/test_struct_refs.py`` checks that it still applies.
+kernels are then slower, never wrong); ``tests/renderer/kernels/test_struct_refs.py`` checks that it still applies.
 
 The same pass leaves **scratch vectors** uninitialised (``scratch``): Warp zero-fills every local vector, which
 for the 160-entry traversal stacks was 17 % of a closest-hit ray. Only the exact declaration and constructor lines

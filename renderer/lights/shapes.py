@@ -135,7 +135,7 @@ def _rect_local(p_ref: wp.vec3, corner: wp.vec3, edge_u: wp.vec3, edge_v: wp.vec
 # The four edge-plane normals' radii and the four internal angles of ``_sph_rect_angles`` side by side in vector
 # lanes (``vector_code``): four square roots, four divisions and four ``_safe_acos`` polynomials at once, each
 # lane operation for operation what the scalar code computes (constants rounded as Warp rounds them, double to
-# float), so the same bits (tests/test_sampling.py holds them to the scalar code, bit for bit). The angles were a
+# float), so the same bits (tests/renderer/sampling/test_sampling.py holds them to the scalar code, bit for bit). The angles were a
 # quarter of the rectangle light's sampling, itself 16 % of a gloss sample.
 _SPH_RECT_CPP = VECTOR_TYPES_CPP + r"""
     const v4f zz = splat(z0 * z0);
@@ -182,7 +182,7 @@ def _sph_rect_angles(x0: float, y0: float, z0: float, x1: float, y1: float):
     The edge planes' unit normals are n0 = (0, z0, -y0) / r0, n1 = (-z0, 0, x1) / r1, n2 = (0, -z0, y1) / r2,
     n3 = (z0, 0, -x0) / r3 (the normalised cross products of consecutive corners, written out as pbrt-v4 does),
     so the cosines of the internal angles, -n_i . n_(i+1), are products of corner coordinates (as in Cycles).
-    The four lanes in vector code (``_sph_rect_lanes``), the same bits as the scalar code in tests/test_sampling.py.
+    The four lanes in vector code (``_sph_rect_lanes``), the same bits as the scalar code in tests/renderer/sampling/test_sampling.py.
     """
     lanes = _sph_rect_lanes(x0, y0, z0, x1, y1)
     g01 = lanes[0]

@@ -23,7 +23,7 @@ Known property: the index shuffle is a nested permutation, not a uniformly rando
 strata of two different dimension requests are tied hierarchically (over the first 2^k indices, k >= 1, the
 quadrant counts of (dim a, dim b) satisfy N00 = N11). Every cell is still equally likely and the estimator is
 unbiased; correlations are about 1.2x those of independent sequences, and integration error matches that of a
-random per-wave permutation (measured while writing tests/test_sampler.py).
+random per-wave permutation (measured while writing tests/renderer/sampling/test_sampler.py).
 
 ``sample_1d(.., dim)`` equals ``sample_2d(.., dim).x``, and ``sample_2d(.., dim)`` the first two coordinates of
 ``sample_3d(.., dim)``: a request uses one pattern with as many coordinates as it needs (Sobol's dimensions over

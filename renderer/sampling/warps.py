@@ -3,7 +3,7 @@
 
 After pbrt-v4 ``util/sampling.h`` and Mitsuba 3 ``warp.py``. Every routine takes its uniform numbers as arguments
 (it never owns an RNG), so it can be tested alone and replayed. Every ``X`` has ``X_pdf`` (same name + ``_pdf``);
-the tests keep NumPy twins of both (``tests/sampling_twins.py``) to compare against and to feed the chi-square
+the tests keep NumPy twins of both (``tests/helpers/sampling_twins.py``) to compare against and to feed the chi-square
 harness. The light shapes' samplers, built on these, are in ``renderer.lights.shapes``.
 
 Conventions

@@ -10,7 +10,7 @@ import pytest
 from pxr import Gf, Kind, Sdf, Usd, UsdGeom, UsdLux, UsdShade
 
 import stages
-from test_cli import assert_one_line_error, drt
+from cli_runs import assert_one_line_error, drt
 from renderer.film import cryptomatte as cm
 from renderer.settings.options import RenderOptions
 from renderer.render import frame_image, prepare, render_frame

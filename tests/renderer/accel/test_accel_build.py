@@ -1,6 +1,6 @@
 """BVH builder: layout invariants, conservative per-key bounds, SAH quality, and closest hits against brute force.
 
-Run ``python tests/test_accel_build.py`` for the build-time benchmark (1M one-key boxes, 100k three-key boxes).
+Run ``python tests/renderer/accel/test_accel_build.py`` for the build-time benchmark (1M one-key boxes, 100k three-key boxes).
 """
 from __future__ import annotations
 

@@ -8,7 +8,7 @@ from pxr import Gf, Sdf, UsdLux
 
 import stages
 from renderer.usd.importer import load_scene
-from test_render_analytic import render_rgb
+from renders import render_rgb
 
 W = 64  # pixels across x in [-0.32, 0.32], 0.01 m each
 

@@ -9,7 +9,7 @@ import pytest
 from renderer.film.adaptive import Convergence, pixel_error
 from renderer.settings.options import RenderOptions
 from renderer.render import Tile, frame_channels, prepare, render_frame, render_tile
-from test_render_tiles import make_scene
+from renders import make_scene
 
 
 @pytest.fixture(scope="module")

@@ -12,9 +12,9 @@ from pxr import Gf, Sdf, UsdGeom, UsdLux
 import stages
 from renderer.lights.ies import IesError, parse_ies, read_ies
 from renderer.lights.shaping import shaping_np
-from test_render_analytic import pixel_average, render_rgb
+from renders import pixel_average, render_rgb
 
-DATA = pathlib.Path(__file__).parent / "data"
+DATA = pathlib.Path(__file__).resolve().parents[2] / "data"
 
 
 def schema_cone(theta, angle_deg, softness):

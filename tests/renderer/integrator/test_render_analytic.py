@@ -8,28 +8,10 @@ from pxr import Gf
 from scipy.optimize import minimize_scalar
 
 import stages
+from renders import pixel_average, render_rgb
 from renderer.settings.options import RenderOptions
-from renderer.render import Tile, frame_channels, prepare, render_frame, render_tile
+from renderer.render import Tile, frame_channels, prepare, render_frame
 from renderer.usd.importer import load_scene
-
-
-def render_rgb(path, *, tile=None, motion_blur=True, **opts):
-    scene = load_scene(path, 0.0, motion_blur=motion_blur)
-    opts.setdefault("unbiased", True)  # analytic values: no path regularization
-    prep = prepare(scene, RenderOptions(**opts))
-    if tile is None:
-        sums = render_frame(prep, tile_size=32, threads=2).sums
-    else:
-        t = render_tile(prep, tile)
-        sums = {k: v for k, v in t.arrays.items()}
-    ch = frame_channels(prep, sums)
-    return np.stack([ch["R"], ch["G"], ch["B"]], -1), prep
-
-
-def pixel_average(profile, x0, n_pixels, sub=64):
-    """Average of profile(x) over pixels [x0 + i, x0 + i + 1), x in pixels."""
-    xs = x0 + (np.arange(n_pixels * sub) + 0.5) / sub
-    return profile(xs).reshape(n_pixels, sub).mean(1)
 
 
 # --------------------------------------------------------------------------- depth of field

@@ -9,7 +9,7 @@ import pytest
 
 from renderer.lights import reach
 from renderer.scene.model import LIGHT_CYLINDER, LIGHT_DISK, LIGHT_RECT, LIGHT_SPHERE
-from test_render_analytic import render_rgb
+from renders import render_rgb
 
 LIGHTS = [  # (kind, extra attributes, xform ops): all four kinds, turned, scaled, one of them moving
     ("RectLight", "float inputs:width = 0.6\n float inputs:height = 0.3", "(0.8, 2.4, -0.5)", "(90, 0, 0)", "(1, 1, 1)"),
@@ -233,7 +233,7 @@ def test_the_many_lights_benchmark_runs(tmp_path):
     import sys
     from pathlib import Path
 
-    script = Path(__file__).resolve().parents[1] / "bench" / "many_lights.py"
+    script = Path(__file__).resolve().parents[3] / "bench" / "many_lights.py"
     scene = tmp_path / "box.usda"
     scene.write_text(BOX)
     r = subprocess.run([sys.executable, str(script), "--width", "32", "--height", "18", "--spp", "1", "--repeats", "1",

@@ -12,7 +12,7 @@ import stages
 from renderer.motion.transform import matrix_at
 from renderer.scene import model as sc
 from renderer.usd.importer import load_scene
-from test_render_analytic import render_rgb
+from renders import render_rgb
 
 H = 1.0  # light height above the floor (m)
 

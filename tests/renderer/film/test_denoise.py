@@ -8,7 +8,7 @@ from renderer.errors import SettingsError
 from renderer.film import denoise
 from renderer.settings.options import RenderOptions
 from renderer.render import frame_channels, prepare, render_frame
-from test_render_tiles import make_scene
+from renders import make_scene
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,7 @@ from renderer.settings.options import RenderOptions
 from renderer.render import frame_channels, prepare, render_frame
 from renderer.usd.importer import load_scene
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
+ROOT = pathlib.Path(__file__).resolve().parents[3]
 CANDIDATES = [ROOT.parent / "shared" / "usd-assets", pathlib.Path("/work/shared/usd-assets")]
 ASSETS = next((p for p in CANDIDATES if (p / "MANIFEST.json").is_file()), None)
 

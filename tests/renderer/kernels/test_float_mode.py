@@ -13,7 +13,7 @@ from renderer.film.tiles import Tile
 from renderer.settings.options import RenderOptions
 from renderer.render import prepare, render_frame, render_tile
 
-from test_render_tiles import make_scene
+from renders import make_scene
 
 pytestmark = pytest.mark.skipif(thread_mxcsr() is None, reason="MXCSR is read on Linux x86-64 only")
 

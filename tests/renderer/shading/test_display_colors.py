@@ -12,7 +12,7 @@ import pytest
 from pxr import Gf, Sdf, UsdGeom, UsdShade, Vt
 
 import stages
-from test_render_analytic import render_rgb
+from renders import render_rgb
 
 RED, BLUE, GREEN = (1.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, 1.0, 0.0)
 

@@ -12,8 +12,8 @@ from renderer.accel import embree
 from renderer.accel.upload import upload_geometry
 from renderer.motion.transform import MotionTransform
 from renderer.scene.model import Camera, Instance, Material, Mesh, Scene
-from tests.test_accel import _probe, brute_force, random_mesh, rot_y
-from tests.test_quads import hits
+from test_accel import _probe, brute_force, random_mesh, rot_y
+from test_quads import hits
 
 pytestmark = pytest.mark.skipif(embree.library() is None, reason="Embree (embreex) is not available")
 

@@ -9,7 +9,7 @@ import pytest
 from pxr import Gf, UsdGeom, UsdLux
 
 import stages
-from test_render_analytic import render_rgb
+from renders import render_rgb
 
 
 def floor_stage(path):

@@ -8,7 +8,7 @@ import pytest
 
 from renderer.settings.options import RenderOptions
 from renderer.render import frame_attributes, prepare, render_frame
-from test_render_tiles import make_scene
+from renders import make_scene
 
 
 @pytest.fixture(scope="module")

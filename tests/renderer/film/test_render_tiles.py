@@ -8,44 +8,13 @@ import pytest
 import warp as wp
 
 from renderer.errors import SettingsError
+from renders import make_scene
 from renderer.film import film
 from renderer.film.exr import read_exr
 from renderer.film.tiles import Tile, auto_tile_size, split_tiles, tile_count
-from renderer.motion.shutter import Shutter
-from renderer.motion.transform import MotionTransform, make_transform
 from renderer.settings.options import RenderOptions
 from renderer.render import (assemble, frame_image, prepare, render_frame, render_tile, with_options,
                              write_frame)
-from renderer.scene.model import (LIGHT_RECT, LIGHT_SPHERE, Camera, Instance, Light, Material, Mesh, Scene)
-
-
-def translate(x, y, z):
-    m = np.eye(4)
-    m[:3, 3] = (x, y, z)
-    return m
-
-
-def quad_mesh(name, size, material=0):
-    h = size / 2
-    pts = np.array([[[-h, 0, -h], [h, 0, -h], [h, 0, h], [-h, 0, h]]], np.float32)
-    return Mesh(name, np.zeros(1, np.float32), pts, np.array([[0, 2, 1], [0, 3, 2]], np.int32),
-                np.full(2, material, np.int32))
-
-
-def make_scene():
-    """A floor, a card moving over the shutter, a rect light and a sphere light, a lens with depth of field."""
-    rot = np.array([[1, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1]], float)  # card stands up
-    meshes = [quad_mesh("floor", 10.0), quad_mesh("card", 1.0, 1)]
-    instances = [Instance(0, MotionTransform.static(np.eye(4))),
-                 Instance(1, make_transform([0, 1], [translate(-1, 1, 0) @ rot, translate(1, 1.5, 0) @ rot]))]
-    down = np.array([[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]], float)  # -Z -> -Y
-    lights = [Light(LIGHT_RECT, "rect", (4, 4, 4), MotionTransform.static(translate(0, 4, 0) @ down), width=1,
-                    height=2),
-              Light(LIGHT_SPHERE, "sphere", (2, 1, 1), MotionTransform.static(translate(2, 2, 2)), radius=0.3)]
-    cam = Camera("cam", MotionTransform.static(translate(0, 1.5, 8)), focal_length=3.5, horizontal_aperture=3.6,
-                 vertical_aperture=2.4, f_stop=2.0, focus_distance=8.0)
-    mats = [Material("floor", (0.8, 0.8, 0.8)), Material("card", (0.8, 0.2, 0.1), opacity=0.7)]
-    return Scene(meshes, instances, mats, lights, cam, Shutter(0.0, 0.0, 1.0))
 
 
 @pytest.fixture(scope="module")

@@ -18,7 +18,7 @@ from renderer.accel.surface import surface_at
 from renderer.accel.upload import upload_geometry
 from renderer.motion.transform import MotionTransform
 from renderer.scene.model import LIGHT_MESH, Camera, Instance, Light, Material, Mesh, Scene
-from tests.test_accel import rot_y
+from test_accel import rot_y
 
 
 def bumpy_grid(rng, nx=40, ny=30, flip=None):
@@ -253,7 +253,7 @@ def test_embree_holding_quads_finds_the_triangle_point_and_side_our_walk_finds(m
     instance and a plain one: the same triangle as our walk (but for ties on shared edges, at the same distance),
     the same barycentrics, the same facing normal from Embree's hit as from the corners and the same side, the
     same shadow answers; and Embree's share of the memory below what it takes for the triangles unpaired."""
-    from tests.test_accel import _probe
+    from test_accel import _probe
 
     rng = np.random.default_rng(4)
     pts, tris = bumpy_grid(rng, 30, 24, flip=np.arange(5, 1440, 11))
@@ -334,7 +334,7 @@ def test_a_merged_mesh_light_in_quads_lights_the_floor_as_in_triangles(tmp_path,
     order). The panel's lone triangle stays in its range, not after the floor's pairs."""
     import stages
     from renderer.accel import quads
-    from test_render_analytic import render_rgb
+    from renders import render_rgb
 
     stage = stages.new_stage(tmp_path / "panel.usda")
     stages.camera(stage, ortho=True, h_ap_mm=0.4, v_ap_mm=0.4, translate=(0, 0.5, 0), rotate_x=-90.0,

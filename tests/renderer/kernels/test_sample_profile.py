@@ -13,7 +13,7 @@ import pytest
 from renderer.kernels import profile as sample_profile
 from renderer.kernels.profile import profile_flags, renew_names
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
+ROOT = pathlib.Path(__file__).resolve().parents[3]
 sys.path.insert(0, str(ROOT / "bench"))
 
 

@@ -9,13 +9,8 @@ import numpy as np
 import pytest
 
 import stages
+from cli_runs import assert_one_line_error, drt
 from renderer.film.exr import read_exr
-
-
-def drt(*args, cwd=None):
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
-    return subprocess.run([sys.executable, "-m", "service.cli", *map(str, args)], capture_output=True, text=True,
-                          cwd=cwd, env=env, timeout=300)
 
 
 @pytest.fixture(scope="module")
@@ -27,15 +22,6 @@ def scene_file(tmp_path_factory):
     stages.distant_light(stage, rotate_x=-20.0)
     stage.Save()
     return d / "card.usda"
-
-
-def assert_one_line_error(r, *needles):
-    assert r.returncode != 0
-    lines = r.stderr.strip().splitlines()
-    assert len(lines) == 1, r.stderr
-    assert "Traceback" not in r.stderr
-    for n in needles:
-        assert n in lines[0], lines[0]
 
 
 def test_render_writes_exr_with_aovs_and_reports_speed(scene_file, tmp_path):

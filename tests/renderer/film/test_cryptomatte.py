@@ -14,7 +14,7 @@ from pxr import Gf, Kind, Sdf, Usd, UsdGeom, UsdShade
 from renderer.film import cryptomatte as cm
 from renderer.film.exr import read_exr, write_exr
 from renderer.usd.importer import load_scene
-from tests import stages
+import stages
 
 
 # -- hashes and ids ----------------------------------------------------------------------------------------------
