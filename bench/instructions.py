@@ -66,7 +66,7 @@ def child(lib: str, scene: str, blur: bool, dof: bool, speed: float, size: int, 
     from renderer.kernels.device import init_warp
 
     init_warp()
-    from renderer import render
+    from renderer.integrator import tile as render  # where the path tracing kernel is launched
     from renderer.settings.options import RenderOptions
     from renderer.render import prepare, render_frame
     from renderer.usd.importer import load_scene

@@ -23,8 +23,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
 
     import uvicorn
 
-    from .app import create_app
-    from .settings import ServiceSettings
+    from service.app import create_app
+    from service.settings import ServiceSettings
 
     overrides = {k: v for k, v in (("data_dir", args.data_dir), ("scheduler_address", args.scheduler),
                                    ("workers", args.workers), ("threads_per_worker", args.threads))

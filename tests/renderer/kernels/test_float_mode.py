@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import warp as wp
 
-import renderer.render as render_module
+import renderer.integrator.tile as tile_module
 from renderer.kernels.device import FTZ_DAZ, denormals_flushed, init_warp, thread_mxcsr
 from renderer.film.tiles import Tile
 from renderer.settings.options import RenderOptions
@@ -62,13 +62,13 @@ def test_render_tiles_run_flushed_on_every_thread_and_leave_the_caller_as_it_was
     """The mode is set where the tile is rendered (render_frame's threads, a farm worker's render_tile call), not
     inherited from whoever made the threads."""
     seen = []
-    inner = render_module._sampled_tile
+    inner = tile_module._sampled_tile
 
     def spy(*args):
         seen.append((threading.get_ident(), thread_mxcsr()))
         return inner(*args)
 
-    monkeypatch.setattr(render_module, "_sampled_tile", spy)
+    monkeypatch.setattr(tile_module, "_sampled_tile", spy)
     prep = prepare(make_scene(), RenderOptions(width=24, height=16, spp=2))
     before = control()
     render_frame(prep, tile_size=8, threads=2)
