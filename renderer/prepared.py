@@ -26,7 +26,7 @@ from renderer.media.upload import MediaUpload, upload_media
 from renderer.scene.flatten import flatten_still_instances
 from renderer.scene.model import LIGHT_MESH, Scene
 from renderer.settings.options import MAX_PIXELS, SETTINGS, RenderOptions
-from renderer.shading.materials import upload_material_textures, upload_materials
+from renderer.shading.material_upload import upload_material_textures, upload_materials
 
 
 @dataclass
