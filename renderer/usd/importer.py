@@ -33,6 +33,7 @@ from renderer.core.color import ColorSpaces
 from renderer.errors import SceneError, SettingsError
 from renderer.motion.shutter import Shutter
 from renderer.scene import model as sc
+from renderer.settings.options import default_of
 from renderer.scene.analytic import object_box, realize_tessellations
 from renderer.subdiv import MAX_LEVEL
 from renderer.usd import camera as usd_camera
@@ -71,15 +72,15 @@ class ImportOptions:
     """What a render asks of the import, by the settings table's names (``renderer.settings.options``)."""
 
     frame: float | None = None  # time code; None: the stage's startTimeCode (0 if no range is authored)
-    camera: str | None = None  # camera prim path; None: the render settings' camera, else the first
-    shutter: tuple[float, float] | None = None  # (open, close) relative to the frame; None: the camera's
-    motion_blur: bool = True
+    camera: str | None = default_of("camera")  # prim path; None: the render settings' camera, else the first
+    shutter: tuple[float, float] | None = default_of("shutter")  # (open, close) relative to the frame; None: camera's
+    motion_blur: bool = default_of("motion_blur")
     subdivision_level: int | None = None  # 0..MAX_LEVEL; None: chosen from the camera for ``width`` pixels
-    width: int | None = None  # pixels across the image (default: the render settings' width, else 640)
-    ocio_config: str | None = None  # None: $OCIO, else OpenColorIO's built-in config
-    settings_prim: str | None = None  # RenderSettings prim; None: the stage's choice (``camera.settings_prim``)
+    width: int | None = default_of("width")  # pixels across; None: the render settings' width, else 640
+    ocio_config: str | None = default_of("ocio_config")  # None: $OCIO, else OpenColorIO's built-in config
+    settings_prim: str | None = default_of("settings_prim")  # None: the stage's choice (``camera.settings_prim``)
     product: str | None = None  # the RenderProduct whose overrides apply; None: the settings' first
-    purposes: tuple[str, ...] = ()  # purposes drawn; (): the render settings' includedPurposes
+    purposes: tuple[str, ...] = default_of("purposes")  # purposes drawn; (): the render settings' includedPurposes
     primvars: tuple[str, ...] = ()  # primvars a render asked for by name (primvar RenderVars)
 
     def check(self) -> None:
