@@ -6,6 +6,7 @@ prepared scene with other sampling options at no cost.
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import pickle
 from dataclasses import dataclass, field, replace
@@ -24,8 +25,8 @@ from renderer.lights.table import upload_lights
 from renderer.media.upload import MediaUpload, upload_media
 from renderer.scene.flatten import flatten_still_instances
 from renderer.scene.model import LIGHT_MESH, Scene
-from renderer.settings.options import MAX_PIXELS, RenderOptions
-from renderer.shading.materials import upload_material_textures, upload_materials
+from renderer.settings.options import MAX_PIXELS, SETTINGS, RenderOptions
+from renderer.shading.material_upload import upload_material_textures, upload_materials
 
 
 @dataclass
@@ -66,7 +67,7 @@ class PreparedScene:
 
 
 def resolve_resolution(scene: Scene, options: RenderOptions) -> tuple[int, int]:
-    """The size in pixels of the image a render of ``scene`` with ``options`` writes (see ``renderer.camera.framing``)."""
+    """The size in pixels of the image a render of ``scene`` with ``options`` writes (``renderer.camera.framing``)."""
     f = resolve_framing(scene, options)
     return f.width, f.height
 
@@ -199,10 +200,13 @@ def with_options(prep: PreparedScene, options: RenderOptions) -> PreparedScene:
     ``RenderRequest.load`` drops motion keys for a strobe time filter.) A service renders many jobs of one scene
     that differ in nothing else."""
     old = prep.options
-    def kept(o: RenderOptions) -> tuple:
-        return o.width, o.height, o.dof, hit_vars.primvar_names(o.hit_vars)
+
+    def kept(o: RenderOptions) -> tuple:  # the options the table marks ``scene``, and the primvars hit vars load
+        scene = tuple(getattr(o, f.name) for f in dataclasses.fields(o) if f.name in SETTINGS and SETTINGS[f.name].scene)
+        return scene, hit_vars.primvar_names(o.hit_vars)
     if kept(options) != kept(old):
-        raise ValueError("with_options keeps the resolution, depth of field and primvar vars of the prepared scene")
+        raise ValueError("with_options keeps the options the prepared scene depends on (resolution, depth of field, "
+                         "time filter) and the primvars of its hit vars")
     options.validate()
     if options.denoise:
         denoise.require()

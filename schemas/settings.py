@@ -16,10 +16,9 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, create_model, field_validator, model_validator
 
-from renderer.settings.options import MAX_LPES, SETTINGS, SETTINGS_TABLE, Setting, resolve_given
+from renderer.settings.options import MAX_LPES, MAX_TIME, SETTINGS, SETTINGS_TABLE, Setting, resolve_given
 
 MAX_FRAMES = 100_000
-MAX_TIME = 1.0e9  # |time code| bound: keeps frame arithmetic exact enough and rejects nonsense early
 
 
 class _Strict(BaseModel):

@@ -15,7 +15,7 @@ bytes per triangle (``bench/embree_rays.py``).
 
 What Embree answers, per mesh (``EmbreeScenes``): the closest hit of a still triangle mesh (not an exact shape,
 not a point cloud, not deforming), and the shadow test of such a mesh when every material it uses is opaque for
-shadow rays (``materials.opaque_for_shadows``), where the first crossing found settles the
+shadow rays (``material_upload.opaque_for_shadows``), where the first crossing found settles the
 transmittance at 0. Everything else (the top level over instances, motion, CSG, exact shapes, clouds, partly opaque
 surfaces) stays in our hierarchy; the walks reach a mesh through ``intersect.mesh_closest`` and
 ``occlusion.mesh_transmittance``, which choose. ``DRT_EMBREE=0`` turns it off.

@@ -26,7 +26,7 @@ from renderer.scene.analytic import (CLOUD_KINDS, SHAPE_BOX_PAD, analytic_shapes
                                      shape_bounds, shape_table, shape_world_boxes)
 from renderer.scene.mesh_facts import is_closed
 from renderer.scene.model import Mesh, Scene
-from renderer.shading.materials import opaque_for_shadows
+from renderer.shading.material_upload import opaque_for_shadows
 
 MAX_TLAS_KEYS = 33  # top-level time keys for moving scenes (32 segments over the shutter)
 # Bottom-level leaves of up to 4 triangles, SAH node cost 2 triangle tests: for the four-wide walk, 5-13 % faster

@@ -73,7 +73,7 @@ class Mesh:
     solid: np.ndarray | None = None
     # (T, 4) float32 per-triangle object-space tangent dP/du (unit xyz) and handedness w = +-1 (bitangent =
     # w * cross(n, t)); w = 0 where uvs are missing or degenerate. None: computed from points key 0 and uvs when
-    # uploaded (``materials.mesh_tangents``).
+    # uploaded (``material_upload.mesh_tangents``).
     tangents: np.ndarray | None = None
     # The implicit prim (Sphere, Cylinder, Cone, Capsule) the mesh tessellates, when its size holds over the
     # shutter: the renderer may intersect that shape itself instead of its triangles (``scene.analytic``); kind

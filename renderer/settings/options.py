@@ -16,7 +16,8 @@ from typing import Any, Callable
 
 from renderer.errors import SettingsError
 
-FILTERS = {"box": 0, "triangle": 1, "gaussian": 2, "blackman-harris": 3}  # pixel reconstruction filters
+# pixel reconstruction filters: their names (the default first, as the help lists them) and kernel codes
+FILTERS = {"gaussian": 2, "box": 0, "triangle": 1, "blackman-harris": 3}
 TIME_FILTERS = {"box": 0, "triangle": 1, "strobe": 2}  # shutter weightings
 AOV_NAMES = ("depth", "normal", "albedo", "spp")
 MAX_PIXELS = 16384 * 16384
@@ -88,6 +89,7 @@ class Setting:
     aliases: tuple[str, ...] = ()  # other spellings of the flag (husk's short ones: -c, -s)
     metavar: str | None = None
     scene: bool = False  # the prepared scene depends on it; else it steers sampling and output only
+    pattern_only: bool = False  # it changes the sample pattern and nothing else: no check of a job depends on it
     check: Callable[[Any], str | None] | None = None  # a rule beyond the bounds: the problem, or None
     example: Any = None  # a valid value of a free-form list (tests and docs)
 
@@ -138,7 +140,7 @@ class Setting:
 
 
 _WEEK = 7 * 24 * 3600.0
-_MAX_TIME = 1.0e9  # |time code| bound: keeps frame arithmetic exact enough and rejects nonsense early
+MAX_TIME = 1.0e9  # |time code| bound: keeps frame arithmetic exact enough and rejects nonsense early
 
 SETTINGS_TABLE: tuple[Setting, ...] = (
     # What the frame is seen through: the prepared scene depends on these.
@@ -158,7 +160,7 @@ SETTINGS_TABLE: tuple[Setting, ...] = (
     Setting("height", int, None, "height of the image written (default: the render settings', else at the "
             "camera's aspect)", unit="pixels", optional=True, ge=1, le=16384, scene=True),
     Setting("shutter", float, None, "shutter interval (open, close) overriding the camera's",
-            unit="time codes relative to the frame", optional=True, shape="pair", ge=-_MAX_TIME, le=_MAX_TIME,
+            unit="time codes relative to the frame", optional=True, shape="pair", ge=-MAX_TIME, le=MAX_TIME,
             metavar=("OPEN", "CLOSE"), scene=True, check=_ordered_shutter),
     Setting("motion_blur", bool, True, "motion blur (off: the frame renders still)", scene=True),
     Setting("time_filter", str, "box", "shutter weighting: box, triangle, strobe (instantaneous, at the frame "
@@ -176,9 +178,9 @@ SETTINGS_TABLE: tuple[Setting, ...] = (
     # How it is sampled and written: one prepared scene serves every value of these.
     Setting("spp", int, 16, "samples per pixel; with a time limit, the cap (then 4096 unless given)", ge=1,
             le=1 << 16, metavar="N"),
-    Setting("seed", int, 0, "seed of the sample pattern", ge=0, le=2**32 - 1, metavar="S"),
+    Setting("seed", int, 0, "seed of the sample pattern", ge=0, le=2**32 - 1, metavar="S", pattern_only=True),
     Setting("filter", str, "gaussian", "pixel filter: gaussian (radius 1.5 px), box, triangle, blackman-harris",
-            choices=("gaussian", "box", "triangle", "blackman-harris")),
+            choices=tuple(FILTERS)),
     Setting("max_depth", int, 8, "bounces after the camera ray (1: direct lighting only, 0: emission only)",
             ge=0, le=64, metavar="N"),
     Setting("clamp", float, 0.0, "clamp each sample's radiance to this per channel to cut fireflies (0: off)",

@@ -89,14 +89,10 @@ class RenderRequest:
                    options=RenderOptions(**take(RenderOptions)), **take(cls))
 
     def settings(self) -> dict:
-        """The request's values of every setting it carries, by the table's names."""
-        out = {"camera": self.camera, "shutter": self.shutter, "motion_blur": self.motion_blur, "half": self.half,
-               "ocio_config": self.ocio_config, "settings_prim": self.settings_prim,
-               "purposes": self.purposes}
-        out.update((f.name, getattr(self.lens, f.name)) for f in dataclasses.fields(LensOverrides))
-        out.update((f.name, getattr(self.options, f.name)) for f in dataclasses.fields(RenderOptions)
-                   if f.name in SETTINGS)
-        return out
+        """The request's values of every setting it carries (its own fields, its lens's and its options' that are
+        rows of the table), by the table's names."""
+        return {f.name: getattr(record, f.name) for record in (self, self.lens, self.options)
+                for f in dataclasses.fields(record) if f.name in SETTINGS}
 
     def scene_key(self) -> tuple:
         """What the prepared scene depends on besides the scene's content: the frame, the product, the hit vars (which
@@ -104,6 +100,12 @@ class RenderRequest:
         sampling and output settings share one prepared scene."""
         return (self.frame, self.product, self.options.hit_vars,
                 tuple(sorted((k, v) for k, v in self.settings().items() if SETTINGS[k].scene)))
+
+    def check_key(self) -> tuple:
+        """What checking this request against a scene (its frames, products, limits) depends on besides the scene's
+        content: every setting but those that change the sample pattern only (the seed)."""
+        return (self.frame, self.product,
+                tuple(sorted((k, v) for k, v in self.settings().items() if not SETTINGS[k].pattern_only)))
 
     @property
     def motion_blur_keys(self) -> bool:
@@ -116,10 +118,10 @@ class RenderRequest:
     def load(self, stage=None) -> Scene:
         """The frame as the renderer's Scene, lens overrides applied. ``stage``: the scene file's stage, already
         open (``renderer.usd.stage.open_stage``), as a range of frames reads it."""
-        scene = load_scene(os.fspath(self.scene_path), self.frame, camera_path=self.camera, shutter=self.shutter,
-                           motion_blur=self.motion_blur_keys, image_width=self.options.width,
-                           ocio_config=self.ocio_config, settings_path=self.settings_prim,
-                           product_path=self.product, purposes=self.purposes,
+        scene = load_scene(os.fspath(self.scene_path), self.frame, camera=self.camera, shutter=self.shutter,
+                           motion_blur=self.motion_blur_keys, width=self.options.width,
+                           ocio_config=self.ocio_config, settings_prim=self.settings_prim,
+                           product=self.product, purposes=self.purposes,
                            primvars=primvar_names(self.options.hit_vars), stage=stage)
         return self.lens.apply(scene)
 

@@ -24,6 +24,7 @@ Policies worth knowing:
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 
 import numpy as np
 from pxr import Gf, Tf, Usd, UsdGeom, UsdLux, UsdRender, UsdShade
@@ -32,6 +33,7 @@ from renderer.core.color import ColorSpaces
 from renderer.errors import SceneError, SettingsError
 from renderer.motion.shutter import Shutter
 from renderer.scene import model as sc
+from renderer.settings.options import default_of
 from renderer.scene.analytic import object_box, realize_tessellations
 from renderer.subdiv import MAX_LEVEL
 from renderer.usd import camera as usd_camera
@@ -65,44 +67,57 @@ def _failure(prim, e: Exception) -> str:
     return f"{prim.GetPath()} ({type(e).__name__}: {' '.join(str(e).split())[:160]})"
 
 
-def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_path: str | None = None,
-               shutter: tuple[float, float] | None = None, motion_blur: bool = True,
-               subdivision_level: int | None = None, image_width: int | None = None,
-               ocio_config: str | None = None, settings_path: str | None = None, product_path: str | None = None,
-               purposes: tuple[str, ...] = (), primvars: tuple[str, ...] = (), stage=None) -> sc.Scene:
-    """Load one frame of a USD stage as a ``Scene``.
+@dataclass(frozen=True)
+class ImportOptions:
+    """What a render asks of the import, by the settings table's names (``renderer.settings.options``)."""
+
+    frame: float | None = None  # time code; None: the stage's startTimeCode (0 if no range is authored)
+    camera: str | None = default_of("camera")  # prim path; None: the render settings' camera, else the first
+    shutter: tuple[float, float] | None = default_of("shutter")  # (open, close) relative to the frame; None: camera's
+    motion_blur: bool = default_of("motion_blur")
+    subdivision_level: int | None = None  # 0..MAX_LEVEL; None: chosen from the camera for ``width`` pixels
+    width: int | None = default_of("width")  # pixels across; None: the render settings' width, else 640
+    ocio_config: str | None = default_of("ocio_config")  # None: $OCIO, else OpenColorIO's built-in config
+    settings_prim: str | None = default_of("settings_prim")  # None: the stage's choice (``camera.settings_prim``)
+    product: str | None = None  # the RenderProduct whose overrides apply; None: the settings' first
+    purposes: tuple[str, ...] = default_of("purposes")  # purposes drawn; (): the render settings' includedPurposes
+    primvars: tuple[str, ...] = ()  # primvars a render asked for by name (primvar RenderVars)
+
+    def check(self) -> None:
+        """SettingsError for a value no stage could make sense of."""
+        if self.shutter is not None:
+            if len(self.shutter) != 2 or not all(np.isfinite(self.shutter)) or self.shutter[0] > self.shutter[1]:
+                raise SettingsError(f"shutter must be (open, close) with open <= close, got {tuple(self.shutter)}")
+        if self.frame is not None and not np.isfinite(self.frame):
+            raise SettingsError(f"frame must be finite, got {self.frame}")
+        if self.subdivision_level is not None and not 0 <= self.subdivision_level <= MAX_LEVEL:
+            raise SettingsError(f"subdivision level must be between 0 and {MAX_LEVEL}, got {self.subdivision_level}")
+
+
+def load_scene(path: str | os.PathLike, frame: float | None = None, *, stage=None, **options) -> sc.Scene:
+    """Load one frame of a USD stage as a ``Scene``; ``options``: the fields of ``ImportOptions``.
 
     ``frame`` defaults to the stage's startTimeCode (0 if no range is authored). The shutter is ``frame +``
     the camera's (shutter:open, shutter:close), or ``frame + shutter`` when given. Subdivision surfaces are
     refined to ``subdivision_level`` (0..6), or by default to a level chosen from the camera for an image
-    ``image_width`` pixels wide (default: the render settings' width, else 640). Colours are converted into the
+    ``width`` pixels wide (default: the render settings' width, else 640). Colours are converted into the
     render settings' ``renderingColorSpace`` (default linear Rec.709) through the OpenColorIO config
     ``ocio_config`` (default ``$OCIO``, else OpenColorIO's built-in one; ``renderer.core.color``). Raises SceneError
     (one-line message) for a missing or malformed file or a bad camera path.
 
-    The render settings are those of ``settings_path`` (see ``camera.settings_prim``) with the overrides of its
-    product ``product_path`` (default: the first). ``stage``: the stage already opened from ``path``
+    The render settings are those of ``settings_prim`` (see ``camera.settings_prim``) with the overrides of its
+    product ``product`` (default: the first). ``stage``: the stage already opened from ``path``
     (``open_stage``), for a range of frames to read one stage.
     """
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise SceneError(f"scene file not found: {path}")
-    if shutter is not None:
-        if len(shutter) != 2 or not all(np.isfinite(shutter)) or shutter[0] > shutter[1]:
-            raise SettingsError(f"shutter must be (open, close) with open <= close, got {tuple(shutter)}")
-    if frame is not None and not np.isfinite(frame):
-        raise SettingsError(f"frame must be finite, got {frame}")
-    if subdivision_level is not None and not 0 <= subdivision_level <= MAX_LEVEL:
-        raise SettingsError(f"subdivision level must be between 0 and {MAX_LEVEL}, got {subdivision_level}")
+    opts = ImportOptions(frame=frame, **options)
+    opts.check()
     if stage is None:
         stage = _open_stage(path)
     try:
-        importer = _Importer(stage, path, frame, camera_path, shutter, motion_blur, subdivision_level,
-                             image_width, ocio_config)
-        importer.settings_path, importer.product_path = settings_path, product_path
-        importer.purposes = tuple(purposes)
-        importer.primvar_names = tuple(primvars)
-        return importer.run()
+        return _Importer(stage, path, opts).run()
     except Tf.ErrorException as e:
         raise SceneError(f"cannot read {os.path.basename(path)}: {_pxr_message(e)}") from None
 
@@ -116,20 +131,15 @@ def load_scene(path: str | os.PathLike, frame: float | None = None, *, camera_pa
 
 
 class _Importer(PointInstancing):
-    def __init__(self, stage, source, frame, camera_path, shutter_override, motion_blur, subdivision_level=None,
-                 image_width=None, ocio_config=None):
+    def __init__(self, stage, source: str, opts: ImportOptions):
         self.stage = stage
-        self.ocio_config = ocio_config
+        self.opts = opts
         self.source = source
         self.warn = WarningLog()
+        frame = opts.frame
         if frame is None:
             frame = stage.GetStartTimeCode() if stage.HasAuthoredTimeCodeRange() else 0.0
         self.frame = float(frame)
-        self.camera_path = camera_path
-        self.shutter_override = shutter_override
-        self.motion_blur = motion_blur
-        self.subdivision_level = subdivision_level
-        self.image_width = image_width
         self.meshes: list[sc.Mesh] = []
         self.instances: list[sc.Instance] = []
         self.lights: list[sc.Light] = []
@@ -156,10 +166,6 @@ class _Importer(PointInstancing):
         self.csg = usd_csg.CsgGroups(self.warn)
         self.assets = AssetNames()
         self._skipped: set[str] = set()  # prims skipped with a warning of their own (not checked for unread data)
-        self.settings_path: str | None = None
-        self.product_path: str | None = None
-        self.purposes: tuple[str, ...] = ()
-        self.primvar_names: tuple[str, ...] = ()  # primvars a render asked for (``_asked_primvars``)
 
     # -- top level ------------------------------------------------------------------------------------------------
     def run(self) -> sc.Scene:
@@ -169,16 +175,16 @@ class _Importer(PointInstancing):
         if errors:
             warn(f"{len(errors)} composition error(s) (missing references/payloads?); the rest was loaded",
                  str(errors[0]).splitlines()[0] if str(errors[0]) else None)
-        settings, _ = usd_camera.render_settings(stage, self.frame, warn, self.settings_path, self.product_path)
-        self.color_spaces = ColorSpaces(settings.rendering_color_space, self.ocio_config)
+        settings, _ = usd_camera.render_settings(stage, self.frame, warn, self.opts.settings_prim, self.opts.product)
+        self.color_spaces = ColorSpaces(settings.rendering_color_space, self.opts.ocio_config)
         self.colors = AttributeColors(self.color_spaces, warn)
-        cam_prim = usd_camera.find_camera(stage, self.camera_path, settings, warn)
+        cam_prim = usd_camera.find_camera(stage, self.opts.camera, settings, warn)
         self._frame_bounds = cam_prim is None
         self.shutter = self._shutter(cam_prim, settings)
         self.xf = TransformSampler(self.shutter)
         self.materials = MaterialTable(self.frame, warn, self.shutter, self.colors, settings.material_binding_purpose)
         # None: default and render, proxy where no render
-        self._included = self.purposes or settings.included_purposes
+        self._included = self.opts.purposes or settings.included_purposes
         self.volume_reader = usd_volumes.VolumeReader(self.frame, warn, self._skipped, self.colors)
         self.detail = self._subdivision_detail(cam_prim, settings)
         self.skinning = Skinning(self.shutter, warn)
@@ -240,10 +246,10 @@ class _Importer(PointInstancing):
 
     def _subdivision_detail(self, cam_prim, settings: sc.RenderSettingsInfo) -> SubdivisionDetail:
         """How finely subdivision surfaces are refined: the fixed level asked for, else from the camera."""
-        if self.subdivision_level is not None or cam_prim is None:
-            return SubdivisionDetail(level=self.subdivision_level)
+        if self.opts.subdivision_level is not None or cam_prim is None:
+            return SubdivisionDetail(level=self.opts.subdivision_level)
         cam = UsdGeom.Camera(cam_prim).GetCamera(self.frame)
-        width = self.image_width or (settings.resolution[0] if settings.resolution else 640)
+        width = self.opts.width or (settings.resolution[0] if settings.resolution else 640)
         aperture = float(cam.horizontalAperture)  # tenths of a scene unit, like the focal length
         if not aperture > 0:
             return SubdivisionDetail()
@@ -258,14 +264,14 @@ class _Importer(PointInstancing):
 
     def _shutter(self, cam_prim, settings: sc.RenderSettingsInfo) -> Shutter:
         tcps = float(self.stage.GetTimeCodesPerSecond())
-        if self.shutter_override is not None:
-            o, c = (float(x) for x in self.shutter_override)
+        if self.opts.shutter is not None:
+            o, c = (float(x) for x in self.opts.shutter)
         else:
             o, c = usd_camera.shutter_offsets(cam_prim, self.frame)
             if o > c:
                 self.warn(f"camera shutter:open {o} is after shutter:close {c}; motion blur disabled")
                 o = c = 0.0
-        still = not self.motion_blur or settings.disable_motion_blur or o == c
+        still = not self.opts.motion_blur or settings.disable_motion_blur or o == c
         return Shutter.around(self.frame, None if still else (o, c), tcps)
 
     # -- traversal ------------------------------------------------------------------------------------------------
@@ -525,7 +531,7 @@ class _Importer(PointInstancing):
         triangles, any gprim's constant (inherited from an ancestor too) as one value."""
         out = {}
         api = UsdGeom.PrimvarsAPI(prim)
-        for name in self.primvar_names:
+        for name in self.opts.primvars:
             pv = api.FindPrimvarWithInheritance(name)
             if not pv or not pv.HasValue():
                 continue
@@ -658,4 +664,4 @@ class _Importer(PointInstancing):
                                             instance=i, emissive_object=True))
 
 
-__all__ = ["load_scene"]
+__all__ = ["ImportOptions", "load_scene"]

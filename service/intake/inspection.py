@@ -204,9 +204,8 @@ class InspectionPool:
         return self.run(task)
 
     def run(self, task: InspectTask) -> dict:
-        # The stored path is content-addressed (<sha>/<name>) and the seed never changes what loads.
-        key = (task.frames, task.spec.scene_path,
-               tuple(sorted((k, v) for k, v in task.spec.request.settings().items() if k != "seed")))
+        # The stored path is content-addressed (<sha>/<name>); the request says which settings the answer reads.
+        key = (task.frames, task.spec.scene_path, task.spec.request.check_key())
         with self._lock:
             if key in self._answers:
                 self._answers.move_to_end(key)

@@ -9,7 +9,8 @@ from renderer.motion.shutter import Shutter
 from renderer.accel.intersect import (Geometry, instance_object_to_world, instance_world_to_object, intersect_closest,
                                       leaf_closest, leaf_four, triangle_hit_edges)
 from renderer.motion.kernels import find_segment, keys_matrix
-from renderer.shading.materials import Materials, upload_material_textures, upload_materials
+from renderer.shading.materials import Materials
+from renderer.shading.material_upload import upload_material_textures, upload_materials
 from renderer.accel.occlusion import hit_uv, transmittance
 from renderer.shading.textures import Textures
 from renderer.accel.build import build_bvh

@@ -8,7 +8,7 @@ import pytest
 
 from renderer.film.film import resolve
 from renderer.render import RenderOptions, prepare, render_frame
-from renderer.shading import materials as M
+from renderer.shading import material_upload as U, materials as M
 from renderer.shading.textures import image_bilinear_np
 from renderer.usd.importer import load_scene
 from test_shading_network import HEAD, QUAD, load, warnings, write_png
@@ -51,7 +51,7 @@ def emission_at(scene, **geometry):
     n = len(next(iter(geometry.values())))
     mats = scene.materials
     i = int(scene.meshes[0].material_ids[0])
-    return M.evaluate_materials(M.upload_materials(mats), M.upload_material_textures(mats), [i] * n,
+    return M.evaluate_materials(U.upload_materials(mats), U.upload_material_textures(mats), [i] * n,
                                 np.zeros((n, 2)), geometry=M.hit_geometries(n, **geometry))["emissive_color"]
 
 
@@ -76,7 +76,7 @@ def test_geometric_values_without_a_hit_take_their_mean(tmp_path):
                      node("C", "ND_add_vector3FA", in1=("float3", "</M/P.outputs:out>"), in2=("float", 0.25)))
     mats = scene.materials
     i = int(scene.meshes[0].material_ids[0])
-    out = M.evaluate_materials(M.upload_materials(mats), M.upload_material_textures(mats), [i], [(0.5, 0.5)])
+    out = M.evaluate_materials(U.upload_materials(mats), U.upload_material_textures(mats), [i], [(0.5, 0.5)])
     np.testing.assert_allclose(out["emissive_color"][0], [0.25, 0.25, 0.25], atol=1e-6)
     np.testing.assert_allclose(emission_at(scene, p_object=[[0.5, 0.0, 1.0]]), [[0.75, 0.25, 1.25]], atol=1e-6)
 

@@ -11,7 +11,7 @@ import OpenImageIO as oiio
 from renderer.film.film import resolve
 from renderer.settings.options import RenderOptions
 from renderer.render import prepare, render_frame
-from renderer.shading import materials as M
+from renderer.shading import material_upload as U, materials as M
 from renderer.shading import textures as T
 from renderer.usd.importer import load_scene
 
@@ -49,7 +49,7 @@ def evaluate(scene, uvs=((0.25, 0.25),)):
     mats = scene.materials
     mesh = scene.meshes[0]
     i = int(mesh.material_ids[0])
-    return M.evaluate_materials(M.upload_materials(mats), M.upload_material_textures(mats), [i] * len(uvs), uvs)
+    return M.evaluate_materials(U.upload_materials(mats), U.upload_material_textures(mats), [i] * len(uvs), uvs)
 
 
 def warnings(scene):
@@ -536,7 +536,7 @@ def test_grazing_checkerboard_does_not_alias(tmp_path):
     def render(spp, mips):
         prep = prepare(scene, RenderOptions(width=64, height=48, spp=spp, max_depth=0, seed=3))
         if not mips:  # the same atlas with level 0 only: plain bilinear lookups
-            prep = dataclasses.replace(prep, textures=M.upload_material_textures(mats, mips=False))
+            prep = dataclasses.replace(prep, textures=U.upload_material_textures(mats, mips=False))
         return resolve(render_frame(prep, tile_size=64, threads=2).sums)["rgba"][..., :3]
 
     ref = render(256, mips=False)  # supersampled: the box-filtered truth that mip levels approximate
@@ -574,11 +574,11 @@ def Material "M"
     assert full == 4 * 256 * 256 * 3 * 4
     budget = 1 << 20  # 1 MiB: less than a third of the set at full resolution, mip levels included
     warns = []
-    atlas = M.upload_material_textures(scene.materials, warn=warns.append, budget=budget)
+    atlas = U.upload_material_textures(scene.materials, warn=warns.append, budget=budget)
     assert T.atlas_bytes(atlas) <= budget
     assert warns and "texture budget" in warns[0]
     # still every tile, at a lower resolution, and the same mean colour
-    out = M.evaluate_materials(M.upload_materials(scene.materials), atlas, [0] * 4,
+    out = M.evaluate_materials(U.upload_materials(scene.materials), atlas, [0] * 4,
                                [(0.5, 0.5), (1.5, 0.5), (0.5, 1.5), (1.5, 1.5)])
     assert np.all(out["diffuse_color"] > 0.0)
 

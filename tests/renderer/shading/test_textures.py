@@ -6,7 +6,7 @@ import OpenImageIO as oiio
 import pytest
 import warp as wp
 
-from renderer.shading import materials as M
+from renderer.shading import material_upload as U, materials as M
 from renderer.shading import textures as T
 from renderer.scene.model import Material, Texture, TextureInput
 from renderer.usd.texture_files import TextureFiles, udim_tile_size
@@ -159,7 +159,7 @@ def test_udim_tile_selection_and_missing_tiles():
 
 
 def evaluate(materials, ids, uvs):
-    return M.evaluate_materials(M.upload_materials(materials), M.upload_material_textures(materials), ids, uvs)
+    return M.evaluate_materials(U.upload_materials(materials), U.upload_material_textures(materials), ids, uvs)
 
 
 def test_scale_bias_fallback_and_outputs():
@@ -209,7 +209,7 @@ def test_constants_opacity_threshold_and_absorption():
     np.testing.assert_allclose(r["absorption"][0], -np.log([0.5, 0.25, 1.0]) / 2.0, atol=1e-6)
     np.testing.assert_allclose(r["absorption"][1], 0.0)
     # the constant summaries the constant-shading code reads
-    m = M.upload_materials(mats)
+    m = U.upload_materials(mats)
     np.testing.assert_allclose(m.opacity.numpy(), [0.6, 1.0, 0.0], atol=1e-7)
 
 
@@ -243,14 +243,14 @@ def test_transform2d_and_constant_st_and_primvar_fallback():
 def test_triangle_tangents_and_handedness():
     p = np.array([[0, 0, 0], [2, 0, 0], [0, 3, 0]], np.float64)
     tri = np.array([[0, 1, 2]])
-    t = M.triangle_tangents(p, tri, np.array([[[0, 0], [1, 0], [0, 1]]]))
+    t = U.triangle_tangents(p, tri, np.array([[[0, 0], [1, 0], [0, 1]]]))
     np.testing.assert_allclose(t, [[1, 0, 0, 1]])
-    t = M.triangle_tangents(p, tri, np.array([[[0, 1], [1, 1], [0, 0]]]))  # v flipped: mirrored
+    t = U.triangle_tangents(p, tri, np.array([[[0, 1], [1, 1], [0, 0]]]))  # v flipped: mirrored
     np.testing.assert_allclose(t, [[1, 0, 0, -1]])
-    t = M.triangle_tangents(p, tri, np.array([[[0, 0], [0, 1], [1, 0]]]))  # u runs along +y
+    t = U.triangle_tangents(p, tri, np.array([[[0, 0], [0, 1], [1, 0]]]))  # u runs along +y
     np.testing.assert_allclose(t, [[0, 1, 0, -1]])
-    assert M.triangle_tangents(p, tri, None).tolist() == [[0, 0, 0, 0]]
-    assert M.triangle_tangents(p, tri, np.zeros((1, 3, 2))).tolist() == [[0, 0, 0, 0]]  # degenerate uvs
+    assert U.triangle_tangents(p, tri, None).tolist() == [[0, 0, 0, 0]]
+    assert U.triangle_tangents(p, tri, np.zeros((1, 3, 2))).tolist() == [[0, 0, 0, 0]]  # degenerate uvs
 
 
 def test_apply_normal_map():
@@ -272,7 +272,7 @@ def test_warp_triangle_tangent_matches_numpy_and_vec3_overload():
     out = wp.zeros(20, dtype=wp.vec4)
     wp.launch(M.triangle_tangent_kernel, dim=20, inputs=[wp.array(p.reshape(-1, 3), dtype=wp.vec3),
                                                          wp.array(uv.reshape(-1, 2), dtype=wp.vec2), out])
-    expect = M.triangle_tangents(p.reshape(-1, 3), np.arange(60).reshape(20, 3), uv)
+    expect = U.triangle_tangents(p.reshape(-1, 3), np.arange(60).reshape(20, 3), uv)
     np.testing.assert_allclose(out.numpy(), expect, atol=1e-4)
     assert expect[0].tolist() == [0, 0, 0, 0] and set(np.abs(expect[1:, 3])) == {1.0}
     res = wp.zeros(1, dtype=wp.vec3)

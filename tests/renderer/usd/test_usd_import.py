@@ -476,7 +476,7 @@ def test_render_settings_pick_camera_resolution_and_disable_blur(tmp_path):
     assert scene.camera.name == "/World/Second"
     assert scene.shutter.open == scene.shutter.close == scene.frame
     # an explicit camera wins over the settings
-    assert load_scene(path, camera_path="/World/First").camera.name == "/World/First"
+    assert load_scene(path, camera="/World/First").camera.name == "/World/First"
 
 
 def test_a_camera_placed_only_by_arnold_look_at_primvars(tmp_path):
@@ -492,11 +492,11 @@ def test_a_camera_placed_only_by_arnold_look_at_primvars(tmp_path):
         for key, v in (("position", (-6.0, -3.0, 30.0)), ("look_at", (-6.0, -3.0, 7.0)), ("up", (0.0, 1.0, 0.0))):
             p.CreateAttribute(f"primvars:arnold:{key}", Sdf.ValueTypeNames.Float3Array).Set([Gf.Vec3f(*v)])
     stage.GetRootLayer().Save()
-    m = matrix_at(load_scene(path, camera_path="/World/Max").camera.transform, 0.0)
+    m = matrix_at(load_scene(path, camera="/World/Max").camera.transform, 0.0)
     np.testing.assert_allclose(m[:3, 3], [-6, -3, 30], atol=1e-5)  # eye
     np.testing.assert_allclose(-m[:3, 2], [0, 0, -1], atol=1e-6)  # looks at look_at
     np.testing.assert_allclose(m[:3, 1], [0, 1, 0], atol=1e-6)  # up
-    m = matrix_at(load_scene(path, camera_path="/World/Placed").camera.transform, 0.0)
+    m = matrix_at(load_scene(path, camera="/World/Placed").camera.transform, 0.0)
     np.testing.assert_allclose(m[:3, 3], [1, 2, 3], atol=1e-6)
     np.testing.assert_allclose(m[:3, :3], np.eye(3), atol=1e-6)
 
@@ -754,13 +754,13 @@ def test_bad_camera_paths(tmp_path):
     add_tri(stage)
     stage.GetRootLayer().Save()
     with pytest.raises(SceneError) as e:
-        load_scene(path, camera_path="/World/Cam")
+        load_scene(path, camera="/World/Cam")
     assert str(e.value) == "camera prim not found: /World/Cam"
     with pytest.raises(SceneError) as e:
-        load_scene(path, camera_path="/World/Tri")
+        load_scene(path, camera="/World/Tri")
     assert "not a Camera" in str(e.value) and "\n" not in str(e.value)
     with pytest.raises(SceneError):
-        load_scene(path, camera_path="not a path")
+        load_scene(path, camera="not a path")
 
 
 # ---------------------------------------------------------------------------------------------------------------

@@ -10,7 +10,7 @@ import pytest
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade, Vt
 
 from renderer.lights import envmap
-from renderer.shading import materials as M
+from renderer.shading import material_upload as U, materials as M
 from renderer.scene import model as sc
 from renderer.motion.transform import matrix_at
 from renderer.usd.primvars import read_named_uvs
@@ -133,7 +133,7 @@ def mat_of(scene, mesh_suffix, tri=0):
 def evaluate(scene, material, uvs):
     mats = scene.materials
     i = next(k for k, m in enumerate(mats) if m is material)
-    return M.evaluate_materials(M.upload_materials(mats), M.upload_material_textures(mats), [i] * len(uvs), uvs)
+    return M.evaluate_materials(U.upload_materials(mats), U.upload_material_textures(mats), [i] * len(uvs), uvs)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -208,7 +208,7 @@ def test_every_input_textured(tmp_path):
     v = np.array([2 * 128 / 255 - 1, 1.0, 1.0])
     np.testing.assert_allclose(r["normal_ts"][0], v / np.linalg.norm(v), atol=1e-6)
     assert r["has_normal_map"][0] == 1
-    assert len(M.collect_textures(scene.materials)) == 3
+    assert len(U.collect_textures(scene.materials)) == 3
 
 
 def test_opacity_threshold_cut_out_and_coverage(tmp_path):
@@ -491,7 +491,7 @@ TEXTURES = {
 def test_every_asset_loads_with_its_textures():
     for root in asset_roots():
         scene = load_scene(ASSETS / root)
-        textures = M.collect_textures(scene.materials)
+        textures = U.collect_textures(scene.materials)
         domes = [l for l in scene.lights if l.kind == sc.LIGHT_DOME and l.texture is not None]
         print(f"{root}: {len(textures)} textures, {len(domes)} dome textures")
         for w in scene.warnings:
@@ -510,7 +510,7 @@ def test_every_asset_loads_with_its_textures():
             m = next(m for m in scene.materials if m.textures)
             assert m.textures["roughness"].uv_primvar == "UVW" and m.textures["opacity"].output == "a"
         # the whole scene uploads and evaluates
-        mats = M.upload_materials(scene.materials)
-        tex = M.upload_material_textures(scene.materials)
+        mats = U.upload_materials(scene.materials)
+        tex = U.upload_material_textures(scene.materials)
         r = M.evaluate_materials(mats, tex, np.arange(len(scene.materials)), np.full((len(scene.materials), 2), 0.5))
         assert all(np.isfinite(v).all() for v in r.values()), root

@@ -133,7 +133,7 @@ def test_refinement_level_follows_the_camera(tmp_path):
         xf.AddTranslateOp().Set(Gf.Vec3d(0, 0, z))
         cube_cage(stage, f"/World/{name}/Cage")
     stage.Save()
-    scene = load_scene(tmp_path / "lvl.usda", 0.0, image_width=640)
+    scene = load_scene(tmp_path / "lvl.usda", 0.0, width=640)
     tris = {m.name.split("/")[2]: len(m.triangles) for m in scene.meshes}
     # near: a 2-unit edge at 6 units spans ~300 px -> level 4 (capped); far: ~3 px -> level 1
     assert tris["Near"] == 48 * 4 ** 3 and tris["Far"] == 48
