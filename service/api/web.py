@@ -1,5 +1,8 @@
 """The job monitor's static shell: ``/`` (jobs), ``/jobs/{id}`` (a job), ``/farm`` and ``/ui/<file>``.
 
+The page's script is a set of ES modules under ``static/`` (``app.js`` the entry point), loaded by the browser
+with ``import`` as they are: no build step. Only the files named in ``FILES`` are served.
+
 The shell holds no data and is served without the token (the page asks for it, then reads everything through
 the token-protected API). Every response carries a Content-Security-Policy that allows scripts, styles and
 connections from this origin only and no inline script at all, so text a user controls (scene names, error
@@ -15,8 +18,12 @@ from fastapi.responses import FileResponse
 from ..errors import ApiError
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
-FILES = {"app.js": "text/javascript; charset=utf-8", "style.css": "text/css; charset=utf-8",
-         "favicon.svg": "image/svg+xml"}
+JAVASCRIPT = "text/javascript; charset=utf-8"
+# The page's ES modules (app.js is the entry point index.html loads; it imports the others). A module a browser
+# asks for that is not named here is a 404, and the page fails to start: add a new module to this list.
+MODULES = ("app.js", "api.js", "dom.js", "format.js", "notice.js", "stream.js", "jobs-view.js", "job-view.js",
+           "farm-view.js")
+FILES = {**dict.fromkeys(MODULES, JAVASCRIPT), "style.css": "text/css; charset=utf-8", "favicon.svg": "image/svg+xml"}
 CSP = ("default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' blob: data:; connect-src 'self'; "
        "base-uri 'none'; form-action 'none'; frame-ancestors 'none'")
 HEADERS = {"Content-Security-Policy": CSP, "X-Content-Type-Options": "nosniff", "Referrer-Policy": "no-referrer",

@@ -35,7 +35,11 @@ def browser():
 
 
 class Page:
-    """A browser tab that records dialogs (accepting confirms) and script errors, which must stay empty."""
+    """A browser tab that records dialogs (accepting confirms) and errors, which must stay empty: script errors,
+    console errors (a module that cannot be loaded or linked is reported only there) and any file of the page
+    itself that is not served. A failed API request is the page's to answer (a 401 asks for the token, a 404 says
+    the job is gone, a stream that cannot open falls back to polling), so the console error Chromium logs for one
+    is not counted."""
 
     def __init__(self, browser, base: str, **context):
         self.base = base
@@ -46,6 +50,20 @@ class Page:
         self.errors: list[str] = []
         self.page.on("dialog", self._dialog)
         self.page.on("pageerror", lambda e: self.errors.append(str(e)))
+        self.page.on("console", self._console)
+        self.page.on("response", self._response)
+
+    def _own(self, url: str) -> bool:
+        """True for a file of the page itself (this server's, not the API's)."""
+        return url.startswith(self.base + "/") and not url.startswith(self.base + "/v1/")
+
+    def _console(self, msg) -> None:
+        if msg.type == "error" and not msg.location.get("url", "").startswith(self.base + "/v1/"):
+            self.errors.append(f"console: {msg.text} ({msg.location.get('url')})")
+
+    def _response(self, r) -> None:
+        if r.status >= 400 and self._own(r.url):
+            self.errors.append(f"{r.status} for {r.url}")
 
     def _dialog(self, d) -> None:
         self.dialogs.append((d.type, d.message))
@@ -266,6 +284,7 @@ def test_a_phone_width_needs_no_sideways_scrolling(server, browser, card, path):
         t.page.wait_for_selector("main > *:not(p.muted)")
         t.page.wait_for_timeout(500)
         assert t.js("() => document.documentElement.scrollWidth") <= 390
+        assert t.errors == []
     finally:
         t.close()
 
@@ -306,3 +325,22 @@ def test_with_a_token_the_page_asks_for_it(browser, card, tmp_path):
         fresh.close()
     finally:
         s.stop()
+
+
+@pytest.mark.parametrize("broken", [
+    {"status": 404, "body": "not found"},  # a module web.py does not serve
+    {"status": 200, "content_type": "text/plain", "body": "export const STATES = [];"},  # served as text
+    {"status": 200, "content_type": "text/javascript", "body": "export const = ;"},  # a syntax error
+], ids=["missing", "not-javascript", "syntax-error"])
+def test_a_module_that_does_not_load_is_an_error_the_tab_records(server, browser, broken):
+    # Every other test relies on this: a page whose modules do not all load starts nothing, and says so only in
+    # the console, which the tab must record for the test to fail.
+    t = Page(browser, server.url)
+    try:
+        t.page.route("**/ui/format.js", lambda route: route.fulfill(**broken))
+        t.goto("/")
+        sample(lambda errors: errors, lambda: list(t.errors), timeout=10)
+        assert t.js("() => document.getElementById('main').childElementCount") == 0  # no view started
+        assert t.page.locator("#live").inner_text() == "offline"
+    finally:
+        t.close()

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import contextlib
 import json
+import re
 import signal
 import sqlite3
 import subprocess
 import sys
 import threading
 import time
+from urllib.parse import urljoin
 
 import httpx
 import pytest
@@ -296,19 +298,58 @@ def test_farm_links_the_configured_dashboard(tmp_path):
 # -- the static shell and the token ------------------------------------------------------------------------------
 
 def test_the_shell_is_static_with_a_strict_csp(server):
+    from service.api import web
+
     for path in ("/", "/jobs/anything", "/farm"):
         r = server.http.get(path)
         assert r.status_code == 200 and r.headers["content-type"].startswith("text/html")
         csp = r.headers["content-security-policy"]
         assert "script-src 'self'" in csp and "default-src 'none'" in csp and "unsafe-inline" not in csp
         assert r.headers["x-content-type-options"] == "nosniff"
-        assert '<script src="/ui/app.js" defer></script>' in r.text and "<script>" not in r.text
-    js = server.http.get("/ui/app.js")
-    assert js.status_code == 200 and js.headers["content-type"].startswith("text/javascript")
-    assert ".innerHTML" not in js.text and "insertAdjacentHTML" not in js.text and "eval(" not in js.text
+        assert '<script type="module" src="/ui/app.js"></script>' in r.text and "<script>" not in r.text
+    for name in web.MODULES:
+        js = server.http.get(f"/ui/{name}")
+        assert js.status_code == 200 and js.headers["content-type"].startswith("text/javascript"), name
+        assert ".innerHTML" not in js.text and "insertAdjacentHTML" not in js.text and "eval(" not in js.text, name
     assert server.http.get("/ui/style.css").headers["content-type"].startswith("text/css")
     for bad in ("/ui/index.html", "/ui/..%2Fapp.py", "/ui/nope.js"):
         assert server.http.get(bad).status_code == 404, bad
+
+
+# An import or re-export of a module by its specifier: `import {a} from "./x.js"`, `export * from "./x.js"`,
+# `import "./x.js"`, `import("./x.js")`.
+IMPORTS = re.compile(r"""^\s*(?:import|export)\s[^;'"]*?\sfrom\s*["']([^"']+)["']"""
+                     r"""|^\s*import\s*["']([^"']+)["']|\bimport\(\s*["']([^"']+)["']\s*\)""", re.M)
+MAX_LINES = 450
+
+
+def test_the_page_loads_modules_that_are_all_served_as_javascript_and_short(server):
+    # The browser follows the entry point's imports from /ui/: each must be served, as JavaScript (a module of any
+    # other type is refused), and every module served must be one the page loads.
+    from service.api import web
+
+    shell = server.http.get("/").text
+    entries = re.findall(r'<script type="module" src="(/ui/[^"]+)"></script>', shell)
+    assert entries == ["/ui/app.js"] and len(re.findall(r"<script", shell)) == 1
+    loaded, todo = {}, list(entries)
+    while todo:
+        url = todo.pop()
+        if url in loaded:
+            continue
+        r = server.http.get(url)
+        assert r.status_code == 200 and r.headers["content-type"].startswith("text/javascript"), (url, r.status_code)
+        loaded[url] = r.text
+        for specifier in (next(filter(None, m)) for m in IMPORTS.findall(r.text)):
+            todo.append(urljoin(url, specifier))
+    assert len(loaded) >= 6, sorted(loaded)  # the API client, the stream, the three views...
+    served = {f"/ui/{name}" for name, kind in web.FILES.items() if kind.startswith("text/javascript")}
+    assert set(loaded) == served, "a module is served but no page imports it"
+    assert {f"/ui/{p.name}" for p in web.STATIC_DIR.glob("*.js")} == served, "a module in static/ is not served"
+    for url, text in loaded.items():
+        assert len(text.splitlines()) <= MAX_LINES, (url, len(text.splitlines()))
+        assert text.startswith("// "), f"{url} does not start with a comment saying what it does"
+    for name in ("index.html", "style.css"):
+        assert len((web.STATIC_DIR / name).read_text().splitlines()) <= MAX_LINES, name
 
 
 def test_with_a_token_only_the_shell_and_healthz_are_open(token_server):
