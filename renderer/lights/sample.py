@@ -126,31 +126,6 @@ def light_shaping(lights: Lights, li: int, emit_dir: wp.vec3, s: float):
 
 
 @wp.func
-def mesh_light_shaping(lights: Lights, geo: Geometry, li: int, inst: int, p0: wp.vec3, p1: wp.vec3, p2: wp.vec3,
-                       emit_dir: wp.vec3, s: float):
-    """ShapingAPI colour of MeshLightAPI light li for the unit world direction ``emit_dir`` leaving its triangle
-    (p0, p1, p2 in object space) at time s. The light frame is the triangle's: -Z its normal on the side that
-    emits (a double-sided mesh's back face shapes about its own), X the mesh's object X made orthogonal to it
-    (IES azimuth), Y = Z x X."""
-    sh = lights.shape0[li] * (1.0 - s) + lights.shape1[li] * s
-    w2o = instance_world_to_object(geo, inst, s)
-    n = wp.normalize(wp.transform_vector(wp.transpose(w2o), wp.cross(p1 - p0, p2 - p0)))
-    if wp.dot(n, emit_dir) < 0.0:
-        n = -n
-    az = -n
-    x = wp.transform_vector(instance_object_to_world(geo, inst, s), wp.vec3(1.0, 0.0, 0.0))
-    ax = x - az * wp.dot(az, x)
-    if wp.length(ax) <= 1.0e-6 * wp.length(x):
-        ax = wp.cross(wp.vec3(0.0, 1.0, 0.0), az)
-        if wp.length(ax) <= 1.0e-6:
-            ax = wp.vec3(1.0, 0.0, 0.0)
-    ax = wp.normalize(ax)
-    ay = wp.cross(az, ax)
-    dl = wp.vec3(wp.dot(emit_dir, ax), wp.dot(emit_dir, ay), wp.dot(emit_dir, az))
-    return shaping_eval(sh, lights.focus_tint[li], lights.ies_table, lights.ies_off[li], lights.ies_param[li], dl)
-
-
-@wp.func
 def rect_texel(lights: Lights, li: int, corner: wp.vec3, ex: wp.vec3, ey: wp.vec3, q: wp.vec3):
     """A rect light's texture at world point q on it (white without one), nearest texel: the image's top-left
     texel at the (-X, +Y) corner, its bottom-right at (+X, -Y), so the image reads unmirrored from behind the
@@ -321,9 +296,9 @@ def sample_light(lights: Lights, geo: Geometry, mats: Materials, tex: Textures, 
         if wp.dot(wp.transform_vector(w2o_t, wp.cross(p1 - p0, p2 - p0)), g.dir) >= 0.0:
             return zero, 0.0, zero, 0.0, False
     if g.pdf > 0.0 and lights.uniform[li] != 0:  # MeshLightAPI: light rays only, so no MIS partner
-        if lights.shape0[li][3] != 0.0:
-            Le = wp.cw_mul(Le, mesh_light_shaping(lights, geo, li, inst, p0, p1, p2, -g.dir, s))
-        return g.dir, g.dist, Le, g.pdf * p_tri, True
+        # ShapingAPI about the light's primary axis, the mesh prim's -Z (its transform is the light's), the same
+        # for every triangle: each triangle's normal only decides which side emits (above)
+        return g.dir, g.dist, wp.cw_mul(Le, light_shaping(lights, li, -g.dir, s)), g.pdf * p_tri, True
     if g.pdf > 0.0:
         # the emission where the point landed (emissive textures): its barycentrics are the warp's
         b = square_to_uniform_triangle(u)

@@ -135,3 +135,24 @@ def mean_shaping(shape, tint, ies_grid, ies, cosine_weighted: bool, n: int = 409
     d = np.stack([r * np.cos(phi), r * np.sin(phi), z], 1)
     c = shaping_np(shape, tint, ies_grid, ies, d)
     return float((c @ np.array([0.2126, 0.7152, 0.0722])).mean())
+
+
+def mean_face_shaping(shape, tint, ies_grid, ies, normals, weights, two_sided: bool, n: int = 4096) -> float:
+    """``mean_shaping`` of an emitting mesh: its faces (unit ``normals`` (N, 3) in the light's frame) drawn by
+    ``weights`` (their power), directions cosine-weighted about each face's normal (either side of a two-sided
+    mesh): the share of its power the shaping about the light's -Z lets out, whichever way its faces look."""
+    rng = np.random.default_rng(7)
+    u = rng.random((n, 4))
+    w = np.cumsum(np.asarray(weights, np.float64))
+    k = np.minimum(np.searchsorted(w / w[-1], u[:, 0], side="right"), len(w) - 1)
+    nrm = np.asarray(normals, np.float64)[k]
+    if two_sided:
+        nrm = np.where(u[:, 3:] < 0.5, nrm, -nrm)
+    helper = np.where(np.abs(nrm[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    t = np.cross(helper, nrm)
+    t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-300)  # a degenerate face: no direction
+    b = np.cross(nrm, t)
+    r, phi = np.sqrt(u[:, 1:2]), 2 * math.pi * u[:, 2:3]
+    d = r * np.cos(phi) * t + r * np.sin(phi) * b + np.sqrt(np.maximum(0.0, 1 - r * r)) * nrm
+    c = shaping_np(shape, tint, ies_grid, ies, d)
+    return float((c @ np.array([0.2126, 0.7152, 0.0722])).mean())

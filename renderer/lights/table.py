@@ -21,7 +21,7 @@ from renderer.lights.envmap import EnvMap, upload_envmap
 from renderer.lights.linking import Links, upload_links
 from renderer.lights.reach import Reach, upload_reach
 from renderer.lights.select import SelectEstimate, Selection, upload_selection
-from renderer.lights.shaping import mean_shaping
+from renderer.lights.shaping import mean_face_shaping, mean_shaping
 from renderer.motion.kernels import MotionKeys, upload_keys
 from renderer.motion.transform import matrices_at, matrix_at, placed_extent
 from renderer.scene.analytic import object_box
@@ -128,11 +128,27 @@ def _shape_keys(sh: Shaping) -> tuple[tuple[float, ...], tuple[float, ...]]:
     return tuple((math.radians(sh.cone_angle[k]), sh.cone_softness[k], sh.focus[k], 1.0) for k in (0, 1))
 
 
-def _shaped_fraction(sh: Shaping, one_sided: bool) -> float:
-    """Share of a light's power its shaping lets out (at the shutter's open), for light selection."""
+def _shaped_fraction(sh: Shaping, one_sided: bool, faces=None) -> float:
+    """Share of a light's power its shaping lets out (at the shutter's open), for light selection. ``faces``: a
+    mesh light's (unit normals in its light frame, their power), which emit about their own normals."""
     k0, _ = _shape_keys(sh)
     ies = (sh.ies_angle_scale, sh.ies_scale)
+    if faces is not None:
+        return max(mean_face_shaping(k0, sh.focus_tint, sh.ies_grid, ies, *faces, two_sided=not one_sided), 1e-6)
     return max(mean_shaping(k0, sh.focus_tint, sh.ies_grid, ies, cosine_weighted=one_sided), 1e-6)
+
+
+def light_frame_normals(points, triangles, inst_matrix, light_matrix) -> np.ndarray:
+    """(n, 3) unit front-face normals of triangles (object-space ``points``) placed by ``inst_matrix``, in the
+    frame of ``light_matrix`` (its unit axes, as ``sample.light_shaping`` measures directions): the side each
+    emits from, by the inverse transpose as the kernels take it (a mirroring matrix does not flip it)."""
+    p = np.asarray(points, np.float64)[triangles]
+    a = np.asarray(inst_matrix, np.float64)[:3, :3]
+    # det(a) a^-T by its cofactors: defined for a flattening (singular) matrix too, whose faces still emit
+    cof = np.stack([np.cross(a[:, 1], a[:, 2]), np.cross(a[:, 2], a[:, 0]), np.cross(a[:, 0], a[:, 1])], 1)
+    n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) @ cof.T * (-1.0 if np.linalg.det(a) < 0 else 1.0)
+    axes = np.asarray(light_matrix, np.float64)[:3, :3]
+    return _unit(n @ (axes / np.maximum(np.linalg.norm(axes, axis=0), 1e-300)))
 
 
 def _upload_shaping(lt: Lights, shapes: list, device: str) -> None:
@@ -253,6 +269,9 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
             tri_power = area * np.maximum(emis, 0.0)
             if count == 0 or not np.isfinite(tri_power).all() or tri_power.sum() <= 0:
                 continue
+            if light.shaping is not None:
+                face_frames = (light_frame_normals(mesh.points[0], mesh.triangles[first:end], m,
+                                                   matrix_at(light.transform, 0.0)), tri_power)
             cdf = (np.cumsum(tri_power) / tri_power.sum()).astype(np.float32)
             cdf[-1] = 1.0
             faces = 1.0 if light.one_sided else 2.0
@@ -303,7 +322,7 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
             power = delivered_irradiance(phi, cap, pos, centre, radius)
         if light.shaping is not None:
             one_sided = light.kind in (LIGHT_RECT, LIGHT_DISK) or (light.kind == LIGHT_MESH and light.one_sided)
-            frac = _shaped_fraction(light.shaping, one_sided=one_sided)
+            frac = _shaped_fraction(light.shaping, one_sided, face_frames if light.kind == LIGHT_MESH else None)
             power *= frac
             phi *= frac
         if not np.isfinite(rad).all() or (rad <= 0).all() or not power > 0:

@@ -316,6 +316,8 @@ class _Importer(PointInstancing):
                     self._guarded(self._visit_gprim, prim, purpose)
                 if usd_lights.is_light(prim):  # MeshLightAPI: its instances become emitters (see mesh_lights)
                     self._mesh_lights.append((prim, list(range(first, len(self.instances)))))
+                else:
+                    usd_lights.warn_shaping_without_light(prim, self.warn)
             elif usd_lights.is_light(prim):
                 self._guarded(self._light, prim)
             elif prim.IsA(UsdLux.LightFilter):

@@ -255,6 +255,14 @@ def _has_shaping(prim) -> bool:
                or (prim.GetAttribute(n) and prim.GetAttribute(n).HasAuthoredValue()) for n in _SHAPING_NAMES)
 
 
+def warn_shaping_without_light(prim, warn) -> None:
+    """ShapingAPI on a gprim that is no light (neither MeshLightAPI nor LightAPI): the schema shapes "a light's
+    emission", and an emissive material's glow is none, so nothing is shaped; one warning naming the prim."""
+    if _has_shaping(prim):
+        warn("light shaping on prims that are not lights ignored (ShapingAPI shapes a light's emission; "
+             "MeshLightAPI makes a mesh one)", str(prim.GetPath()))
+
+
 @reads("ShapingAPI", "inputs:shaping:cone:angle", "inputs:shaping:cone:softness", "inputs:shaping:focus",
        "inputs:shaping:focusTint", "inputs:shaping:ies:file", "inputs:shaping:ies:angleScale",
        "inputs:shaping:ies:normalize")

@@ -12,11 +12,11 @@ rays" in the schema's words); rays that hit the mesh see its material. ``light:m
 - independent: rays see the material's glow; L as authored;
 - noMaterialResponse: the surface has no material response at all (no reflection, no glow); L as authored.
 
-ShapingAPI (cone angle and softness, focus, focus tint, IES profile) shapes L as for any other light, measured in
-the light frame of each emitting triangle: its primary axis (the schema's -Z) is the triangle's normal on the
-side it emits from (both sides of a doubleSided mesh, each about its own normal), its X the mesh's object X made
-orthogonal to that normal (the IES azimuth); see ``lights.sample.mesh_light_shaping``. A flat mesh thus shapes
-like a rect light; a curved one spreads its cone with its normals.
+ShapingAPI (cone angle and softness, focus, focus tint, IES profile) shapes L as for any other light, in the
+light's frame: the schema measures "the light's primary axis" and "the emission direction in the light's local
+space", and this light is the mesh prim, so its axis is the prim's -Z and its IES azimuth the prim's X, carried
+to the world by the prim's (here the instance's) transform at each sample's time (``lights.sample.light_shaping``),
+the same for every triangle. A triangle's normal only decides which side emits (one-sided unless doubleSided).
 """
 from __future__ import annotations
 

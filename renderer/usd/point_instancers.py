@@ -190,6 +190,8 @@ class PointInstancing:
                 mesh = self._mesh_index(prim)
                 if usd_lights.is_light(prim):  # each placement becomes a mesh light (see _point_instancer)
                     self._proto_mesh_lights[str(prim.GetPath())] = prim
+                else:
+                    usd_lights.warn_shaping_without_light(prim, self.warn)
                 if mesh is not None:
                     meshes.append(mesh)
                     names.append(str(prim.GetPath()))

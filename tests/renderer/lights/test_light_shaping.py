@@ -7,7 +7,7 @@ import pathlib
 
 import numpy as np
 import pytest
-from pxr import Gf, Sdf, UsdGeom, UsdLux
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, Vt
 
 import stages
 from renderer.lights.ies import IesError, parse_ies, read_ies
@@ -218,13 +218,15 @@ A = 0.02  # side of the small mesh light (m): a point seen from the floor, H / A
 
 
 def floor_under_mesh_light(path, configure):
-    """``floor_under_point_light`` with a small down-facing MeshLightAPI quad (normalized, intensity 1: radiance
-    1 / A^2, so an intensity of cos(theta) along theta off its normal) in place of the point light. The prim's
-    own -Z axis is horizontal: only the triangles' normals point down."""
+    """``floor_under_point_light`` with a small MeshLightAPI quad (normalized, intensity 1: radiance 1 / A^2, so an
+    intensity of cos(theta) along theta off its normal) in place of the point light, placed as the point light
+    is: its prim's -Z (the light's primary axis) and its face's normal both point down."""
     def mesh_light(light, stage):
         stage.RemovePrim("/World/Spot")
         a = A / 2
-        m = stages.quad(stage, "/World/Panel", [(-a, H, -a), (a, H, -a), (a, H, a), (-a, H, a)])
+        m = stages.quad(stage, "/World/Panel", [(-a, -a, 0), (-a, a, 0), (a, a, 0), (a, -a, 0)])  # facing -Z
+        UsdGeom.Xformable(m).AddTranslateOp().Set(Gf.Vec3d(0, H, 0))
+        UsdGeom.Xformable(m).AddRotateXOp().Set(-90.0)
         UsdLux.MeshLightAPI.Apply(m.GetPrim())
         lux = UsdLux.LightAPI(m.GetPrim())
         lux.CreateIntensityAttr(1.0)
@@ -240,8 +242,8 @@ def focus_falloff(theta, focus, tint=0.0):
 
 @pytest.mark.parametrize("angle,softness,focus", [(90.0, 0.0, 0.0), (30.0, 0.0, 0.0), (40.0, 0.5, 2.0),
                                                   (90.0, 0.0, 8.0)])
-def test_mesh_light_cone_and_focus_measured_from_its_triangles_normal(tmp_path, angle, softness, focus):
-    """Outside the cone (about the triangles' normal) the floor is dark; inside it is the unshaped mesh light's
+def test_mesh_light_cone_and_focus_match_the_schema(tmp_path, angle, softness, focus):
+    """Outside the cone (about the light's axis) the floor is dark; inside it is the unshaped mesh light's
     cos(theta) intensity times the cone's smoothstep and the focus falloff."""
     def configure(prim, _stage):
         shaping = UsdLux.ShapingAPI.Apply(prim)
@@ -265,7 +267,7 @@ def test_mesh_light_focus_tint_colours_off_its_axis(tmp_path):
     assert_profile(measured, expected)
 
 
-def test_mesh_light_ies_profile_about_its_triangles_normal(tmp_path):
+def test_mesh_light_ies_profile_about_its_axis(tmp_path):
     profile = read_ies(str(DATA / "spot.ies"))
     (tmp_path / "spot.ies").write_text((DATA / "spot.ies").read_text())
 
@@ -278,35 +280,169 @@ def test_mesh_light_ies_profile_about_its_triangles_normal(tmp_path):
     assert_profile(measured, expected)
 
 
-def test_a_tilted_mesh_light_aims_its_cone_along_its_normal(tmp_path):
-    """The quad tilted 30 degrees about z: its normal, so its 20-degree cone, points down and towards +x; the lit
-    spot is centred H tan 30 along +x, with the cone measured from that normal."""
-    tilt = math.radians(30.0)
-    normal = np.array([math.sin(tilt), -math.cos(tilt), 0.0])
+# --------------------------------------------------------------------------- a mesh light's axis
+# ShapingAPI measures "the light's primary axis" and "the emission direction in the light's local space": for a
+# mesh light the mesh prim's own -Z, the same for all its triangles, whichever way they face (their normals only
+# decide which side emits). Lamps HL above the floor, so that a 65-degree cone ends on the strip.
+HL = 0.5
 
-    def tilted(light, stage):
-        stage.RemovePrim("/World/Spot")
-        a = A / 2
-        u = np.array([math.cos(tilt), math.sin(tilt), 0.0])  # the quad's x edge, tilted up towards +x
-        w = np.array([0.0, 0.0, 1.0])
-        c = np.array([0.0, H, 0.0])
-        corners = [c - a * u - a * w, c + a * u - a * w, c + a * u + a * w, c - a * u + a * w]
-        m = stages.quad(stage, "/World/Panel", corners)
-        UsdLux.MeshLightAPI.Apply(m.GetPrim())
-        lux = UsdLux.LightAPI(m.GetPrim())
-        lux.CreateIntensityAttr(1.0)
-        lux.CreateNormalizeAttr(True)
-        UsdLux.ShapingAPI.Apply(m.GetPrim()).CreateShapingConeAngleAttr(20.0)
-    measured = floor_under_point_light(tmp_path / "tilted.usda", tilted)
 
-    def radiance(px, z):
-        d = np.stack([(px - W / 2) * PX, np.full_like(px, -H), np.full_like(px, z)], -1)
-        r = np.linalg.norm(d, axis=-1)
-        cos_axis = d @ normal / r
-        theta = np.arccos(np.clip(cos_axis, -1, 1))
-        return cos_axis * schema_cone(theta, 20.0, 0.0) * H / (math.pi * r ** 3)
-    zs = (np.arange(32) + 0.5) / 32 * 4 * PX - 2 * PX
-    expected = np.mean([pixel_average(lambda px: radiance(px, z), 0, W) for z in zs], 0)
+def lamp_over_floor(path, points, triangles, ops, cone=65.0, shutter=(0.0, 0.0)):
+    """A white floor, an orthographic camera HL / 2 above it looking down on a strip along x, and a MeshLightAPI
+    mesh (normalized, intensity 1) of ``points`` and ``triangles`` with ShapingAPI cone ``cone``, placed by
+    ``ops`` (xformOp adders and their values, {time: value} when animated). Returns the stage."""
+    stage = stages.new_stage(path)
+    stages.camera(stage, ortho=True, h_ap_mm=W * PX * 10, v_ap_mm=4 * PX * 10, translate=(0, HL / 2, 0),
+                  rotate_x=-90.0, tenths_per_mm=1.0, shutter=shutter)
+    stages.rect_xz(stage, "/World/Floor", -10, 10, -10, 10, 0.0, stages.material(stage, "White", (1, 1, 1)))
+    m = UsdGeom.Mesh.Define(stage, "/World/Lamp")
+    m.CreatePointsAttr(Vt.Vec3fArray([Gf.Vec3f(*map(float, p)) for p in points]))
+    m.CreateFaceVertexCountsAttr([3] * len(triangles))
+    m.CreateFaceVertexIndicesAttr([int(i) for t in triangles for i in t])
+    m.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    for add, value in ops:
+        op = add(UsdGeom.Xformable(m))
+        for t, v in (value.items() if isinstance(value, dict) else [(Usd.TimeCode.Default(), value)]):
+            op.Set(v, t)
+    UsdLux.MeshLightAPI.Apply(m.GetPrim())
+    lux = UsdLux.LightAPI(m.GetPrim())
+    lux.CreateIntensityAttr(1.0)
+    lux.CreateNormalizeAttr(True)
+    UsdLux.ShapingAPI.Apply(m.GetPrim()).CreateShapingConeAngleAttr(cone)
+    stage.Save()
+    return stage
+
+
+def render_strip(path, spp=16):
+    rgb, _ = render_rgb(path, width=W, height=4, spp=spp, filter="box", max_depth=1)
+    return rgb[..., 0].mean(0)
+
+
+def lamp_floor_radiance(world_tris, axis, cone, x, z, sub=6):
+    """Floor radiance (albedo 1) at floor points (x, 0, z) under a one-sided emitter of world triangles (T, 3, 3),
+    radiance 1 / total area, front faces by their winding, shaped by the schema's cone about the world ``axis``:
+    sum over sub-triangle centres q of L dA max(n . d, 0) cone(acos(axis . d)) cos_floor / (pi r^2), d = p - q."""
+    e0, e1 = world_tris[:, 1] - world_tris[:, 0], world_tris[:, 2] - world_tris[:, 0]
+    n = np.cross(e0, e1)
+    area = 0.5 * np.linalg.norm(n, axis=1)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    i, j = np.meshgrid(np.arange(sub), np.arange(sub), indexing="ij")
+    keep = (i + j) < sub  # the sub-triangles' centres: sub^2 of equal area, up and down ones
+    bu = np.concatenate([(i[keep] + 1 / 3), (i[keep & (i + j < sub - 1)] + 2 / 3)]) / sub
+    bv = np.concatenate([(j[keep] + 1 / 3), (j[keep & (i + j < sub - 1)] + 2 / 3)]) / sub
+    q = world_tris[:, None, 0] + bu[None, :, None] * e0[:, None] + bv[None, :, None] * e1[:, None]  # (T, S, 3)
+    da = np.repeat(area[:, None] / len(bu), len(bu), 1)
+    nq = np.repeat(n[:, None], len(bu), 1)
+    q, da, nq = q.reshape(-1, 3), da.ravel() / area.sum(), nq.reshape(-1, 3)  # L dA with L = 1 / area
+    p = np.stack([x, np.zeros_like(x), z], -1).reshape(-1, 1, 3)
+    d = p - q[None]
+    r = np.linalg.norm(d, axis=-1)
+    d = d / r[..., None]
+    theta = np.arccos(np.clip(d @ (np.asarray(axis) / np.linalg.norm(axis)), -1, 1))
+    e = da * np.maximum(np.einsum("pqk,qk->pq", d, nq), 0) * schema_cone(theta, cone, 0.0) * (q[:, 1] / r) / r ** 2
+    return (e.sum(-1) / math.pi).reshape(np.shape(x))
+
+
+def expected_strip(world_tris, axis, cone, sub=6, px_sub=16, rows=8, pixels=slice(0, W)):
+    """``lamp_floor_radiance`` averaged over each pixel of the strip (``pixels`` of them) as the camera sees it."""
+    zs = (np.arange(rows) + 0.5) / rows * 4 * PX - 2 * PX
+    x0, n_px = pixels.start, pixels.stop - pixels.start
+    return np.mean([pixel_average(lambda px: lamp_floor_radiance(world_tris, axis, cone, (px - W / 2) * PX,
+                                                                 np.full_like(px, z), sub), x0, n_px, px_sub)
+                    for z in zs], 0)
+
+
+def world_triangles(stage, points, triangles, time=0.0):
+    m = np.array(UsdGeom.Xformable(stage.GetPrimAtPath("/World/Lamp")).ComputeLocalToWorldTransform(time)).T
+    p = np.asarray(points, np.float64) @ m[:3, :3].T + m[:3, 3]
+    return p[np.asarray(triangles)], -m[:3, 2]  # and the primary axis: the prim's -Z in the world
+
+
+def tilted_panel(tilt_deg):
+    """A small square (side A) about its origin, in local coordinates, facing -Z tilted by ``tilt_deg`` towards +X
+    (rotated about Y): a face that looks away from the light's axis."""
+    t = math.radians(tilt_deg)
+    u = np.array([math.cos(t), 0.0, math.sin(t)])  # the square's x edge, tipped up in z
+    v = np.array([0.0, 1.0, 0.0])
+    a = A / 2
+    corners = [-a * u - a * v, -a * u + a * v, a * u + a * v, a * u - a * v]  # winding: normal (sin t, 0, -cos t)
+    assert np.cross(corners[1] - corners[0], corners[2] - corners[0]) @ [math.sin(t), 0, -math.cos(t)] > 0
+    return np.array(corners), [(0, 1, 2), (0, 2, 3)]
+
+
+DOWN = [(lambda x: x.AddTranslateOp(), Gf.Vec3d(0, HL, 0)), (lambda x: x.AddRotateXOp(), -90.0)]  # -Z down
+
+
+def test_a_mesh_lights_cone_is_about_its_prims_minus_z_not_its_faces_normal(tmp_path):
+    """A panel facing 50 degrees off its prim's -Z, which points down: its 65-degree cone is about the straight
+    down axis, so the floor is lit from x = -HL cot 50 (where the face turns away) to HL tan 65 (the cone's edge),
+    with the analytic irradiance, and dark beyond: not the cone about its normal, which would light -HL tan 15 to
+    past the strip's end."""
+    points, tris = tilted_panel(50.0)
+    stage = lamp_over_floor(tmp_path / "lamp.usda", points, tris, DOWN)
+    world, axis = world_triangles(stage, points, tris)
+    np.testing.assert_allclose(axis, [0, -1, 0], atol=1e-12)
+    measured = render_strip(tmp_path / "lamp.usda")
+    expected = expected_strip(world, axis, 65.0)
     assert_profile(measured, expected)
-    lit = np.nonzero(measured > 0)[0]
-    assert (lit.min() + lit.max() + 1) / 2 * PX - W / 2 * PX > 0.4, "the spot is off to +x"
+    x = (np.arange(W) + 0.5 - W / 2) * PX
+    assert measured[x > HL * math.tan(math.radians(65)) + 2 * PX].max() == 0.0  # outside the cone: dark
+    between = (x > -HL / math.tan(math.radians(50)) + 2 * PX) & (x < -HL * math.tan(math.radians(15)) - 2 * PX)
+    assert measured[between].min() > 0.0  # in the cone, in front of the face, yet > 65 degrees off its normal
+
+
+def test_rotating_the_mesh_prim_rotates_its_lights_axis(tmp_path):
+    """The same panel with its prim turned a further -20 degrees about the world Z: the axis (and the cone) tilts
+    20 degrees towards -x, so the cone's edge on +x comes in to HL tan 45 = HL."""
+    points, tris = tilted_panel(50.0)
+    ops = [DOWN[0], (lambda x: x.AddRotateZOp(), -20.0), DOWN[1]]
+    stage = lamp_over_floor(tmp_path / "turned.usda", points, tris, ops)
+    world, axis = world_triangles(stage, points, tris)
+    np.testing.assert_allclose(axis, [-math.sin(math.radians(20)), -math.cos(math.radians(20)), 0], atol=1e-12)
+    measured = render_strip(tmp_path / "turned.usda")
+    assert_profile(measured, expected_strip(world, axis, 65.0))
+    x = (np.arange(W) + 0.5 - W / 2) * PX
+    assert measured[x > HL + 2 * PX].max() == 0.0 and measured[(x > 0) & (x < HL - 2 * PX)].min() > 0.0
+
+
+def test_a_turning_mesh_light_shapes_about_its_axis_at_each_samples_time(tmp_path):
+    """The prim turns about the world Z from -20 to +20 degrees over the shutter: each sample is shaped about the
+    axis of its time, so the floor shows the average over the shutter of the turning lamp's profile."""
+    points, tris = tilted_panel(50.0)
+    ops = [DOWN[0], (lambda x: x.AddRotateZOp(), {0.0: -20.0, 1.0: 20.0}), DOWN[1]]
+    stage = lamp_over_floor(tmp_path / "turning.usda", points, tris, ops, shutter=(0.0, 1.0))
+    measured = render_strip(tmp_path / "turning.usda", spp=64)
+    expected = np.mean([expected_strip(*world_triangles(stage, points, tris, t), 65.0, sub=3, rows=4)
+                        for t in (np.arange(16) + 0.5) / 16], 0)
+    assert_profile(measured, expected)
+
+
+def lampshade(half_angle_deg=20.0, radius=0.02, segments=24):
+    """A cone open at the bottom (apex up at local z = h, the rim at z = 0, local -Z down), its faces wound to face
+    inwards: light leaves through the opening, each face's normal 90 - half_angle off the downward axis."""
+    h = radius / math.tan(math.radians(half_angle_deg))
+    ring = [(radius * math.cos(2 * math.pi * k / segments), radius * math.sin(2 * math.pi * k / segments), 0.0)
+            for k in range(segments)]
+    points = np.array([(0.0, 0.0, h)] + ring)
+    tris = [(0, 1 + (k + 1) % segments, 1 + k) for k in range(segments)]
+    p = points[np.asarray(tris)]
+    inward = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    assert (np.einsum("ij,ij->i", inward, -p[:, 1:].mean(1) * [1, 1, 0]) > 0).all()
+    return points, tris
+
+
+def test_a_cone_shaped_lamp_lights_the_floor_below_it(tmp_path):
+    """A lampshade whose inside faces are 70 degrees off the straight-down axis, with a 65-degree cone (the case a
+    reference renderer lights and a cone about each face's normal leaves dark): the floor below is lit with the
+    analytic irradiance (within HL tan 20 of the axis every point sees the whole inside, unoccluded), and dark
+    beyond the cone."""
+    points, tris = lampshade()
+    stage = lamp_over_floor(tmp_path / "shade.usda", points, tris, DOWN)
+    world, axis = world_triangles(stage, points, tris)
+    measured = render_strip(tmp_path / "shade.usda", spp=64)
+    x = (np.arange(W) + 0.5 - W / 2) * PX
+    near = np.nonzero(np.abs(x) < HL * math.tan(math.radians(20)) - 2 * PX)[0]
+    expected = expected_strip(world, axis, 65.0, sub=4, rows=4, pixels=slice(near[0], near[-1] + 1))
+    assert expected.min() > 0.3 * expected.max() > 0
+    np.testing.assert_allclose(measured[near], expected, rtol=0.02)
+    assert measured[np.abs(x) > HL * math.tan(math.radians(65)) + 2 * PX].max() == 0.0

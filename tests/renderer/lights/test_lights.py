@@ -11,8 +11,8 @@ from renderer.lights.select import Selection, select_light
 from renderer.lights.select import select_pdf as light_select_pdf
 from renderer.lights.table import delivered_irradiance, upload_lights
 from renderer.motion.transform import MotionTransform
-from renderer.scene.model import (LIGHT_DISTANT, LIGHT_DOME, LIGHT_RECT, LIGHT_SPHERE, Camera, Instance, Light,
-                                  Material, Mesh, Scene)
+from renderer.scene.model import (LIGHT_DISTANT, LIGHT_DOME, LIGHT_MESH, LIGHT_RECT, LIGHT_SPHERE, Camera, Instance,
+                                  Light, Material, Mesh, Scene, Shaping)
 
 
 def translate(x, y, z):
@@ -57,6 +57,30 @@ def test_equal_lights_at_equal_distance_are_equally_likely():
     a = Light(LIGHT_RECT, "a", (3, 3, 3), MotionTransform.static(translate(4, 4, 0) @ down), width=1, height=1)
     b = Light(LIGHT_RECT, "b", (3, 3, 3), MotionTransform.static(translate(-4, 4, 0) @ down), width=1, height=1)
     np.testing.assert_allclose(select_pdf([a, b]), [0.5, 0.5], rtol=1e-6)
+
+
+def test_a_shaped_mesh_light_is_weighed_by_the_share_of_its_faces_emission_in_its_cone():
+    """Equal one-sided MeshLightAPI squares at equal distance, shaped by a 90-degree cone about their prims' -Z
+    (the light's axis): one faces along -Z and sends all its power into the cone; a face turned beta off -Z sends
+    (1 + cos beta) / 2 of its cosine-weighted emission into the cone's hemisphere, and is weighed so."""
+    betas = [0.0, 60.0, 90.0, 150.0]
+    scene = unit_scene([])
+    for k, beta in enumerate(betas):
+        b = math.radians(beta)
+        u, v = np.array([math.cos(b), 0.0, math.sin(b)]), np.array([0.0, 1.0, 0.0])  # normal (sin b, 0, -cos b)
+        pts = np.array([[-u - v, -u + v, u + v, u - v]], np.float32) * 0.25
+        tris = np.array([[0, 1, 2], [0, 2, 3]], np.int32)
+        scene.meshes.append(Mesh(f"square{k}", np.zeros(1, np.float32), pts, tris, np.zeros(2, np.int32)))
+        a = math.radians(90.0 * k)
+        xf = MotionTransform.static(translate(6 * math.cos(a), 3, 6 * math.sin(a)))  # all as far from the scene
+        scene.instances.append(Instance(len(scene.meshes) - 1, xf))
+        scene.lights.append(Light(LIGHT_MESH, f"square{k}", (3.0, 3.0, 3.0), xf, instance=len(scene.instances) - 1,
+                                  one_sided=True, uniform=True, shaping=Shaping()))
+    lt, n = upload_lights(scene)
+    assert n == len(betas)
+    p = lt.select_pdf.numpy()
+    share = (1 + np.cos(np.radians(betas))) / 2
+    np.testing.assert_allclose(p / p[0], share, rtol=0.03, atol=0.01)
 
 
 # --------------------------------------------------------------------------- spatially aware selection

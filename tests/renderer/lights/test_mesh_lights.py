@@ -197,3 +197,16 @@ def test_mesh_lights_in_point_instancer_prototypes_light_like_placed_copies(tmp_
     placed, instanced = floor_value(tmp_path / "placed.usda"), floor_value(tmp_path / "instanced.usda")
     assert placed.mean() > 0.1
     np.testing.assert_allclose(instanced, placed, rtol=0.03)
+
+
+def test_shaping_on_an_emissive_mesh_that_is_no_light_warns_and_shapes_nothing(tmp_path):
+    """ShapingAPI shapes a light's emission: on a mesh with a glowing material but no MeshLightAPI there is no
+    light to shape, so its emission stays as the material has it, with one warning naming the mesh."""
+    stage = floor_stage(tmp_path / "glow.usda")
+    glow = down_quad(stage, "/World/Glow", 0.5, 0.5, H, stages.material(stage, "Glow", emissive=(1, 1, 1)))
+    UsdLux.ShapingAPI.Apply(glow.GetPrim()).CreateShapingConeAngleAttr(10.0)
+    stage.Save()
+    scene = load_scene(tmp_path / "glow.usda", 0.0)
+    (light,) = scene.lights
+    assert light.kind == sc.LIGHT_MESH and light.emissive_object and light.shaping is None
+    assert [w for w in scene.warnings if "light shaping on prims that are not lights" in w and "/World/Glow" in w]
