@@ -228,7 +228,7 @@ class ColorSpaces:
 def default_display_view(config: str | None = None) -> tuple[str, str]:
     """The config's default display and that display's default view (OpenColorIO's ``active_displays`` /
     ``active_views`` and ``$OCIO_ACTIVE_DISPLAYS`` / ``$OCIO_ACTIVE_VIEWS`` choose them): what display-referred
-    image files (PNG, JPEG, TIFF) are encoded with, as husk encodes its 8-bit outputs."""
+    image files (PNG, JPEG, TIFF) are encoded with."""
     cfg = load_config(config_name(config))
     display = cfg.getDefaultDisplay()
     return display, cfg.getDefaultView(display)
