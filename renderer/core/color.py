@@ -225,27 +225,43 @@ class ColorSpaces:
         return out
 
 
+def default_display_view(config: str | None = None) -> tuple[str, str]:
+    """The config's default display and that display's default view (OpenColorIO's ``active_displays`` /
+    ``active_views`` and ``$OCIO_ACTIVE_DISPLAYS`` / ``$OCIO_ACTIVE_VIEWS`` choose them): what display-referred
+    image files (PNG, JPEG, TIFF) are encoded with."""
+    cfg = load_config(config_name(config))
+    display = cfg.getDefaultDisplay()
+    return display, cfg.getDefaultView(display)
+
+
+def _preview_display_view(cfg) -> tuple[str, str]:
+    display = PREVIEW_DISPLAY if PREVIEW_DISPLAY in cfg.getDisplays() else cfg.getDefaultDisplay()
+    views = list(cfg.getViews(display))
+    return display, PREVIEW_VIEW if PREVIEW_VIEW in views else cfg.getDefaultView(display)
+
+
 @functools.lru_cache(maxsize=8)
-def _display_processor(config: str, source: str):
+def _display_processor(config: str, source: str, display: str | None, view: str | None):
     import PyOpenColorIO as ocio
 
     cfg = load_config(config)
-    display = PREVIEW_DISPLAY if PREVIEW_DISPLAY in cfg.getDisplays() else cfg.getDefaultDisplay()
-    views = list(cfg.getViews(display))
-    view = PREVIEW_VIEW if PREVIEW_VIEW in views else cfg.getDefaultView(display)
+    if display is None:
+        display, view = _preview_display_view(cfg)
     t = ocio.DisplayViewTransform(src=cfg.getColorSpace(source).getName(), display=display, view=view)
     return cfg.getProcessor(t).getDefaultCPUProcessor()
 
 
-def to_display(rgb: np.ndarray, rendering: str | None = None, config: str | None = None) -> np.ndarray:
-    """Linear ``rgb`` (..., 3) in the rendering space ``rendering`` (default linear Rec.709) through the sRGB
-    display's plain view (``PREVIEW_VIEW``): display-encoded values, 0..1 for what a screen shows."""
+def to_display(rgb: np.ndarray, rendering: str | None = None, config: str | None = None,
+               display: str | None = None, view: str | None = None) -> np.ndarray:
+    """Linear ``rgb`` (..., 3) in the rendering space ``rendering`` (default linear Rec.709) through the display
+    ``display`` and its ``view`` (default: the sRGB display's plain view, ``PREVIEW_VIEW``): display-encoded
+    values, 0..1 for what a screen shows."""
     src = rendering or LINEAR_REC709
-    proc = _display_processor(config_name(config), src)
+    proc = _display_processor(config_name(config), src, display, view)
     flat = np.ascontiguousarray(np.asarray(rgb, np.float32).reshape(-1, 3))
     proc.applyRGB(flat)
     return flat.reshape(np.shape(rgb))
 
 
-__all__ = ["ColorSpaces", "config_name", "load_config", "to_display", "DEFAULT_CONFIG", "LINEAR_REC709",
-           "SRGB_REC709", "PREVIEW_DISPLAY", "PREVIEW_VIEW"]
+__all__ = ["ColorSpaces", "config_name", "load_config", "to_display", "default_display_view", "DEFAULT_CONFIG",
+           "LINEAR_REC709", "SRGB_REC709", "PREVIEW_DISPLAY", "PREVIEW_VIEW"]

@@ -235,8 +235,15 @@ def product_image(prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = (),
 
 
 def write_product(path, prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = (),
-                  user_cryptomatte: tuple[str, ...] = (), half: bool = False) -> int:
-    """Write a product's EXR atomically (``product_image``). Returns the number of non-finite values zeroed."""
+                  user_cryptomatte: tuple[str, ...] = (), half: bool = False, warn=None) -> int:
+    """Write a product atomically (``product_image``) in the format its extension names
+    (``renderer.output.image_formats``: the EXR, or the beauty of a PNG, JPEG or TIFF, whose left-out layers
+    ``warn(message, layers)`` is told). Returns the number of non-finite values zeroed."""
+    from renderer.output.image_formats import LEFT_OUT, image_format, left_out, write_image
+
     image, halves = product_image(prep, sums, vars_, user_aovs=user_aovs, user_cryptomatte=user_cryptomatte,
                                   half=half)
-    return image.write(path, half=halves)
+    missing = left_out(image.channels, image_format(path))
+    if missing and warn is not None:
+        warn(LEFT_OUT, ", ".join(missing))
+    return write_image(path, image, half=halves)

@@ -6,8 +6,10 @@ A range renders in one process: the stage is opened once, the kernels load once,
 materials did not change reuses the hierarchy and textures of the one before (``prepare``'s ``reuse``). Output
 names expand ``$F``, ``$F2``..``$F9``, ``$FF`` and runs of ``#`` per frame (``renderer.output.names``).
 
-Bad input ends with a one-line error and a non-zero exit code (``main``), never a partial output file (EXR writes
-are atomic). In a range, a frame that fails is reported (``drt: error: frame F: ...``) and the others still render.
+The output's extension chooses its format (``renderer.output.image_formats``: ``.exr``, or the beauty as a
+display-referred ``.png``, ``.jpg``, ``.tif``); any other fails before the render. Bad input ends with a one-line
+error and a non-zero exit code (``main``), never a partial output file (every write is atomic). In a range, a
+frame that fails is reported (``drt: error: frame F: ...``) and the others still render.
 """
 from __future__ import annotations
 
@@ -34,11 +36,12 @@ def add_warmup_command(sub: argparse._SubParsersAction) -> argparse.ArgumentPars
 
 
 def add_render_command(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    r = sub.add_parser("render", help="render frames of a USD scene to EXR files")
+    r = sub.add_parser("render", help="render frames of a USD scene to EXR (or PNG, JPEG, TIFF) files")
     r.add_argument("scene", help="a .usd/.usda/.usdc/.usdz file")
     r.add_argument("-o", "--output", default=None, metavar="OUT.exr",
-                   help="the image (of a render settings' products, the first); $F, $F4, $FF and #### expand to "
-                        "the frame (default: each RenderProduct to its productName)")
+                   help="the image (of a render settings' products, the first): .exr, or the beauty through the "
+                        "OpenColorIO display view as .png, .jpg, .tif; $F, $F4, $FF and #### expand to the frame "
+                        "(default: each RenderProduct to its productName)")
     add_render_settings(r)
     add_make_output_path(r)
     r.add_argument("--checkpoint", action="store_true",
@@ -121,6 +124,7 @@ def _targets(args, products: list, frame: float, warn) -> list[tuple[str, object
     if not products:
         if args.output is None:
             raise RenderError("no -o given and the render settings name no RenderProduct to write")
+        _check_format(expand_frame(args.output, frame), None)
         return [(expand_frame(args.output, frame), None)]
     out = []
     for i, product in enumerate(products):
@@ -135,7 +139,23 @@ def _targets(args, products: list, frame: float, warn) -> list[tuple[str, object
             out.append((expand_frame(product.name, frame), product))
     if not out:
         raise RenderError("the render settings have no raster RenderProduct to write")
+    for name, product in out:
+        _check_format(name, product)
     return out
+
+
+def _check_format(name: str, product) -> None:
+    """RenderError, before the render, for a name whose extension drt does not write, or a PNG/JPEG/TIFF of a
+    product whose vars hold no beauty (those formats hold the beauty alone)."""
+    from renderer.errors import RenderError
+    from renderer.output.image_formats import image_format
+    from renderer.output.var_channels import source_kind
+
+    fmt = image_format(name)
+    if fmt.display_referred and product is not None and product.vars and not any(
+            source_kind(v) == "rgba" for v in product.vars):
+        raise RenderError(f"cannot write {name}: a {fmt.label} image holds the beauty, and RenderProduct "
+                          f"{product.path} has no beauty var (name it .exr for its layers)")
 
 
 def cmd_render(args: argparse.Namespace) -> int:
@@ -146,6 +166,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     from renderer.usd.stage import open_stage
     from renderer.usd.products import default_frame, resolve_settings_path
 
+    if args.output is not None:
+        _check_format(expand_frame(args.output, 0.0), None)  # an unknown extension fails before the load
     if args.output is not None and not args.make_output_path and expand_frame(args.output, 0.0) == args.output:
         output_path(args.output, make=False)  # a missing folder fails before the load
     t_load = time.perf_counter()
@@ -205,7 +227,7 @@ class _Run:
         sums = assemble(tiles, prep.width, prep.height)
         for path, name, product in members:
             write_product(path, prep, sums, product.vars if product else (), user_aovs=self.base.options.aovs,
-                          user_cryptomatte=self.base.options.cryptomatte, half=self.base.half)
+                          user_cryptomatte=self.base.options.cryptomatte, half=self.base.half, warn=self.warn)
             sys.stderr.write(f"drt: snapshot of {len(tiles)} tiles written to {name}\n")
         sys.stderr.flush()
 
@@ -282,7 +304,7 @@ class _Run:
             for path, name, product in members:
                 zeroed = write_product(path, prep, result.sums, product.vars if product else (),
                                        user_aovs=base.options.aovs, user_cryptomatte=base.options.cryptomatte,
-                                       half=base.half)
+                                       half=base.half, warn=self.warn)
                 if zeroed:
                     self.warn(f"{zeroed} non-finite pixel values were zeroed in {name}")
                 self._report(name, prep, result, load)
