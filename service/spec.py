@@ -84,7 +84,7 @@ class FrameProduct:
 
     name: str
     prim: str | None
-    vars: tuple = ()  # renderer.usd.products.VarSpec
+    vars: tuple = ()  # renderer.usd.render_products.VarSpec
 
 
 def default_product_name(scene_name: str) -> str:
@@ -98,7 +98,7 @@ def frame_products(stage, request: RenderRequest, frame: float, warn) -> list[Fr
     from renderer.output.names import expand_frame
     from renderer.errors import RenderError
     from renderer.output.var_channels import UNWRITTEN, unwritten
-    from renderer.usd.products import read_products, resolve_settings_path
+    from renderer.usd.render_products import read_products, resolve_settings_path
 
     products = read_products(stage, resolve_settings_path(stage, request.settings_prim, lambda *a: None), frame)
     if not products:

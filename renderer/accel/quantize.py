@@ -23,7 +23,7 @@ misses nothing. A decoded box is larger by less than one step (1/254 of the node
 enters a few more nodes: the triangle tests, and with them the hits, are unchanged.
 
 Coordinates beyond +-2^126 (~8.5e37) are clamped there, and a NaN box becomes the whole node's (never looser than
-the float test, which would miss it): finite scenes never meet either (``renderer.usd.mesh`` rejects non-finite
+the float test, which would miss it): finite scenes never meet either (``renderer.usd.geometry.mesh`` rejects non-finite
 points).
 """
 from __future__ import annotations

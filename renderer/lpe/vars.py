@@ -2,7 +2,7 @@
 
 A var is an EXR layer ``NAME.R/G/B`` holding the light of every path its expression accepts, filtered as the
 beauty. ``--light-groups`` adds the layer ``RGBA_<group>`` of each light group ``g`` the scene's lights carry
-(``renderer.usd.light_groups``): ``C.*<L.'g'>`` and the emissive geometry of that group, ``C.*<O.'g'>``.
+(``renderer.usd.lights.light_groups``): ``C.*<L.'g'>`` and the emissive geometry of that group, ``C.*<O.'g'>``.
 """
 from __future__ import annotations
 

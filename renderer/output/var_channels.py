@@ -1,6 +1,6 @@
 """RenderVars as EXR layers: which pixels a var's source names, in how many channels, at what precision.
 
-A product (``renderer.usd.products.ProductSpec``) lists its vars; ``product_channels`` turns a rendered frame's
+A product (``renderer.usd.render_products.ProductSpec``) lists its vars; ``product_channels`` turns a rendered frame's
 sums into its channels:
 
 * the **beauty** var (raw ``color``/``C``/``Ci``/``rgba``, or an LPE of all light such as ``C.*``) is the

@@ -3,7 +3,7 @@ corners, boundary interpolation, limit positions and normals, and face-varying d
 
 ``Refinement`` is computed once per mesh topology: a short chain of sparse stencils (one per level, then the
 limit projection) applied to every motion key of the points and to every primvar, so deforming meshes stay
-consistent between keys. No pxr here: ``renderer/usd/subdiv.py`` reads the USD attributes into
+consistent between keys. No pxr here: ``renderer/usd/geometry/subdiv.py`` reads the USD attributes into
 ``SubdivOptions``. No library on the package registry offers OpenSubdiv to Python on CPU in a maintained form
 (``pyopensubdiv`` 0.0.3 wraps plain Catmull-Clark without creases or face-varying data), hence this module.
 """

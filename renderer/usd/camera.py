@@ -52,7 +52,7 @@ def settings_prim(stage: Usd.Stage, settings_path: str | None, warn):
     return found[0] if found else None
 
 
-# what ``renderer.usd.products`` reads of products and vars (declared here, where the importer sees them)
+# what ``renderer.usd.render_products`` reads of products and vars (declared here, where the importer sees them)
 @reads("RenderProduct", "productName", "productType")
 @reads("RenderVar", "sourceName", "sourceType", "dataType")
 def settings_products(stage: Usd.Stage, prim) -> list:

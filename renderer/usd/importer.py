@@ -37,26 +37,26 @@ from renderer.settings.options import default_of
 from renderer.scene.analytic import object_box, realize_tessellations
 from renderer.subdiv import MAX_LEVEL
 from renderer.usd import camera as usd_camera
-from renderer.usd import csg as usd_csg
-from renderer.usd import curves as usd_curves
-from renderer.usd import lights as usd_lights
+from renderer.usd.geometry import csg as usd_csg
+from renderer.usd.geometry import curves as usd_curves
+from renderer.usd.lights import lux as usd_lights
 from renderer.usd.assets import AssetNames
 from renderer.usd.color import AttributeColors
-from renderer.usd.linking import apply_linking
-from renderer.usd.materials import MaterialTable
-from renderer.usd.mesh import read_mesh
-from renderer.usd.mesh_lights import apply_mesh_light
-from renderer.usd.mtlx import compose_mtlx
+from renderer.usd.lights.linking import apply_linking
+from renderer.usd.shading.materials import MaterialTable
+from renderer.usd.geometry.mesh import read_mesh
+from renderer.usd.lights.mesh_lights import apply_mesh_light
+from renderer.usd.shading.mtlx import compose_mtlx
 from renderer.usd.motion import TransformSampler, collapse_keys, motion_transform, motion_transforms, samples_in_shutter
-from renderer.usd.point_instancers import PointInstancing
-from renderer.usd.primitives import PRIMITIVE_TYPES, primitive_signature, read_primitive
-from renderer.usd.primvars import default_uv_name, read_corner_primvar, read_display_colors, read_named_uvs
-from renderer.usd.light_groups import assign_light_groups
+from renderer.usd.geometry.point_instancers import PointInstancing
+from renderer.usd.geometry.primitives import PRIMITIVE_TYPES, primitive_signature, read_primitive
+from renderer.usd.geometry.primvars import default_uv_name, read_corner_primvar, read_display_colors, read_named_uvs
+from renderer.usd.lights.light_groups import assign_light_groups
 from renderer.usd.reads import reads, report_unread
-from renderer.usd.skel import Skinning
+from renderer.usd.geometry.skel import Skinning
 from renderer.usd.stage import WarningLog, _open_stage, _pxr_message
-from renderer.usd.subdiv import SubdivisionDetail
-from renderer.usd import volumes as usd_volumes  # noqa: I100
+from renderer.usd.geometry.subdiv import SubdivisionDetail
+from renderer.usd.geometry import volumes as usd_volumes  # noqa: I100
 
 # What reading a prim's data can raise (pxr's errors and Boost.Python's ArgumentError, a TypeError): the prim,
 # or the optional step that read it, is skipped with a warning naming the error.

@@ -164,7 +164,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     from renderer.integrator.frame import default_threads
     from renderer.kernels.loading import load_kernels
     from renderer.usd.stage import open_stage
-    from renderer.usd.products import default_frame, resolve_settings_path
+    from renderer.usd.render_products import default_frame, resolve_settings_path
 
     if args.output is not None:
         _check_format(expand_frame(args.output, 0.0), None)  # an unknown extension fails before the load
@@ -257,7 +257,7 @@ class _Run:
         from renderer.output.var_channels import UNWRITTEN, needs, unwritten, with_needs, write_product
         from renderer.film.tiles import auto_tile_size
         from renderer.integrator.frame import render_frame
-        from renderer.usd.products import read_products
+        from renderer.usd.render_products import read_products
 
         args, base = self.args, self.base
         t0 = time.perf_counter()

@@ -14,7 +14,7 @@ from renderer.motion.transform import MotionTransform, make_transform
 from renderer.scene.analytic import SHAPE_CODES, analytic_shapes
 from renderer.scene.flatten import flatten_still_instances
 from renderer.scene.model import LIGHT_MESH, AnalyticShape, Camera, Instance, Light, Material, Mesh, Scene
-from renderer.usd.primitives import _AXIS_PERM, _analytic_shape, _sphere, _tessellate, tessellate_primitive
+from renderer.usd.geometry.primitives import _AXIS_PERM, _analytic_shape, _sphere, _tessellate, tessellate_primitive
 from renderer.usd.importer import load_scene
 from test_accel import _probe, random_mesh, ray_triangles
 

@@ -9,7 +9,7 @@ from renderer.settings.options import RenderOptions
 from renderer.render import frame_channels, prepare, render_frame
 from renderer.scene import tessellate_curves as tc
 from renderer.scene import tessellate_points as tp
-from renderer.usd.curves import nurbs_basis as tc_nurbs_basis
+from renderer.usd.geometry.curves import nurbs_basis as tc_nurbs_basis
 from renderer.usd.importer import load_scene
 
 # ------------------------------------------------------------------------------------------- curve evaluation

@@ -1,4 +1,4 @@
-"""MaterialX nodes driven by the hit's position, normal and tangent (renderer/usd/signals.py ``Geo``,
+"""MaterialX nodes driven by the hit's position, normal and tangent (renderer/usd/shading/signals.py ``Geo``,
 renderer/shading/materials.py ``projected_rgba``): the geometric nodes in object and world space, image lookups
 projected from the position, triplanar projections, and a render that evaluates them at every hit."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Shading networks (renderer/usd/shading_network.py) and surface models (renderer/usd/surfaces.py): interface
+"""Shading networks (renderer/usd/shading/network.py) and surface models (renderer/usd/shading/surfaces.py): interface
 inputs, NodeGraph outputs, multi-output shaders, connected varnames, MaterialX math and images, Standard Surface
 (MaterialX and Arnold ids), OpenPBR and UsdPreviewSurface rendering alike."""
 from __future__ import annotations

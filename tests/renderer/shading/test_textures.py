@@ -9,7 +9,7 @@ import warp as wp
 from renderer.shading import material_upload as U, materials as M
 from renderer.shading import textures as T
 from renderer.scene.model import Material, Texture, TextureInput
-from renderer.usd.texture_files import TextureFiles, udim_tile_size
+from renderer.usd.shading.texture_files import TextureFiles, udim_tile_size
 
 
 def write_image(path, pixels, fmt=oiio.UINT8):

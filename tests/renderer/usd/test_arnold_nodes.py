@@ -1,4 +1,4 @@
-"""Arnold's own shader nodes (renderer/usd/arnold_nodes.py): each gives the colour its definition says."""
+"""Arnold's own shader nodes (renderer/usd/shading/arnold_nodes.py): each gives the colour its definition says."""
 from __future__ import annotations
 
 import numpy as np

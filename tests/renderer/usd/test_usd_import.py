@@ -14,7 +14,7 @@ from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdRender, UsdShade, Vt
 from renderer.scene import model as sc
 from renderer.errors import SceneError
 from renderer.motion.transform import make_transform, matrix_at, quat_to_matrix
-from renderer.usd.triangulation import triangulate
+from renderer.usd.geometry.triangulation import triangulate
 from renderer.usd.motion import motion_transforms
 from renderer.usd.importer import load_scene
 

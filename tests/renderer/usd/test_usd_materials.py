@@ -1,4 +1,4 @@
-"""UsdPreviewSurface import with textures (renderer/usd/materials.py), dome textures, and the shipped assets."""
+"""UsdPreviewSurface import with textures (renderer/usd/shading/materials.py), dome textures, and the shipped assets."""
 from __future__ import annotations
 
 import json
@@ -13,8 +13,8 @@ from renderer.lights import envmap
 from renderer.shading import material_upload as U, materials as M
 from renderer.scene import model as sc
 from renderer.motion.transform import matrix_at
-from renderer.usd.primvars import read_named_uvs
-from renderer.usd.materials import MaterialTable
+from renderer.usd.geometry.primvars import read_named_uvs
+from renderer.usd.shading.materials import MaterialTable
 from renderer.usd.importer import load_scene
 from renderer.usd.stage import WarningLog
 

@@ -1,4 +1,4 @@
-"""Mesh features read from USD (renderer/usd/mesh.py, renderer/usd/primvars.py): holes, GeomSubsets through holes
+"""Mesh features read from USD (renderer/usd/geometry/mesh.py, renderer/usd/geometry/primvars.py): holes, GeomSubsets through holes
 and refinement, subdivision surfaces as imported and rendered."""
 from __future__ import annotations
 
@@ -167,7 +167,7 @@ def test_subdivided_texture_coordinates_and_named_uv_sets(tmp_path):
     """st (faceVarying, linear 'all') on a flat subdivided grid is the bilinear map of the cage: every refined
     corner keeps uv = xy of the cage; a second set read by name for materials lines up with the same
     triangles; varying uvs refine linearly too."""
-    from renderer.usd.primvars import read_named_uvs
+    from renderer.usd.geometry.primvars import read_named_uvs
     from renderer.usd.stage import WarningLog
 
     stage = stages.new_stage(tmp_path / "uv.usda")
@@ -204,7 +204,7 @@ def test_inconsistent_creases_are_ignored_with_a_warning(tmp_path):
 
 
 def test_level_choice_from_projected_edges_and_the_triangle_cap():
-    from renderer.usd.subdiv import SubdivisionDetail
+    from renderer.usd.geometry.subdiv import SubdivisionDetail
 
     counts = np.full(6, 4)
     edges = np.array([[0, 1]])

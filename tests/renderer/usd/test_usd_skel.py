@@ -1,4 +1,4 @@
-"""UsdSkel (renderer/usd/skel.py): skinned meshes and blend shapes match UsdSkel's own baked points at every
+"""UsdSkel (renderer/usd/geometry/skel.py): skinned meshes and blend shapes match UsdSkel's own baked points at every
 key inside the shutter, rigidly skinned primitives follow their joint, skinned motion blurs, and skinned meshes
 inside native instances (crowd agents) are skinned by the Skeleton above each instance."""
 from __future__ import annotations
@@ -319,7 +319,7 @@ def test_skinned_motion_blur_under_an_animated_parent(tmp_path):
 def test_a_failing_optional_step_degrades_with_one_warning(tmp_path, monkeypatch, step, warning):
     """Skinning the normals or applying blend shapes fails: the mesh is still skinned and drawn, one warning says
     which step was left out."""
-    from renderer.usd.skel import Skinning
+    from renderer.usd.geometry.skel import Skinning
 
     def fail(*args, **kwargs):
         raise TypeError("not this time")

@@ -1,4 +1,4 @@
-"""UsdVol import (renderer/usd/volumes.py, renderer/media/openvdb.py): Volume prims, their field relationships,
+"""UsdVol import (renderer/usd/geometry/volumes.py, renderer/media/openvdb.py): Volume prims, their field relationships,
 OpenVDBAsset fieldName / fieldIndex / time-sampled filePath, instancing, materials, and the warnings."""
 from __future__ import annotations
 

@@ -31,10 +31,10 @@ from __future__ import annotations
 import numpy as np
 
 from renderer.scene.model import Texture, TextureInput
-from renderer.usd.shading_network import Network, vector
-from renderer.usd.shading_nodes import RAW_NAMES, SRGB_NAMES, shader_id
-from renderer.usd.signals import UV, Const, Display, Tex, const, numeric
-from renderer.usd.texture_files import resolve_asset
+from renderer.usd.shading.network import Network, vector
+from renderer.usd.shading.nodes import RAW_NAMES, SRGB_NAMES, shader_id
+from renderer.usd.shading.signals import UV, Const, Display, Tex, const, numeric
+from renderer.usd.shading.texture_files import resolve_asset
 
 CHECKER_TEXELS = 32  # texels per checker square in the texture made for a checkerboard node
 

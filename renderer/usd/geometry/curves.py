@@ -38,10 +38,10 @@ from pxr import UsdGeom
 from renderer.scene import tessellate_curves as tc
 from renderer.scene import tessellate_points as tp
 from renderer.scene.model import AnalyticShape
-from renderer.usd.mesh import GeomData
+from renderer.usd.geometry.mesh import GeomData
 from renderer.motion.shutter import Shutter
 from renderer.usd.motion import point_keys
-from renderer.usd.primvars import varying_colors
+from renderer.usd.geometry.primvars import varying_colors
 from renderer.usd.reads import reads
 
 DEFAULT_WIDTH = 1.0  # scene units; the schema has no fallback, Hydra and RenderMan use 1

@@ -1,6 +1,6 @@
 """UsdGeomMesh subdivision surfaces: the schema's attributes read into ``renderer.subdiv``, the refinement level
 chosen from the camera, and the refined triangles, limit points (every motion key), normals and texture
-coordinates that ``renderer.usd.mesh.read_mesh`` returns.
+coordinates that ``renderer.usd.geometry.mesh.read_mesh`` returns.
 
 Level: with a camera, the smallest level whose edges project to at most ``EDGE_PIXELS`` (95th percentile of the
 cage's edges, each at its own distance from the camera), between 1 and ``MAX_AUTO_LEVEL``; without one

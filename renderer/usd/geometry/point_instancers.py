@@ -10,11 +10,11 @@ from __future__ import annotations
 import numpy as np
 from pxr import Usd, UsdGeom
 
-from renderer.usd import curves as usd_curves
-from renderer.usd import lights as usd_lights
-from renderer.usd import volumes as usd_volumes
+from renderer.usd.geometry import curves as usd_curves
+from renderer.usd.lights import lux as usd_lights
+from renderer.usd.geometry import volumes as usd_volumes
 from renderer.usd.motion import refine_keys, samples_in_shutter, shutter_interval
-from renderer.usd.primitives import PRIMITIVE_TYPES
+from renderer.usd.geometry.primitives import PRIMITIVE_TYPES
 from renderer.usd.reads import reads
 
 _PI_ATTRS = ("positions", "orientations", "orientationsf", "scales", "velocities", "angularVelocities",

@@ -4,8 +4,8 @@
 (``GetValueProducingAttributes``): through NodeGraph outputs and interface inputs (``inputs:x.connect =
 </Mat.inputs:x>`` on a Material or NodeGraph), to the output of the shader that produces the value, which may be
 one of several (UsdUVTexture r/g/b/a/rgb, MaterialX separate3 outr/outg/outb). Each node output is evaluated
-once into a *signal* (``renderer.usd.signals``: Const, UV, Tex, Display, Geo); node ids and the math nodes'
-functions are tabled in ``renderer.usd.shading_nodes``.
+once into a *signal* (``renderer.usd.shading.signals``: Const, UV, Tex, Display, Geo); node ids and the math nodes'
+functions are tabled in ``renderer.usd.shading.nodes``.
 
 Nodes: UsdUVTexture, UsdPrimvarReader_*, UsdTransform2d, and the MaterialX standard library's image,
 tiledimage, texcoord, geompropvalue, position, normal, tangent, triplanarprojection, constant, place2d, normalmap
@@ -33,11 +33,11 @@ from pxr import UsdShade
 
 from renderer.scene.model import Texture, TextureInput
 from renderer.usd.color import AttributeColors, attribute_colors
-from renderer.usd.shading_nodes import (ADDRESS, GEO_NODES, MATH, NODE_KINDS, SEPARATE_OUTPUTS, SPACES, SRGB_NAMES,
+from renderer.usd.shading.nodes import (ADDRESS, GEO_NODES, MATH, NODE_KINDS, SEPARATE_OUTPUTS, SPACES, SRGB_NAMES,
                                         RAW_NAMES, TYPES, node_kind, shader_id)
-from renderer.usd.signals import (UV, Const, Display, Geo, Signal, Tex, affine, affine_matrix, const, fold, geo,
+from renderer.usd.shading.signals import (UV, Const, Display, Geo, Signal, Tex, affine, affine_matrix, const, fold, geo,
                                   geo_default, numeric, tex_mean, tex_values)
-from renderer.usd.texture_files import TextureFiles, resolve_asset
+from renderer.usd.shading.texture_files import TextureFiles, resolve_asset
 
 BAKE_MAX = 1024  # texels on the longest side of a baked texture
 MAX_DEPTH = 64  # nodes on one path through a network (guards against connection cycles)

@@ -1,18 +1,18 @@
 """Primvars of a mesh as per-triangle-corner values: interpolation, indices, ``elementSize``, texture coordinates.
 
-Every interpolation expands over the triangles' corners (``renderer.usd.triangulation``) the same way: constant ->
+Every interpolation expands over the triangles' corners (``renderer.usd.geometry.triangulation``) the same way: constant ->
 broadcast, uniform -> per face, vertex/varying -> per point, faceVarying -> per corner. Subdivision surfaces refine
-their primvars with the surface's own rules (``renderer.usd.subdiv``).
+their primvars with the surface's own rules (``renderer.usd.geometry.subdiv``).
 """
 from __future__ import annotations
 
 import numpy as np
 from pxr import UsdGeom
 
-from renderer.usd import subdiv as usd_subdiv
+from renderer.usd.geometry import subdiv as usd_subdiv
 from renderer.usd.reads import reads
-from renderer.usd.subdiv import SubdivisionDetail
-from renderer.usd.triangulation import drop_holes, hole_indices, triangulate
+from renderer.usd.geometry.subdiv import SubdivisionDetail
+from renderer.usd.geometry.triangulation import drop_holes, hole_indices, triangulate
 
 # Hydra's mesh of a UsdGeomCube (GeomUtilCuboidMeshGenerator): the topology primvars authored on a Cube refer to.
 # Points are for size 1; faces are right-handed quads.

@@ -41,7 +41,7 @@ from renderer.shading.textures import ImageError
 from renderer.usd.color import AttributeColors
 from renderer.usd.motion import TransformSampler, motion_transform
 from renderer.usd.reads import reads
-from renderer.usd.texture_files import read_asset_image, resolve_asset
+from renderer.usd.shading.texture_files import read_asset_image, resolve_asset
 
 # Row-vector matrix of a +90 degree turn about X: the dome's +Y pole to +Z (UsdLuxDomeLight.OrientToStageUpAxis).
 _POLE_Z_ROW = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])

@@ -26,7 +26,7 @@ import numpy as np
 
 from renderer.motion.transform import matrix_at
 from renderer.scene import model as sc
-from renderer.usd.lights import base_emission, normalized, read_shaping
+from renderer.usd.lights.lux import base_emission, normalized, read_shaping
 from renderer.usd.reads import reads
 
 SYNC_MODES = ("materialGlowTintsLight", "independent", "noMaterialResponse")

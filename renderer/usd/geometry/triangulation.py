@@ -1,7 +1,7 @@
 """Polygons to triangles: faces triangulated by vertex count, and the faces ``holeIndices`` leaves undrawn.
 
 Triangles are expressed as *corners* (positions in ``faceVertexIndices``), so that every primvar interpolation
-expands over them the same way (``renderer.usd.primvars``), and keep their authored face numbers throughout.
+expands over them the same way (``renderer.usd.geometry.primvars``), and keep their authored face numbers throughout.
 Triangles pass through, convex polygons are fanned, concave ones are ear-clipped.
 """
 from __future__ import annotations

@@ -12,12 +12,12 @@ import numpy as np
 
 from renderer.scene.analytic import shape_bounds
 from renderer.scene.model import AnalyticShape
-from renderer.usd.mesh import GeomData
+from renderer.usd.geometry.mesh import GeomData
 from renderer.motion.shutter import Shutter
 from renderer.usd.motion import collapse_keys, samples_in_shutter
-from renderer.usd.primvars import CUBE_COUNTS, CUBE_INDICES, CUBE_POINTS, expand_primvar, read_uv_primvar
+from renderer.usd.geometry.primvars import CUBE_COUNTS, CUBE_INDICES, CUBE_POINTS, expand_primvar, read_uv_primvar
 from renderer.usd.reads import reads
-from renderer.usd.triangulation import triangulate
+from renderer.usd.geometry.triangulation import triangulate
 
 SPHERE_SEGMENTS = 64  # around the axis
 SPHERE_RINGS = 32  # pole to pole

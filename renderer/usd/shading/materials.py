@@ -69,13 +69,13 @@ from pxr import Gf, UsdGeom, UsdShade
 
 from renderer.scene.model import Material, Texture, TextureInput
 from renderer.usd.reads import reads
-from renderer.usd.shading_network import Network
-from renderer.usd.shading_nodes import shader_id
-from renderer.usd.signals import UV, Const, Display, Geo, Tex, expand_rgba, geo_texture_input, select_post, tex_mean
-from renderer.usd import arnold_nodes
-from renderer.usd.surfaces import PREVIEW, PREVIEW_DEFAULTS, surface_inputs, surface_model
+from renderer.usd.shading.network import Network
+from renderer.usd.shading.nodes import shader_id
+from renderer.usd.shading.signals import UV, Const, Display, Geo, Tex, expand_rgba, geo_texture_input, select_post, tex_mean
+from renderer.usd.shading import arnold_nodes
+from renderer.usd.shading.surfaces import PREVIEW, PREVIEW_DEFAULTS, surface_inputs, surface_model
 from renderer.usd.color import AttributeColors, attribute_colors
-from renderer.usd.texture_files import TextureFiles
+from renderer.usd.shading.texture_files import TextureFiles
 
 GREY = (0.18, 0.18, 0.18)
 ABSORPTION_COLOR = "drt:absorptionColor"

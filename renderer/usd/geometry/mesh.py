@@ -1,8 +1,8 @@
 """UsdGeomMesh to triangles: topology at the frame, point keys over the shutter, normals and texture coordinates.
 
 ``read_mesh`` returns a ``GeomData`` (NumPy only) in object space, the form every gprim reader returns (implicit
-primitives: ``renderer.usd.primitives``; points and curves: ``renderer.usd.curves``). Subdivision surfaces are
-refined in ``renderer.usd.subdiv``. ``orientation = leftHanded`` swaps two corners so the result is
+primitives: ``renderer.usd.geometry.primitives``; points and curves: ``renderer.usd.geometry.curves``). Subdivision surfaces are
+refined in ``renderer.usd.geometry.subdiv``. ``orientation = leftHanded`` swaps two corners so the result is
 counter-clockwise seen from the front; faces named in ``holeIndices`` are not drawn.
 """
 from __future__ import annotations
@@ -13,13 +13,13 @@ import numpy as np
 from pxr import UsdGeom
 
 from renderer.scene.model import AnalyticShape
-from renderer.usd import subdiv as usd_subdiv
+from renderer.usd.geometry import subdiv as usd_subdiv
 from renderer.motion.shutter import Shutter
 from renderer.usd.motion import point_keys
-from renderer.usd.primvars import expand_primvar, read_primvar, read_uv_primvar, read_uv_primvar_raw
+from renderer.usd.geometry.primvars import expand_primvar, read_primvar, read_uv_primvar, read_uv_primvar_raw
 from renderer.usd.reads import reads
-from renderer.usd.subdiv import SubdivisionDetail
-from renderer.usd.triangulation import drop_holes, hole_indices, triangulate
+from renderer.usd.geometry.subdiv import SubdivisionDetail
+from renderer.usd.geometry.triangulation import drop_holes, hole_indices, triangulate
 
 
 @dataclass

@@ -39,7 +39,7 @@ from renderer.media.openvdb import VdbError, read_field
 from renderer.scene.model import Volume, VolumeField, VolumeMedium
 from renderer.usd.color import attribute_colors
 from renderer.usd.reads import reads
-from renderer.usd.texture_files import resolve_asset
+from renderer.usd.shading.texture_files import resolve_asset
 
 VELOCITY_NAMES = ("vel", "v", "velocity")
 DEFAULT_CHANNELS = {"density": "density", "temperature": "temperature", "emission": "heat", "scatter_color": ""}

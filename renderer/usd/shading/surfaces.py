@@ -24,10 +24,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from renderer.usd import arnold_nodes
-from renderer.usd.shading_network import Network
-from renderer.usd.shading_nodes import node_kind, shader_id
-from renderer.usd.signals import Const, Tex, const
+from renderer.usd.shading import arnold_nodes
+from renderer.usd.shading.network import Network
+from renderer.usd.shading.nodes import node_kind, shader_id
+from renderer.usd.shading.signals import Const, Tex, const
 
 PREVIEW = "UsdPreviewSurface"
 STANDARD = "standard_surface"

@@ -1,0 +1,1 @@
+"""Light import: UsdLux lights, MeshLightAPI lights, light and shadow linking, light groups."""
