@@ -40,7 +40,8 @@ AREA = {"rect": 1.0 * 0.6, "disk": math.pi * 0.5 ** 2, "sphere": 4.0 * math.pi *
 def add_light(stage, shape, *, hints=None, facing=True, scale=1.0, path="/World/Light"):
     """A light of INTENSITY and COLOR DEPTH in front of the camera (rect 1 x 0.6, disk and sphere of radius 0.5),
     facing it (its -Z towards the camera) unless ``facing`` is False; ``hints`` {attribute: value}."""
-    light = {"rect": UsdLux.RectLight, "disk": UsdLux.DiskLight, "sphere": UsdLux.SphereLight}[shape].Define(stage, path)
+    schema = {"rect": UsdLux.RectLight, "disk": UsdLux.DiskLight, "sphere": UsdLux.SphereLight}[shape]
+    light = schema.Define(stage, path)
     if shape == "rect":
         light.CreateWidthAttr(1.0)
         light.CreateHeightAttr(0.6)
@@ -206,7 +207,8 @@ def test_a_seen_light_is_in_the_camera_light_layer_and_its_light_group(tmp_path)
     stages.camera(stage)
     light = add_light(stage, "disk", hints={"primvars:ri:attributes:visibility:camera": 1})
     light.GetPrim().CreateAttribute("karma:light:lpetag", Sdf.ValueTypeNames.String).Set("key")
-    stages.rect_xy(stage, "/World/Card", -5, -0.25, -5, 5, -1.0, stages.material(stage, "Card", emissive=(0.2, 0.2, 0.2)))
+    card = stages.material(stage, "Card", emissive=(0.2, 0.2, 0.2))
+    stages.rect_xy(stage, "/World/Card", -5, -0.25, -5, 5, -1.0, card)
     stage.Save()
     _, ch, _ = render(tmp_path / "l.usda", lpe=("seen=CL", "glow=CO"), light_groups=True)
     layer = lambda name: np.stack([ch[f"{name}.{c}"] for c in "RGB"], -1)  # noqa: E731
@@ -231,7 +233,8 @@ def test_a_moving_seen_light_is_blurred_like_moving_geometry(tmp_path):
     light.CreateIntensityAttr(2.0)
     light.GetPrim().CreateAttribute("visibleInPrimaryRay", Sdf.ValueTypeNames.Bool).Set(True)
     bar = UsdGeom.Xform.Define(stage, "/World/Bar")
-    stages.rect_xy(stage, "/World/Bar/Quad", -0.25, 0.25, -0.4, 0.0, 0.0, stages.material(stage, "E", emissive=(1, 1, 1)))
+    glow = stages.material(stage, "E", emissive=(1, 1, 1))
+    stages.rect_xy(stage, "/World/Bar/Quad", -0.25, 0.25, -0.4, 0.0, 0.0, glow)
     for xf, y in ((UsdGeom.Xformable(light), 0.2), (bar, 0.0)):
         op = xf.AddTranslateOp()
         op.Set(Gf.Vec3d(-2.0, y, 0.0), 0.0)
@@ -251,3 +254,26 @@ def test_a_moving_seen_light_is_blurred_like_moving_geometry(tmp_path):
     assert np.abs(seen / 2.0 - expected).max() < 0.03, np.abs(seen / 2.0 - expected).max()
     assert np.abs(seen / 2.0 - glow).max() < 0.03
     assert seen.max() < 2.0 * 0.5  # blurred: no pixel sees it all the shutter
+
+
+def test_a_dome_takes_the_same_hints_and_stays_seen_without_one(tmp_path):
+    cases = (({}, True), ({"visibleInPrimaryRay": False}, False), ({"inputs:visibility:camera": False}, False))
+    for k, (hints, seen) in enumerate(cases):
+        stage = stages.new_stage(tmp_path / f"d{k}.usda")
+        stages.camera(stage)
+        dome = stages.dome_light(stage, intensity=0.5)
+        for name, value in hints.items():
+            dome.GetPrim().CreateAttribute(name, HINTS[name][0]).Set(value)
+        stage.Save()
+        rgba, _, _ = render(tmp_path / f"d{k}.usda")
+        want = [0.5, 0.5, 0.5, 1.0] if seen else [0.0] * 4
+        np.testing.assert_allclose(rgba.reshape(-1, 4), np.tile(want, (W * H, 1)), rtol=1e-5, err_msg=str(hints))
+
+
+def test_a_hint_on_a_point_light_is_named_and_changes_nothing(tmp_path):
+    def point(light):
+        light.CreateTreatAsPointAttr(True)
+
+    rgba, _, warnings = render(light_stage(tmp_path / "p.usda", "sphere", point, hints={"visibleInPrimaryRay": True}))
+    assert np.all(rgba == 0.0)
+    assert [w for w in warnings if "point lights ignored" in w and "/World/Light" in w], warnings

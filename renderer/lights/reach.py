@@ -11,9 +11,9 @@ With ``TREE_MIN`` area lights or more, the still ones get a tree of their own: t
 whose boxes it enters. Lights that move within the shutter are tested one by one (``loose``): their boxes would
 have to bound a sweep, and they are rare. Fewer area lights are all ``loose``, tested one by one as before. The
 infinite lights (distant, dome) are listed in ``infinite``, and the area lights camera rays see in ``seen`` (most
-scenes have none: then a camera ray tests no light at all; ``sample.first_seen_light``). The lists are in light order, the order the old loops
-added their light in; a tree walk adds them in its own order, which changes a pixel's last bits only where one
-ray reaches two lights (tested).
+scenes have none: then a camera ray tests no light at all; ``sample.first_seen_light``). The lists are in light
+order, the order the old loops added their light in; a tree walk adds them in its own order, which changes a
+pixel's last bits only where one ray reaches two lights (tested).
 
 Boxes are grown by ``PAD`` of their size and position: the kernels intersect the lights in float32, from frames
 computed in float64, so a box exactly on a light's edge could miss a ray the light itself takes.
