@@ -1,8 +1,8 @@
-"""Area lights seen by the camera (``usd.lights.seen_by_camera``): each renderer's hint on a rect, a disk and a sphere
-light shows the light with the radiance its emission gives (intensity x color, / area with normalize, exposure,
-colour temperature, a rect's texture), alpha 1 there; unseen without a hint, from behind a rect or disk, and behind
-geometry; the light hides what is behind it; in the ``C L`` layer and its light group; motion-blurred like
-geometry."""
+"""Area lights seen by the camera (``usd.lights.seen_by_camera``): each renderer's hint on a rect, a disk, a sphere
+and a cylinder light shows the light with the radiance its emission gives (intensity x color, / area with
+normalize, exposure, colour temperature, a rect's texture), alpha 1 there; unseen without a hint, from behind a
+rect or disk, and behind geometry; the light hides what is behind it; in the ``C L`` layer and its light group;
+motion-blurred like geometry; domes take the same hints."""
 from __future__ import annotations
 
 import math
@@ -33,20 +33,25 @@ HINTS = {
     "visibleInPrimaryRay": (Sdf.ValueTypeNames.Bool, True, False),
     "inputs:visibility:camera": (Sdf.ValueTypeNames.Bool, True, False),
 }
-SHAPES = ("rect", "disk", "sphere")
-AREA = {"rect": 1.0 * 0.6, "disk": math.pi * 0.5 ** 2, "sphere": 4.0 * math.pi * 0.5 ** 2}  # at scale 1
+SHAPES = ("rect", "disk", "sphere", "cylinder")
+AREA = {"rect": 1.0 * 0.6, "disk": math.pi * 0.5 ** 2, "sphere": 4.0 * math.pi * 0.5 ** 2,
+        "cylinder": 2.0 * math.pi * 0.5 * 1.0}  # at scale 1 (a cylinder's side)
 
 
 def add_light(stage, shape, *, hints=None, facing=True, scale=1.0, path="/World/Light"):
-    """A light of INTENSITY and COLOR DEPTH in front of the camera (rect 1 x 0.6, disk and sphere of radius 0.5),
-    facing it (its -Z towards the camera) unless ``facing`` is False; ``hints`` {attribute: value}."""
-    schema = {"rect": UsdLux.RectLight, "disk": UsdLux.DiskLight, "sphere": UsdLux.SphereLight}[shape]
+    """A light of INTENSITY and COLOR DEPTH in front of the camera (rect 1 x 0.6, disk and sphere of radius 0.5, a
+    cylinder of radius 0.5 and length 1 along X), facing it (its -Z towards the camera) unless ``facing`` is False;
+    ``hints`` {attribute: value}."""
+    schema = {"rect": UsdLux.RectLight, "disk": UsdLux.DiskLight, "sphere": UsdLux.SphereLight,
+              "cylinder": UsdLux.CylinderLight}[shape]
     light = schema.Define(stage, path)
     if shape == "rect":
         light.CreateWidthAttr(1.0)
         light.CreateHeightAttr(0.6)
     else:
         light.CreateRadiusAttr(0.5)
+    if shape == "cylinder":
+        light.CreateLengthAttr(1.0)
     light.CreateIntensityAttr(INTENSITY)
     light.CreateColorAttr(Gf.Vec3f(*COLOR))
     xf = UsdGeom.Xformable(light)
