@@ -9,6 +9,9 @@ sample can be replayed exactly.
 At every surface, light is gathered twice and the two estimates combined by the power heuristic (Veach's
 multiple importance sampling): a light chosen by power and a point on it (a shadow ray), and the direction
 the BSDF samples, which may hit an emitter by itself. Paths end by Russian roulette after a few bounces.
+UsdLux area lights are not in the scene's hierarchy: scattered rays test them on their way (``lights.reach``) and
+go on; a camera ray (and its straight passes through sheets) sees only those the scene has the camera see, and
+ends at the first of them with the radiance a scattered ray would find there.
 Inside a closed solid entered through its surface, light is absorbed along the distance travelled
 (Beer-Lambert). Participating media (``renderer.media``: grid volumes, and solids whose material holds a scattering
 medium) are walked by delta tracking along every ray before its surface: a real collision makes a volume vertex
@@ -40,6 +43,7 @@ from renderer.film.film import SampleBuffer
 from renderer.lights.sample import (
     area_light_hit,
     emission_mis_light,
+    first_seen_light,
     infinite_light_eval,
     mesh_light_pdf,
     sample_light,
@@ -494,13 +498,19 @@ def trace_wave_kernel_variant(name: str, layers: bool, module: str | None = None
             hit = intersect_closest(geo, origin, rd, t_far, s)
             if geo.csg_groups > 0:
                 hit = csg_closest(geo, origin, rd, s, hit)
+            # a camera ray (and its straight passes through sheets) ends at the first area light the camera sees
+            seen_li = int(-1)
+            t_ray = hit.t
+            Le_seen = wp.vec3(0.0)
+            if see_through != 0 and lights.reach.n_seen > 0:
+                seen_li, t_ray, Le_seen = first_seen_light(lights, origin, rd, hit.t, s, prev_inst)
             # participating media before the surface: emission gathered, and a real collision ends the ray there
             event = int(MEDIUM_NONE)
-            t_seg = hit.t
+            t_seg = t_ray
             in_medium = in_ss[0] > 0.0 or in_ss[1] > 0.0 or in_ss[2] > 0.0
             g_event = float(0.0)
             if media.count > 0 or in_medium:
-                walk = sample_media(media, origin, rd, hit.t, s, sigma, in_ss, in_g, seed, pixel, index,
+                walk = sample_media(media, origin, rd, t_ray, s, sigma, in_ss, in_g, seed, pixel, index,
                                     wp.uint32(DIM_MEDIUM + bounce * MEDIUM_DIMS_PER_BOUNCE))
                 c_walk = clamp_contribution(wp.cw_mul(beta, walk.emitted), hit_clamp)
                 if lpe_on:
@@ -510,8 +520,9 @@ def trace_wave_kernel_variant(name: str, layers: bool, module: str | None = None
                 event = walk.event
                 t_seg = walk.t_end
                 g_event = walk.g
-            # UsdLux area lights are not in the scene's hierarchy: rays after the first bounce may reach them directly
-            if bounce > 0:
+            # UsdLux area lights are not in the scene's hierarchy: rays scattered by a surface or a medium may reach
+            # them directly (the camera's, above, only those it sees)
+            if see_through == 0:
                 L = add_area_lights(L, lights, origin, rd, t_seg, s, prev_inst, prev_delta, prev_pdf, prev_p, lobe_frac,
                                     beta, hit_clamp, lpe, lpe_s, buf, tid)
             if event != MEDIUM_NONE:  # a volume vertex: absorbed, or scattered by the phase function
@@ -550,6 +561,15 @@ def trace_wave_kernel_variant(name: str, layers: bool, module: str | None = None
                     bounce += 1
                     if bounce >= RR_START:
                         alive, beta = roulette(beta, sample_1d(seed, pixel, index, dim + wp.uint32(BOUNCE_ROULETTE)))
+            elif seen_li >= 0:  # the light's emission towards the camera, as a scattered ray would find it
+                c_seen = clamp_contribution(wp.cw_mul(beta, Le_seen), hit_clamp)
+                if lpe_on:
+                    lpe_light(lpe, lpe_s, buf.extra, tid, light_symbol(lpe, seen_li), c_seen)
+                L += c_seen
+                if bounce == 0:
+                    alpha = 1.0
+                    depth_aov = wp.dot(origin + rd * t_ray - cam_origin, fwd)
+                alive = 0
             elif hit.inst < 0:
                 for k in range(lights.reach.n_infinite):  # the distant and dome lights, in light order
                     li = lights.reach.infinite[k]
@@ -599,11 +619,16 @@ def trace_wave_kernel_variant(name: str, layers: bool, module: str | None = None
                     normal_aov = ns
                     albedo_aov = bsdf_albedo_hint(params)
                     # alpha is coverage: opaque surfaces and solids cover the pixel; partly opaque sheets cover
-                    # it as much as light does not get through them along the camera ray (whatever the BSDF samples)
+                    # it as much as light does not get through them along the camera ray (whatever the BSDF samples),
+                    # all of it in front of a seen dome or of a light the camera sees (an opaque emitter to it)
                     alpha = 1.0
                     if lights.dome_visible == 0 and thin != 0 and ms.opacity < 1.0:
-                        rays += 1
-                        alpha = 1.0 - transmittance(geo, mats, tex, origin, rd, t_far, s)
+                        seen_behind = int(-1)
+                        if lights.reach.n_seen > 0:
+                            seen_behind, t_behind, Le_behind = first_seen_light(lights, origin, rd, t_far, s, -1)
+                        if seen_behind < 0:
+                            rays += 1
+                            alpha = 1.0 - transmittance(geo, mats, tex, origin, rd, t_far, s)
                 # emission seen along the path
                 Le = ms.emissive_color
                 if Le[0] > 0.0 or Le[1] > 0.0 or Le[2] > 0.0:

@@ -10,9 +10,10 @@ With ``TREE_MIN`` area lights or more, the still ones get a tree of their own: t
 (``accel.wide``) over each light's world box, walked to the surface the ray hit, so a bounce tests the lights
 whose boxes it enters. Lights that move within the shutter are tested one by one (``loose``): their boxes would
 have to bound a sweep, and they are rare. Fewer area lights are all ``loose``, tested one by one as before. The
-infinite lights (distant, dome) are listed in ``infinite``. The lists are in light order, the order the old loops
-added their light in; a tree walk adds them in its own order, which changes a pixel's last bits only where one
-ray reaches two lights (tested).
+infinite lights (distant, dome) are listed in ``infinite``, and the area lights camera rays see in ``seen`` (most
+scenes have none: then a camera ray tests no light at all; ``sample.first_seen_light``). The lists are in light
+order, the order the old loops added their light in; a tree walk adds them in its own order, which changes a
+pixel's last bits only where one ray reaches two lights (tested).
 
 Boxes are grown by ``PAD`` of their size and position: the kernels intersect the lights in float32, from frames
 computed in float64, so a box exactly on a light's edge could miss a ray the light itself takes.
@@ -45,6 +46,8 @@ class Reach:
     #                                  without a finite box), or all
     n_infinite: int
     infinite: wp.array(dtype=wp.int32)  # distant and dome lights, in light order
+    n_seen: int  # 0 in most scenes: then camera rays test no light
+    seen: wp.array(dtype=wp.int32)  # area lights camera rays see (``usd.lights.seen_by_camera``), in light order
 
 
 def world_boxes(kinds, sizes, matrices) -> tuple[np.ndarray, np.ndarray]:
@@ -68,10 +71,11 @@ def world_boxes(kinds, sizes, matrices) -> tuple[np.ndarray, np.ndarray]:
     return lo - grow, hi + grow
 
 
-def upload_reach(kinds, sizes, transforms, matrices, device: str, tree_min: int | None = None) -> Reach:
+def upload_reach(kinds, sizes, transforms, matrices, device: str, tree_min: int | None = None,
+                 seen=None) -> Reach:
     """The lists and the tree for lights of ``kinds`` (``table.Lights.kind`` order), their ``sizes``,
     MotionTransforms and matrices at the shutter's start (``table.Lights.xf_still``); a tree from ``tree_min`` area
-    lights (default ``TREE_MIN``)."""
+    lights (default ``TREE_MIN``). ``seen``: per light, do camera rays see it (area lights only; None: none)."""
     tree_min = TREE_MIN if tree_min is None else tree_min
     kinds = np.asarray([int(k) for k in kinds], np.int32)
     area = np.flatnonzero(np.isin(kinds, AREA_KINDS))
@@ -89,6 +93,9 @@ def upload_reach(kinds, sizes, transforms, matrices, device: str, tree_min: int 
 
     r.n_infinite = len(infinite)
     r.infinite = ints(infinite)
+    seen_area = [int(i) for i in area if seen is not None and seen[i]]
+    r.n_seen = len(seen_area)
+    r.seen = ints(seen_area)
     r.tree = int(len(area) >= tree_min and len(still) > 0)
     box = np.full((6, 4), 3.0e38, np.float32)
     child = np.zeros((1, 4), np.int32)

@@ -3,7 +3,8 @@
 ``sample_light`` places light ``li`` at the sample's time and picks a point on it from two uniform numbers
 (area, spherical-rectangle or cone sampling: ``lights.shapes``, ``sampling.warps``), returning the solid-angle
 pdf. The same pdf is given by ``area_light_hit`` / ``infinite_light_eval`` / ``mesh_light_pdf`` for a direction
-found by BSDF sampling, so both strategies can be weighted by the power heuristic.
+found by BSDF sampling, so both strategies can be weighted by the power heuristic. ``first_seen_light`` finds what
+a camera ray sees of the area lights seen by the camera, with the same radiance.
 """
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ from renderer.accel.intersect import (
 )
 from renderer.accel.occlusion import hit_uv
 from renderer.lights.envmap import env_pdf, env_radiance, env_sample
+from renderer.lights.linking import lit_by
 from renderer.lights.shapes import (
     cylinder_light_pdf,
     disk_light_pdf,
@@ -381,6 +383,23 @@ def area_light_hit(lights: Lights, li: int, ro: wp.vec3, rd: wp.vec3, tmax: floa
                     if pdf > 0.0:
                         return t, wp.cw_mul(light_radiance(lights, li, s), light_shaping(lights, li, -rd, s)), pdf
     return float(BIG), zero, 0.0
+
+
+@wp.func
+def first_seen_light(lights: Lights, ro: wp.vec3, rd: wp.vec3, tmax: float, s: float, prev_inst: int):
+    """The nearest area light camera rays see (``reach.seen``) that the ray (ro, rd) reaches before tmax, at time s:
+    (light or -1, t, Le), Le what ``area_light_hit`` gives a BSDF-sampled ray (texture, shaping, one-sidedness)."""
+    best = int(-1)
+    t_best = tmax
+    Le_best = wp.vec3(0.0)
+    for k in range(lights.reach.n_seen):
+        li = lights.reach.seen[k]
+        t, Le, pdf = area_light_hit(lights, li, ro, rd, t_best, s)
+        if t < t_best and lit_by(lights.links, li, prev_inst):
+            best = li
+            t_best = t
+            Le_best = Le
+    return best, t_best, Le_best
 
 
 @wp.func(inline=True)  # called once per path vertex: no copy of the big structs

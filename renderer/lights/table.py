@@ -19,7 +19,7 @@ import warp as wp
 
 from renderer.lights.envmap import EnvMap, upload_envmap
 from renderer.lights.linking import Links, upload_links
-from renderer.lights.reach import Reach, upload_reach
+from renderer.lights.reach import AREA_KINDS, Reach, upload_reach
 from renderer.lights.select import SelectEstimate, Selection, upload_selection
 from renderer.lights.shaping import mean_face_shaping, mean_shaping
 from renderer.motion.kernels import MotionKeys, upload_keys
@@ -286,7 +286,7 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
             # the irradiance it delivers at normal incidence: radiance times the disk's pi sin^2 (delta: held)
             power = lum * (math.pi * (1.0 - cos_max * cos_max) if cos_max < 1.0 else 1.0)
         elif light.kind == LIGHT_DOME:
-            dome_visible |= int(light.visible_to_camera)
+            dome_visible |= int(light.seen_by_camera())
             texture = getattr(light, "texture", None)
             sz = (0.0, 0.0, 0.0, 0.0)
             mean = lum
@@ -397,7 +397,9 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
     _upload_images(lt, images, device)
     lt.links = upload_links(kept, len(scene.instances), device, warn)
     lt.select = upload_selection(estimates, device, clusters=clusters)
-    lt.reach = upload_reach(kinds, size, transforms, still, device)
+    seen = [k in AREA_KINDS and light.seen_by_camera() and not (k == LIGHT_SPHERE and sz[2] <= 0.0)
+            for k, light, sz in zip(kinds, kept, size)]
+    lt.reach = upload_reach(kinds, size, transforms, still, device, seen=seen)
     lt.env = upload_envmap(env_image, env_xf, device)
     lt.dome_visible = int(dome_visible)
     return lt, n

@@ -357,7 +357,9 @@ class Light:
     angle: float = 0.53  # degrees, distant lights
     instance: int = -1  # LIGHT_MESH only
     triangles: tuple[int, int] | None = None  # LIGHT_MESH: the emitting triangle range of the mesh (None: all)
-    visible_to_camera: bool = True  # dome lights seen by camera rays
+    # camera rays see the light (rect, disk, sphere, cylinder: its shape; dome: the background); None: the kind's
+    # default, a dome seen and the others not (``seen_by_camera``)
+    visible_to_camera: bool | None = None
     # radiance (RGB) at evenly spaced times over the shutter when the emission is animated in it; None: constant
     radiance_keys: tuple | None = None
     # light path expressions: the light group its events carry ("": none; ``usd.light_groups``), and whether it is
@@ -389,6 +391,10 @@ class Light:
     shadow_distance: float = -1.0  # scene units from the shaded point within which occluders shadow; <= 0 all
     shadow_falloff: float = -1.0  # scene units: the zone before shadow_distance where shadows fade out; <= 0 none
     shadow_falloff_gamma: float = 1.0  # shadow strength (1 - x)^gamma at fraction x through the falloff zone
+
+    def seen_by_camera(self) -> bool:
+        """Do camera rays see this light? ``visible_to_camera``, else only a dome."""
+        return self.kind == LIGHT_DOME if self.visible_to_camera is None else bool(self.visible_to_camera)
 
 
 @dataclass

@@ -119,22 +119,64 @@ def normalized(prim, frame: float) -> bool:
     return bool(_value(prim, "normalize", frame, False))
 
 
-# UsdLux has no camera visibility: a dome is seen behind everything unless one of these says otherwise. Ours,
-# then the per-ray visibility primvar Arnold exports write (0 = hidden from camera rays).
-CAMERA_VISIBILITY_ATTRIBUTES = ("drt:visibility:camera", "primvars:arnold:camera")
+# UsdLux gives lights no camera visibility (schema.usda: none of its attributes says whether camera rays see a
+# light), so it is read from the hints renderers' exports write: ours first, which decides alone when it is
+# authored, then the others, of which an explicit "hidden" wins over any "seen". Each is read at the frame as a
+# bool, an int 0/1, a float (0 hidden, > 0 seen: Arnold's camera-ray contribution scale, its only type) or a token
+# / string ("0", "1", "false", "true", "off", "on", "no", "yes"); a one-element array as its element.
+CAMERA_VISIBILITY_ATTRIBUTES = (
+    "drt:visibility:camera",  # ours (bool)
+    "karma:light:renderlightgeo",  # Karma's "Render Light Geometry" (bool)
+    "primvars:arnold:camera",  # Arnold's camera contribution (float)
+    "primvars:ri:attributes:visibility:camera",  # RenderMan (int 0/1)
+    "visibleInPrimaryRay",  # Omniverse RTX (bool)
+    "inputs:visibility:camera",  # hdEmbree (bool)
+)
+_TOKENS = {"0": False, "false": False, "off": False, "no": False, "1": True, "true": True, "on": True, "yes": True}
 
 
-def dome_seen_by_camera(prim, frame: float) -> bool:
-    """Whether camera rays see the dome (alpha 1 there), by the first of CAMERA_VISIBILITY_ATTRIBUTES authored."""
+def _camera_hint(value) -> tuple[bool | None, bool]:
+    """(seen, scaled) of one hint's value: seen None when unreadable; scaled when it is a contribution scale
+    other than 0 and 1 (read as seen at full radiance)."""
+    if hasattr(value, "__len__") and not isinstance(value, str):
+        if len(value) != 1:
+            return None, False
+        value = value[0]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value), False
+    if isinstance(value, str):  # tokens and strings
+        return _TOKENS.get(value.strip().lower()), False
+    if isinstance(value, (int, np.integer)):
+        return {0: False, 1: True}.get(int(value)), False
+    if isinstance(value, (float, np.floating)) and np.isfinite(value) and value >= 0.0:
+        return bool(value > 0.0), value not in (0.0, 1.0)
+    return None, False
+
+
+def seen_by_camera(prim, frame: float, default: bool, warn) -> bool:
+    """Whether camera rays see the light, by CAMERA_VISIBILITY_ATTRIBUTES (``default`` when none is authored and
+    readable): ``drt:visibility:camera`` decides alone; of the others, any that says hidden wins."""
+    path = str(prim.GetPath())
+    said = {}
     for name in CAMERA_VISIBILITY_ATTRIBUTES:
         attr = prim.GetAttribute(name)
-        if attr and attr.HasAuthoredValue():
-            value = attr.Get(frame)
-            try:
-                return bool(float(value[0] if hasattr(value, "__len__") else value))
-            except (TypeError, ValueError, IndexError):
-                continue
-    return True
+        if not (attr and attr.HasAuthoredValue()):
+            continue
+        value = attr.Get(frame)
+        seen, scaled = _camera_hint(value)
+        if seen is None:
+            warn("camera-visibility hints of unreadable value ignored", f"{path}.{name} ({value!r})")
+            continue
+        if scaled:
+            warn("camera contribution scales other than 0 and 1 read as 1 (the light is seen at its full radiance)",
+                 f"{path}.{name} ({value!r})")
+        if name == CAMERA_VISIBILITY_ATTRIBUTES[0]:
+            return seen
+        said[name] = seen
+    if len(set(said.values())) > 1:
+        warn("conflicting camera-visibility hints: hidden wins",
+             f"{path} ({', '.join(n + (' seen' if v else ' hidden') for n, v in said.items())})")
+    return all(said.values()) if said else default
 
 
 @reads("LightAPI", "inputs:diffuse", "inputs:specular")
@@ -195,7 +237,11 @@ def read_light(prim, sampler: TransformSampler, warn, placement=None, name: str 
         area = distant_size_factor(light.angle)
     elif kind == sc.LIGHT_DOME:
         radiance = _dome_texture(prim, light, radiance, frame, warn, colors)
-        light.visible_to_camera = dome_seen_by_camera(prim, frame)
+    if kind != sc.LIGHT_DISTANT:  # a dome is seen unless a hint says otherwise, a light with a shape only if one does
+        light.visible_to_camera = seen_by_camera(prim, frame, kind == sc.LIGHT_DOME, warn)
+        if light.visible_to_camera and kind == sc.LIGHT_SPHERE and light.radius <= 0.0:
+            warn("camera-visibility hints on point lights ignored (a point has no shape to see)", path)
+            light.visible_to_camera = False
     if kind == sc.LIGHT_RECT:
         image = _light_image(prim, frame, warn, colors=colors)
         if image is not None:
