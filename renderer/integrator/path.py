@@ -15,12 +15,13 @@ ends at the first of them with the radiance a scattered ray would find there.
 Inside a closed solid entered through its surface, light is absorbed along the distance travelled
 (Beer-Lambert). Participating media (``renderer.media``: grid volumes, and solids whose material holds a scattering
 medium) are walked by delta tracking along every ray before its surface: a real collision makes a volume vertex
-(``FLAG_VOLUME``), lit like a surface vertex by light sampling and phase sampling combined with MIS; shadow rays
+lit like a surface vertex by light sampling and phase sampling combined with MIS; shadow rays
 take the media's transmittance (ratio tracking). Samples with NaN/Inf radiance are counted and zeroed; ``clamp``
 (off by default) limits a sample's radiance to cut fireflies, never silently. When a render asks for them (and
 then in a kernel variant of its own, ``renderer.integrator.layers``), each contribution is also handed to the LPE
 vars whose automata accept its path (``renderer.lpe.kernel``), and the first surface a sample sees is recorded
-for Cryptomatte and the vars of what it hit.
+for Cryptomatte and the vars of what it hit. Next-event estimation is ``integrator.direct``'s; the smaller terms
+of a vertex (MIS weights, regularization, roulette, media at boundaries, the shutter time) ``integrator.vertex``'s.
 
 Path regularization (the production default, off with ``unbiased``; see README "Noise defaults"):
 - *indirect clamp*: each contribution that reached the camera after more than one surface bounce is scaled
@@ -34,14 +35,12 @@ from __future__ import annotations
 import warp as wp
 
 from renderer.accel.csg import csg_closest
-from renderer.accel.intersect import BIG, Geometry, intersect_closest, safe_inverse
+from renderer.accel.intersect import BIG, Geometry, intersect_closest
 from renderer.accel.occlusion import transmittance
 from renderer.accel.surface import display_diffuse, hit_geometry, shading_normal, surface_at
-from renderer.accel.wide import entries, leaf_range, wide_stack_t
 from renderer.camera.lens import CameraParams, camera_ray
 from renderer.film.film import SampleBuffer
 from renderer.lights.sample import (
-    area_light_hit,
     emission_mis_light,
     first_seen_light,
     infinite_light_eval,
@@ -67,16 +66,8 @@ from renderer.lpe.kernel import (
     SCATTER_D,
     SCATTER_G,
 )
-from renderer.media.phase import hg_pdf, hg_sample
-from renderer.media.tracking import (
-    MEDIUM_ABSORB,
-    MEDIUM_NONE,
-    Media,
-    grid_transmittance,
-    interior_transmittance,
-    sample_media,
-)
-from renderer.settings.options import TIME_FILTERS
+from renderer.media.phase import hg_sample
+from renderer.media.tracking import MEDIUM_ABSORB, MEDIUM_NONE, Media, sample_media
 from renderer.sampling.sobol import (
     BOUNCE_LIGHT_CHOICE,
     BOUNCE_LOBE,
@@ -96,11 +87,9 @@ from renderer.sampling.sobol import (
     sample_3d,
     sample_camera_pair,
 )
-from renderer.sampling.warps import sample_tent
 from renderer.scene.model import LIGHT_DOME
 from renderer.lights.multipliers import diffuse_fraction, nee_bsdf, sampled_weight
 from renderer.shading.bsdf import (
-    SurfaceParams,
     bsdf_albedo_hint,
     bsdf_setup,
     lobes_eval,
@@ -109,149 +98,18 @@ from renderer.shading.bsdf import (
     lobes_pdf,
     lobes_sample,
 )
-from renderer.shading.materials import HitGeometry, Materials, MaterialSample, beer_lambert, eval_material_cone
+from renderer.shading.materials import HitGeometry, Materials, beer_lambert, eval_material_cone
 from renderer.shading.raycone import bounce_spread, camera_cone, uv_footprint
 from renderer.shading.textures import Textures
 from renderer.kernels.struct_refs import by_reference
+from renderer.integrator.direct import light_gathering
+from renderer.integrator.vertex import (FLAG_DELTA, FLAG_TRANSMISSION, RR_START, clamp_contribution, finite3,
+                                        media_shadow, medium_boundary, offset_origin, power_heuristic,
+                                        regularized_params, roughness_of_pdf, roulette, shadow_start_medium,
+                                        shutter_time)
 
 # Rendering needs no gradients: no adjoint code (half the compile time and code size).
 wp.set_module_options({"enable_backward": False})
-
-TIME_BOX = TIME_FILTERS["box"]
-TIME_TRIANGLE = TIME_FILTERS["triangle"]
-TIME_STROBE = TIME_FILTERS["strobe"]
-
-RR_START = 5  # bounces before Russian roulette may end a path (equal-time efficiency: 3 -> 5 gained 3-15 %)
-RAY_EPSILON = 2.0e-5  # relative offset of secondary ray origins (times 1 + |p|_inf, scene units)
-FLAG_DELTA = 1
-FLAG_TRANSMISSION = 2
-FLAG_VOLUME = 4  # the event was a scattering in a participating medium: the V of light path expressions
-
-
-@wp.func
-def shutter_time(kind: int, u: float, frame_s: float):
-    """Normalised shutter time of a sample from its time dimension, weighted by the temporal filter.
-
-    ``frame_s`` is the frame's own time in normalised shutter time, the one instant a strobe shutter sees.
-    """
-    if kind == TIME_TRIANGLE:
-        return sample_tent(u)
-    if kind == TIME_STROBE:
-        return frame_s
-    return u
-
-
-@wp.func
-def offset_origin(p: wp.vec3, n: wp.vec3):
-    scale = 1.0 + wp.max(wp.max(wp.abs(p[0]), wp.abs(p[1])), wp.abs(p[2]))
-    return p + n * (RAY_EPSILON * scale)
-
-
-@wp.func
-def finite3(v: wp.vec3):
-    return wp.isfinite(v[0]) and wp.isfinite(v[1]) and wp.isfinite(v[2])
-
-
-@wp.func
-def power_heuristic(pdf_a: float, pdf_b: float):
-    a = pdf_a * pdf_a
-    b = pdf_b * pdf_b
-    if a + b <= 0.0:
-        return 0.0
-    return a / (a + b)
-
-
-@wp.func
-def surface_params(ms: MaterialSample, thin: int):
-    p = SurfaceParams()
-    p.diffuse_color = ms.diffuse_color
-    p.specular_color = ms.specular_color
-    p.use_specular_workflow = ms.use_specular_workflow
-    p.metallic = ms.metallic
-    p.roughness = ms.roughness
-    p.clearcoat = ms.clearcoat
-    p.clearcoat_roughness = ms.clearcoat_roughness
-    p.opacity = ms.opacity
-    p.ior = ms.ior
-    p.thin = thin
-    return p
-
-
-@wp.func
-def clamp_contribution(c: wp.vec3, limit: float):
-    """c scaled so its largest channel is at most limit (limit 0 = off); the hue is kept."""
-    m = wp.max(wp.max(c[0], c[1]), c[2])
-    if limit > 0.0 and m > limit:
-        return c * (limit / m)
-    return c
-
-
-@wp.func
-def roughness_of_pdf(pdf: float):
-    """The perceptual GGX roughness whose lobe peaks at this pdf (1/sr): alpha = 1/sqrt(4 pi pdf), clamped to 1.
-
-    A GGX reflection lobe of alpha a has its peak pdf near 1/(4 pi a^2); a Lambertian direction (pdf <= 1/pi)
-    maps to roughness >= 0.71.
-    """
-    if pdf <= 0.0:
-        return 1.0
-    a = wp.min(1.0, 1.0 / wp.sqrt(4.0 * wp.pi * pdf))
-    return wp.sqrt(a)
-
-
-@wp.func
-def regularized_params(ms: MaterialSample, thin: int, k: float, path_roughness: float):
-    """Surface parameters with lobes at least k x the path's roughness so far (the glossy filter; k 0 = off)."""
-    p = surface_params(ms, thin)
-    r = k * path_roughness
-    if r > 0.0:
-        p.roughness = wp.max(p.roughness, r)
-        p.clearcoat_roughness = wp.max(p.clearcoat_roughness, r)
-    return p
-
-
-@wp.func(inline=True)  # no copy of the big structs
-def media_shadow(geo: Geometry, mats: Materials, media: Media, ro: wp.vec3, rd: wp.vec3, tmax: float, s: float,
-                 in_sa: wp.vec3, in_ss: wp.vec3, seed: wp.uint32, pixel: wp.uint32, index: wp.uint32,
-                 dim: wp.uint32):
-    """Transmittance of the media along a shadow ray that starts in the homogeneous medium (in_sa, in_ss)."""
-    tr = grid_transmittance(media, ro, rd, tmax, s, seed, pixel, index, dim)
-    if media.mesh_media != 0 and (tr[0] > 0.0 or tr[1] > 0.0 or tr[2] > 0.0):
-        tr = wp.cw_mul(tr, interior_transmittance(geo, mats, media, ro, rd, tmax, s, in_sa, in_ss))
-    return tr
-
-
-@wp.func
-def shadow_start_medium(media: Media, mats: Materials, mat: int, front: int, through: bool, sa: wp.vec3,
-                        ss: wp.vec3):
-    """The medium a surface's shadow ray starts in: the path's own on the side it came from; through the surface,
-    the material's medium when entering its solid, none when leaving it."""
-    if not through:
-        return sa, ss
-    m = media.mat_scatter[mat]
-    if front != 0 and (m[0] > 0.0 or m[1] > 0.0 or m[2] > 0.0):
-        return mats.absorption[mat], wp.vec3(m[0], m[1], m[2])
-    return wp.vec3(0.0), wp.vec3(0.0)
-
-
-@wp.func
-def medium_boundary(media: Media, mat: int, flags: int):
-    """Is this event a straight pass through the surface of a solid that holds a medium? Such a boundary is no
-    vertex of the path for multiple importance sampling: shadow rays from inside pass it (with the medium's
-    transmittance), so light found beyond it keeps the weights of the vertex before it."""
-    if media.mesh_media == 0 or (flags & FLAG_DELTA) == 0 or (flags & FLAG_TRANSMISSION) == 0:
-        return False
-    m = media.mat_scatter[mat]
-    return m[0] > 0.0 or m[1] > 0.0 or m[2] > 0.0
-
-
-@wp.func
-def roulette(beta: wp.vec3, u: float):
-    """Russian roulette once the path has carried light a few bounces: (survives, reweighted throughput)."""
-    q = wp.max(0.05, 1.0 - wp.max(wp.max(beta[0], beta[1]), beta[2]))
-    if u < q:
-        return 0, beta
-    return 1, beta / (1.0 - q)
 
 
 @wp.struct
@@ -283,130 +141,6 @@ class Wave:
     counters: wp.array(dtype=wp.int64)  # [rays traced, non-finite samples zeroed]
 
 
-def _light_gathering(layers: bool):
-    """``add_area_lights`` and ``volume_direct``, with (``layers``) or without (not generated at all) the share of
-    what they add that goes to the LPE vars."""
-
-    @wp.func(inline=True)  # no copy of the big structs
-    def add_area_light(L: wp.vec3, lights: Lights, li: int, origin: wp.vec3, rd: wp.vec3, t_hit: float, s: float,
-                       prev_inst: int, prev_delta: int, prev_pdf: float, prev_p: wp.vec3, lobe_frac: wp.vec3,
-                       beta: wp.vec3, hit_clamp: float, lpe: LpeTable, lpe_s: int, buf: SampleBuffer,
-                       sample: int):
-        """L plus what area light li sends along the scattered ray (origin, rd) before the surface at t_hit, with its
-        multiple importance weight against sampling the light."""
-        t_l, Le, pdf_l = area_light_hit(lights, li, origin, rd, t_hit, s)
-        if t_l < BIG and lit_by(lights.links, li, prev_inst):
-            w = float(1.0)
-            if prev_delta == 0:
-                w = power_heuristic(prev_pdf, select_pdf(lights.select, li, prev_p) * pdf_l)
-            if lights.lobe_mults != 0:
-                Le = wp.cw_mul(Le, sampled_weight(lights, li, lobe_frac))
-            c = clamp_contribution(wp.cw_mul(beta, Le) * w, hit_clamp)
-            if wp.static(layers):
-                if lpe.count > 0:
-                    lpe_light(lpe, lpe_s, buf.extra, sample, light_symbol(lpe, li), c)
-            return L + c
-        return L
-
-    @wp.func(inline=True)  # one call site: no copy of the big structs
-    def add_area_lights(L: wp.vec3, lights: Lights, origin: wp.vec3, rd: wp.vec3, t_hit: float, s: float,
-                        prev_inst: int, prev_delta: int, prev_pdf: float, prev_p: wp.vec3, lobe_frac: wp.vec3,
-                        beta: wp.vec3, hit_clamp: float, lpe: LpeTable, lpe_s: int, buf: SampleBuffer,
-                        sample: int):
-        """L plus every area light the scattered ray reaches before t_hit (``lights.reach``): the still ones of a tree
-        found by walking it, then the others (all of them without a tree) in light order. One loop, so that the light
-        test is inlined once: a second copy cost a Cornell box 1.5-2.5 %."""
-        inv_d = wp.vec3(0.0)
-        if lights.reach.tree != 0:  # three divisions a bounce of a scene with a few lights need not pay
-            inv_d = safe_inverse(rd)
-        stack = wide_stack_t()  # scratch: not zeroed, read below sp only
-        stack[0] = 0  # the root
-        sp = lights.reach.tree
-        leaf_at = int(0)  # the slots of the leaf being read, leaf_at .. leaf_end - 1
-        leaf_end = int(0)
-        k = int(0)
-        while leaf_at < leaf_end or sp > 0 or k < lights.reach.n_loose:
-            li = int(-1)
-            if leaf_at < leaf_end:
-                li = lights.reach.light[leaf_at]
-                leaf_at += 1
-            elif sp > 0:
-                sp -= 1
-                ref = stack[sp]
-                if ref < 0:
-                    first, count = leaf_range(ref)
-                    leaf_at = first
-                    leaf_end = first + count
-                else:
-                    c = lights.reach.child[ref]
-                    d = entries(lights.reach.box, ref, c, 0, 0, 0.0, origin, inv_d, t_hit)
-                    for j in range(4):
-                        if d[j] < BIG:
-                            stack[sp] = c[j]
-                            sp += 1
-            else:
-                li = lights.reach.loose[k]
-                k += 1
-            if li >= 0:
-                L = add_area_light(L, lights, li, origin, rd, t_hit, s, prev_inst, prev_delta, prev_pdf, prev_p,
-                                   lobe_frac, beta, hit_clamp, lpe, lpe_s, buf, sample)
-        return L
-
-    @wp.func(inline=True)  # one call site: no copy of the big structs
-    def volume_direct(L: wp.vec3, geo: Geometry, mats: Materials, tex: Textures, lights: Lights, media: Media,
-                      p: wp.vec3, rd: wp.vec3, g: float, s: float, in_sa: wp.vec3, in_ss: wp.vec3, beta: wp.vec3,
-                      u_light: wp.vec3, nee_clamp: float, seed: wp.uint32, pixel: wp.uint32, index: wp.uint32,
-                      bounce: int, lpe: LpeTable, lpe_s: int, buf: SampleBuffer, sample: int):
-        """L plus the light sampled at a scattering point p of a medium (each infinite light and one finite light,
-        as at a surface), weighted against phase sampling by the power heuristic; and the shadow rays traced. The
-        phase function takes the place of BSDF x cosine; ``rd`` (the direction of travel) is the axis constant domes
-        are sampled about."""
-        n_infinite = lights.select.count - lights.select.n_finite
-        n_picks = n_infinite + wp.min(lights.select.n_finite, 1)
-        rays = int(0)
-        for pick in range(n_picks):
-            li = int(-1)
-            p_sel = float(1.0)
-            u_tri = u_light[2]
-            if pick < n_infinite:
-                li = infinite_light(lights.select, pick)
-            else:
-                li, p_sel, u_tri = select_light(lights.select, p, u_light[2])
-            wi = wp.vec3(0.0)
-            dist = float(0.0)
-            Le_l = wp.vec3(0.0)
-            pdf_l = float(0.0)
-            delta = False
-            if li >= 0:
-                wi, dist, Le_l, pdf_l, delta = sample_light(lights, geo, mats, tex, li, p, rd, s, u_tri,
-                                                            wp.vec2(u_light[0], u_light[1]))
-            if pdf_l > 0.0 and (Le_l[0] > 0.0 or Le_l[1] > 0.0 or Le_l[2] > 0.0) and lit_by(lights.links, li, -1):
-                ph = hg_pdf(g, wp.dot(rd, wi))
-                rays += 1
-                tmax = dist * (1.0 - 1.0e-4)
-                tr = shadow_factor(geo, mats, tex, lights.links, li, p, wi, tmax, s)
-                if tr[0] > 0.0 or tr[1] > 0.0 or tr[2] > 0.0:
-                    dim = wp.uint32(DIM_MEDIUM_SHADOW + bounce * MEDIUM_SHADOW_DIMS_PER_BOUNCE
-                                    + pick * MEDIUM_SHADOW_DIMS_PER_PICK)
-                    tr = wp.cw_mul(tr, media_shadow(geo, mats, media, p, wi, tmax, s, in_sa, in_ss, seed, pixel,
-                                                    index, dim))
-                    w = float(1.0)
-                    if not delta:
-                        w = power_heuristic(p_sel * pdf_l, ph)
-                    if lights.lobe_mults != 0:  # a medium responds as a diffuse surface does
-                        Le_l = wp.cw_mul(Le_l, sampled_weight(lights, li, wp.vec3(1.0)))
-                    c = clamp_contribution(wp.cw_mul(wp.cw_mul(beta, Le_l), tr) * (ph * w / (p_sel * pdf_l)),
-                                           nee_clamp)
-                    if wp.static(layers):
-                        if lpe.count > 0:
-                            lpe_light_after(lpe, lpe_s, buf.extra, sample, volume_symbol(lpe),
-                                            light_symbol(lpe, li), c)
-                    L += c
-        return L, rays
-
-    return add_area_lights, volume_direct
-
-
 def trace_wave_kernel_variant(name: str, layers: bool, module: str | None = None):
     """The path tracing kernel ``name`` of Warp module ``module`` (None: this one), with (``layers``) or without
     the LPE vars and first-hit records.
@@ -414,7 +148,7 @@ def trace_wave_kernel_variant(name: str, layers: bool, module: str | None = None
     Without, Warp generates none of their code (``wp.static``, and flags that are constants): a render that asks
     for neither runs the kernel it ran before they existed. (Their branches, never taken, cost it 3-5 % of its
     time even where the compiler could fold them away, and a variant with them in the same Warp module 2-4 %.)"""
-    add_area_lights, volume_direct = _light_gathering(layers)
+    add_area_lights, volume_direct = light_gathering(layers)
 
     @wp.kernel(name=name, module=module)
     def kernel(
@@ -467,7 +201,6 @@ def trace_wave_kernel_variant(name: str, layers: bool, module: str | None = None
         sigma = wp.vec3(0.0)  # absorption coefficient of the solid the path is inside (1/scene unit)
         in_ss = wp.vec3(0.0)  # scattering coefficient of the solid's medium, if it holds one (1/scene unit)
         in_g = float(0.0)  # and the anisotropy of its phase function
-        prev_event = int(0)  # FLAG_* of the last scattering event (FLAG_VOLUME: in a medium)
         see_through = int(1)  # so far only straight pass-through events: domes hidden from the camera stay hidden
         bounce = int(0)
         alive = int(1)
@@ -551,7 +284,6 @@ def trace_wave_kernel_variant(name: str, layers: bool, module: str | None = None
                     prev_n = rd
                     prev_inst = -1
                     prev_p = p
-                    prev_event = FLAG_VOLUME
                     see_through = 0
                     if lpe_on:
                         lpe_s = lpe_event(lpe, lpe_s, volume_symbol(lpe))
@@ -756,7 +488,6 @@ def trace_wave_kernel_variant(name: str, layers: bool, module: str | None = None
                             path_roughness = wp.max(path_roughness, roughness_of_pdf(pdf))
                         if not medium_boundary(media, sp.material, flags):
                             prev_delta = flags & FLAG_DELTA
-                            prev_event = flags
                             prev_pdf = pdf
                             prev_n = ns
                             prev_inst = hit.inst

@@ -141,7 +141,8 @@ def _sampled_tile(prep: PreparedScene, tile: Tile, on_wave: Callable[[int, int],
                   inputs=[buf, kind, float(film.FILTER_RADIUS[kind])])
         slot_array = wp.array(slot_of, dtype=wp.int32, device=dev)
         wp.launch(film.gather_kernel, dim=sw * sh, device=dev,
-                  inputs=[buf, acc, wave, sx0, sy0, sw, slot_array, ex0, ey0, ex1 - ex0, ey1 - ey0, margin, aov_sums, 1])
+                  inputs=[buf, acc, wave, sx0, sy0, sw, slot_array, ex0, ey0, ex1 - ex0, ey1 - ey0, margin, aov_sums,
+                          1])
         if plan and plan.keys:
             n = pixels.size * wave
             hit_vars.fill(plan, prep.flat or prep.scene, *prep.hit_index, buf.hit_inst.numpy()[:n],

@@ -140,12 +140,3 @@ def parse_ies(text: str) -> IesProfile:
 def read_ies(path: str) -> IesProfile:
     with open(path, encoding="latin-1") as f:
         return parse_ies(f.read())
-
-
-def apply_angle_scale(theta: float, scale: float) -> float:
-    """usdLux ``shaping:ies:angleScale``: the vertical angle (radians) the profile is sampled at."""
-    if scale > 0.0:
-        return theta / scale
-    if scale < 0.0:
-        return (theta - math.pi) / -scale + math.pi
-    return theta

@@ -43,7 +43,6 @@ from renderer.scene.model import (
     LIGHT_DISK,
     LIGHT_DISTANT,
     LIGHT_DOME,
-    LIGHT_MESH,
     LIGHT_RECT,
     LIGHT_SPHERE,
 )
@@ -51,27 +50,6 @@ from renderer.shading.materials import Materials, eval_emission
 from renderer.shading.textures import Textures
 
 DISTANT_DIST = 1.0e30  # shadow-ray length toward lights at infinity (scene units)
-
-
-@wp.func
-def choose_light(lights: Lights, u: float):
-    """A light chosen from one uniform number: (index, its probability, u rescaled within the light's share).
-
-    The rescaled number is uniform on [0, 1) again and independent of which light was chosen, so it can pick
-    the triangle of an emissive mesh without spending (or, worse, sharing) another sample dimension.
-    """
-    lo = int(0)
-    hi = lights.count - 1
-    while lo < hi:  # first entry with cdf > u
-        mid = (lo + hi) // 2
-        if lights.select_cdf[mid] > u:
-            hi = mid
-        else:
-            lo = mid + 1
-    p = lights.select_pdf[lo]
-    start = lights.select_cdf[lo] - p
-    u_rest = wp.clamp((u - start) / wp.max(p, 1.0e-30), 0.0, 0.99999994)
-    return lo, p, u_rest
 
 
 @wp.func

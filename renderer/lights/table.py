@@ -2,13 +2,12 @@
 
 Conventions (UsdLux): rect and disk lights emit from their front face towards local -Z; sphere and cylinder
 lights from their outer surface; a distant light arrives along its local -Z within a cone of apex ``angle``;
-a dome light from every direction (a constant colour or a lat-long texture, see ``envmap``); emissive meshes
-from both faces (as Cycles does).
+a dome light from every direction (a constant colour or a lat-long texture, see ``envmap``); MeshLightAPI meshes
+from their front faces unless ``doubleSided``, meshes of emissive materials from both faces (as Cycles does).
 
 A shading point samples every infinite light and ONE finite light, chosen by ``select`` in proportion to the
-irradiance each can deliver at that point (spatial clusters of finite lights; see ``select``). ``select_pdf`` /
-``select_cdf`` keep the scene-wide estimate (delivered at the scene's centre, capped at pi times the radiance) for
-tools and tests. The sampling routines are in ``sample``.
+irradiance each can deliver at that point (spatial clusters of finite lights; see ``select``). ``select_pdf``
+keeps the scene-wide estimate (delivered at the scene's centre, capped at pi times the radiance). The sampling routines are in ``sample``.
 """
 from __future__ import annotations
 
@@ -61,7 +60,6 @@ class Lights:
     centre_still: wp.array(dtype=wp.vec4)
     disk_front_still: wp.array(dtype=wp.vec3)  # ... and a disk's emitting side (``emitting_sides``)
     keys: MotionKeys
-    select_cdf: wp.array(dtype=wp.float32)  # (count,) cumulative selection probability
     select_pdf: wp.array(dtype=wp.float32)  # (count,) probability of choosing each light
     instance: wp.array(dtype=wp.int32)  # mesh lights: the emissive instance
     inst_light: wp.array(dtype=wp.int32)  # per instance: its mesh light, or -1
@@ -368,8 +366,6 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
     lt.disk_front_still = wp.array(emitting_sides(still), dtype=wp.vec3, device=device)
     p = np.array(powers or [1.0], np.float64)
     p = p / p.sum()
-    cdf_sel = np.cumsum(p)
-    cdf_sel[-1] = 1.0
     counts_k = [len(k) for k in rad_keys]
     lt.rad_count = i32(counts_k, [0])
     lt.rad_off = i32(np.concatenate([[0], np.cumsum(counts_k)[:-1]]).astype(np.int32) if counts_k else [], [0])
@@ -378,7 +374,6 @@ def upload_lights(scene: Scene, device: str = "cpu", warn=lambda *a: None,
     lt.lobe_mult = wp.array(np.array(mults or [(1.0, 1.0)], np.float32), dtype=wp.vec2, device=device)
     lt.lobe_mults = int(any(m != (1.0, 1.0) for m in mults))
     lt.select_pdf = wp.array(p.astype(np.float32), dtype=wp.float32, device=device)
-    lt.select_cdf = wp.array(cdf_sel.astype(np.float32), dtype=wp.float32, device=device)
     lt.instance = i32(insts, [-1])
     inst_light = np.full(max(1, len(scene.instances)), -1, np.int32)
     for li, (k, inst) in enumerate(zip(kinds, insts)):

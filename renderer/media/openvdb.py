@@ -51,12 +51,6 @@ def _open(path: str):
         return f
 
 
-def grid_names(path: str) -> list[str]:
-    """The names of the file's grids, in file order."""
-    f = _open(path)
-    return [f.grid_name(i) for i in range(f.grid_count)]
-
-
 def index_to_object(transform: dict) -> np.ndarray:
     """The 4x4 column-vector matrix of an OpenVDB linear transform as tinyvdb describes it."""
     kind = str(transform.get("type", ""))

@@ -34,7 +34,6 @@ from __future__ import annotations
 import warp as wp
 
 from renderer.accel.intersect import BIG, Geometry, intersect_closest
-from renderer.media.phase import G_MAX
 from renderer.motion.kernels import MotionKeys, keys_matrix
 from renderer.sampling.sobol import sample_1d, sample_2d
 from renderer.shading.materials import Materials
@@ -414,8 +413,3 @@ def interior_transmittance(geo: Geometry, mats: Materials, media: Media, ro: wp.
                 o = o + rd * step
                 left = left - step
     return tr
-
-
-@wp.func
-def clamp_g(g: float):
-    return wp.clamp(g, -G_MAX, G_MAX)

@@ -12,8 +12,8 @@ import pytest
 from pxr import Gf, Sdf, UsdGeom, UsdLux
 
 import stages
-from test_render_analytic import pixel_average
-from renderer.options import RenderOptions
+from renders import pixel_average
+from renderer.settings.options import RenderOptions
 from renderer.render import frame_channels, frame_image, prepare, render_frame
 from renderer.usd.importer import load_scene
 
