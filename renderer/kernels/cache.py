@@ -2,7 +2,7 @@
 
 Warp compiles a module's generated C++ the first time it is used and keeps the object in its kernel cache, keyed
 by the module's source hash and compiler flags. For the integrator that is ~2 s of code generation and ~15 s of
-clang on this 2-core machine, so a fresh install used to spend ~19 s before its first pixel. The package
+clang on a 2-core machine, ~19 s before a fresh install's first pixel were it compiled there. The package
 therefore ships the render modules compiled ahead for a portable target, **x86-64-v3** (AVX2, FMA, BMI2: x86
 CPUs since 2013-2015), in ``renderer/kernels/prebuilt/<Warp version>/``. They seed Warp's cache, so the first render
 loads them in a fraction of a second.

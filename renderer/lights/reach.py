@@ -2,9 +2,9 @@
 
 UsdLux area lights (rect, disk, sphere, cylinder) are not in the scene's hierarchy: a ray scattered by a surface
 tests them on its own, so that mirrors and glass show them and multiple importance sampling can weight the two
-ways of finding them (``sample.area_light_hit``). Every bounce used to test every light in turn, and a ray that
-left the scene went through every light for the infinite ones: a Cornell box lit by 1024 small rect lights
-rendered 8-9x slower than by one (``bench/many_lights.py``), 85 % of it in those loops (``bench/kernel_profile.py``).
+ways of finding them (``sample.area_light_hit``). Testing every light at every bounce, and every light again for a
+ray that leaves the scene, would make a Cornell box lit by 1024 small rect lights render 8-9x slower than by one
+(``bench/many_lights.py``), 85 % of it in those loops (``bench/kernel_profile.py``).
 
 With ``TREE_MIN`` area lights or more, the still ones get a tree of their own: the top level's four-wide nodes
 (``accel.wide``) over each light's world box, walked to the surface the ray hit, so a bounce tests the lights

@@ -215,7 +215,7 @@ class Material:
     metallic: float = 0.0
     roughness: float = 0.5
     ior: float = 1.5
-    # --- the rest of UsdPreviewSurface 2.5 (issue 3)
+    # --- the rest of UsdPreviewSurface 2.5
     clearcoat: float = 0.0
     clearcoat_roughness: float = 0.01
     opacity_threshold: float = 0.0  # > 0: cut-out; opacity < threshold -> 0, else 1
