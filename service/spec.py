@@ -5,11 +5,12 @@ products a job's frame writes (``frame_products``).
 A ``RenderSpec`` is what a Dask task needs to know about a job: plain, frozen and hashable, so it pickles cheaply
 and keys the worker's scene cache. It never holds pydantic objects (workers need not import the wire format).
 
-**Products.** A frame is rendered once, with the overrides of its render settings' first RenderProduct (as
+**Products.** Which files a frame writes is ``renderer.output.frame_products``' decision, the one ``drt render``
+takes: a frame is rendered once, with the overrides of its render settings' first RenderProduct (as
 ``RenderRequest.product`` None says), and every raster product that shares those overrides is written from that
-render, each with its RenderVars as layers (``renderer.output.var_channels``, as ``drt render`` writes them). A product with
-overrides of its own (another camera, resolution, ...) would need a render of its own: the service names it in a
-warning and leaves it to ``drt render``. A stage without products writes one image, named after the scene file.
+render, each with its RenderVars as layers (``renderer.output.var_channels``). A product with overrides of its own
+(another camera, resolution, ...) would need a render of its own: the service (one view per frame) names it in a
+warning. A stage without products writes one image, named after the scene file.
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ import dataclasses
 import os
 from dataclasses import dataclass
 
+from renderer.output.frame_products import FrameProduct
 from renderer.settings.options import RenderOptions
 from renderer.settings.request import RenderRequest
 from schemas import JobCreate
@@ -77,46 +79,22 @@ class RenderSpec:
         return request.load()
 
 
-@dataclass(frozen=True)
-class FrameProduct:
-    """One EXR a frame writes: its name (the productName at the frame, ``$F4``/``####`` expanded; not yet made safe,
-    see ``schemas.product_name``), its RenderProduct prim (None: the image of a stage without products) and vars."""
-
-    name: str
-    prim: str | None
-    vars: tuple = ()  # renderer.usd.render_products.VarSpec
-
-
 def default_product_name(scene_name: str) -> str:
     """The name pattern of a stage's one image when its render settings have no RenderProduct: the scene's."""
     return os.path.splitext(os.path.basename(scene_name))[0] + ".####.exr"
 
 
 def frame_products(stage, request: RenderRequest, frame: float, warn) -> list[FrameProduct]:
-    """The products one render of ``frame`` writes (see the module docstring); ``warn(message)`` hears of the
-    products and vars it leaves out. RenderError when the settings have products but none to write."""
-    from renderer.output.names import expand_frame
-    from renderer.errors import RenderError
+    """The products one render of ``frame`` writes (``renderer.output.frame_products``, the rules ``drt render``
+    follows, with one view per frame and the scene's name for a stage without products); ``warn(message)`` hears of
+    the products and vars it leaves out. RenderError when the settings have products but none to write."""
+    from renderer.output.frame_products import frame_products as decide
     from renderer.output.var_channels import UNWRITTEN, unwritten
     from renderer.usd.render_products import read_products, resolve_settings_path
 
     products = read_products(stage, resolve_settings_path(stage, request.settings_prim, lambda *a: None), frame)
-    if not products:
-        return [FrameProduct(expand_frame(default_product_name(request.scene_path), frame), None)]
-    out = []
-    for p in products:
-        if p.type != "raster":
-            warn(f"RenderProduct {p.path}: {p.type} products are not written (drt writes raster images)")
-        elif p.override_key != products[0].override_key:
-            warn(f"RenderProduct {p.path} has a camera or image settings of its own: the service renders "
-                 f"{products[0].path}'s view only, so it is not written (drt render writes it)")
-        else:
-            name = p.name or p.path.rsplit("/", 1)[-1] + ".####.exr"
-            if not p.name:
-                warn(f"RenderProduct {p.path} has no productName: written as {name}")
-            out.append(FrameProduct(expand_frame(name, frame), p.path, p.vars))
-    if not out:
-        raise RenderError("the render settings have no raster RenderProduct the service can write")
+    out = decide(products, frame, fallback=default_product_name(request.scene_path), one_view=True,
+                 warn=lambda message, item=None: warn(message if item is None else f"{message}: {item}"))
     skipped = unwritten([v for p in out for v in p.vars])
     if skipped:
         warn(f"{UNWRITTEN}: {', '.join(dict.fromkeys(skipped))}")

@@ -14,20 +14,42 @@ from renderer.motion.transform import matrix_at
 from renderer.prepared import PreparedScene
 
 
-def frame_channels(prep: PreparedScene, sums: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """EXR channels of a frame: premultiplied R, G, B, A, the requested AOVs and the denoised layer if asked."""
-    r = film.resolve(sums, prep.camera.params.exposure_scale)
+class ResolvedFrame:
+    """A frame's assembled sums resolved into pixels once (``film.resolve``: premultiplied colour, AOVs, LPE layers,
+    hit records), and its denoised colour computed at most once: what every product of the frame reads."""
+
+    def __init__(self, prep: PreparedScene, sums: dict[str, np.ndarray]):
+        self.sums = sums
+        self.pixels = film.resolve(sums, prep.camera.params.exposure_scale)
+        self._denoised: np.ndarray | None = None
+
+    def denoised(self) -> np.ndarray:
+        """(H, W, 3) colour through the denoiser, guided by albedo and normals: on the assembled frame, since the
+        filter needs the whole image around each pixel."""
+        if self._denoised is None:
+            r = self.pixels
+            self._denoised = denoise.denoise_rgb(r["rgba"][..., :3], r["albedo"], r["normal"])
+        return self._denoised
+
+
+def frame_channels(prep: PreparedScene, sums: dict[str, np.ndarray], *, aovs: tuple[str, ...] | None = None,
+                   resolved: ResolvedFrame | None = None) -> dict[str, np.ndarray]:
+    """EXR channels of a frame: premultiplied R, G, B, A, the AOVs (``aovs``, default the options') and the
+    denoised layer if asked; ``resolved``: the frame's sums already resolved (``ResolvedFrame``)."""
+    resolved = resolved if resolved is not None else ResolvedFrame(prep, sums)
+    aovs = prep.options.aovs if aovs is None else aovs
+    r = resolved.pixels
     ch = {"R": r["rgba"][..., 0], "G": r["rgba"][..., 1], "B": r["rgba"][..., 2], "A": r["rgba"][..., 3]}
-    if "depth" in prep.options.aovs:
+    if "depth" in aovs:
         ch["depth.Z"] = r["depth"]
-    if "normal" in prep.options.aovs:
+    if "normal" in aovs:
         ch.update({"N.X": r["normal"][..., 0], "N.Y": r["normal"][..., 1], "N.Z": r["normal"][..., 2]})
-    if prep.options.denoise:  # on the assembled frame: the filter needs the whole image around each pixel
-        d = denoise.denoise_rgb(r["rgba"][..., :3], r["albedo"], r["normal"])
+    if prep.options.denoise:
+        d = resolved.denoised()
         ch.update({"denoised.R": d[..., 0], "denoised.G": d[..., 1], "denoised.B": d[..., 2]})
-    if "spp" in prep.options.aovs and "spp" in sums:
+    if "spp" in aovs and "spp" in sums:
         ch["spp.Y"] = sums["spp"]
-    if "albedo" in prep.options.aovs:
+    if "albedo" in aovs:
         ch.update({"albedo.R": r["albedo"][..., 0], "albedo.G": r["albedo"][..., 1],
                    "albedo.B": r["albedo"][..., 2]})
     ch.update(lpe_channels(prep, r))

@@ -28,7 +28,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from renderer.film import film, hit_vars, id_tables
+from renderer.film import hit_vars, id_tables
+from renderer.output.frame import (FrameImage, ResolvedFrame, cryptomatte_channels, frame_attributes, frame_channels,
+                                   frame_windows)
 
 # raw source names (lower case) -> what the renderer makes of them: the name Hydra, Karma and RenderMan use
 RAW_SOURCES = {
@@ -177,19 +179,19 @@ def _is_half(var, data_half: bool, half: bool, kind: str) -> bool:
     return data_half or (half and kind != "depth")
 
 
-def product_channels(prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = (),
-                     half: bool = False) -> tuple[dict[str, np.ndarray], set[str]]:
+def product_channels(prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = (), half: bool = False,
+                     resolved: ResolvedFrame | None = None) -> tuple[dict[str, np.ndarray], set[str]]:
     """A product's EXR channels and the names of those stored as HALF. A product without vars holds what a plain
     render writes (``frame_channels``: the beauty and the AOVs asked for); with vars, its vars, then the AOVs asked
-    for on the command line (``user_aovs``) and the denoised layer if asked."""
-    from renderer.output.frame import frame_channels
-
-    plain = frame_channels(replace(prep, options=replace(prep.options, aovs=tuple(user_aovs))), sums)
+    for on the command line (``user_aovs``) and the denoised layer if asked. ``resolved``: the frame's sums
+    resolved once for all its products (``ResolvedFrame``; default: resolved here)."""
+    resolved = resolved if resolved is not None else ResolvedFrame(prep, sums)
+    plain = frame_channels(prep, sums, aovs=tuple(user_aovs), resolved=resolved)
     plain = {n: a for n, a in plain.items() if not n.startswith(VAR_LAYER)}  # other products' vars
     if not vars_:
         names = {n for n in plain if half and not (n == "Z" or n.startswith("depth."))}
         return plain, names
-    r = film.resolve(sums, prep.camera.params.exposure_scale)
+    r = resolved.pixels
     out: dict[str, np.ndarray] = {}
     halves: set[str] = set()
     for var in vars_:
@@ -220,14 +222,12 @@ def product_channels(prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = ()
 
 
 def product_image(prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = (),
-                  user_cryptomatte: tuple[str, ...] = (), half: bool = False):
+                  user_cryptomatte: tuple[str, ...] = (), half: bool = False, resolved: ResolvedFrame | None = None):
     """A product's EXR as plain values that pickle (``renderer.render.FrameImage``) and the names of its channels
     stored as HALF: ``product_channels``, and the Cryptomatte layers its vars or the command line ask for. Made
     where the prepared frame is (a worker of the service), written elsewhere with ``image.write(path,
     half=halves)``, the same bits as ``write_product``."""
-    from renderer.output.frame import cryptomatte_channels, frame_attributes, frame_windows, FrameImage
-
-    channels, halves = product_channels(prep, sums, vars_, user_aovs=user_aovs, half=half)
+    channels, halves = product_channels(prep, sums, vars_, user_aovs=user_aovs, half=half, resolved=resolved)
     kinds = needed_cryptomatte(vars_) + tuple(user_cryptomatte) if vars_ else None  # None: all asked for
     crypto, manifests = cryptomatte_channels(prep, sums, kinds)
     return FrameImage(channels={**channels, **crypto}, attributes={**frame_attributes(prep), **manifests},
@@ -235,14 +235,15 @@ def product_image(prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = (),
 
 
 def write_product(path, prep, sums: dict, vars_, *, user_aovs: tuple[str, ...] = (),
-                  user_cryptomatte: tuple[str, ...] = (), half: bool = False, warn=None) -> int:
+                  user_cryptomatte: tuple[str, ...] = (), half: bool = False, warn=None,
+                  resolved: ResolvedFrame | None = None) -> int:
     """Write a product atomically (``product_image``) in the format its extension names
     (``renderer.output.image_formats``: the EXR, or the beauty of a PNG, JPEG or TIFF, whose left-out layers
     ``warn(message, layers)`` is told). Returns the number of non-finite values zeroed."""
     from renderer.output.image_formats import LEFT_OUT, image_format, left_out, write_image
 
     image, halves = product_image(prep, sums, vars_, user_aovs=user_aovs, user_cryptomatte=user_cryptomatte,
-                                  half=half)
+                                  half=half, resolved=resolved)
     missing = left_out(image.channels, image_format(path))
     if missing and warn is not None:
         warn(LEFT_OUT, ", ".join(missing))

@@ -117,28 +117,11 @@ class _Warnings:
 
 
 def _targets(args, products: list, frame: float, warn) -> list[tuple[str, object]]:
-    """(output path as given, product or None) of a frame: ``-o`` for the first product (or the plain render),
-    each other product to its ``productName``."""
-    from renderer.errors import RenderError
+    """(output path as given, product or None) of a frame (``renderer.output.frame_products``: ``-o`` for the first
+    product or the plain render, each other product to its ``productName``), each checked for a format drt writes."""
+    from renderer.output.frame_products import frame_products
 
-    if not products:
-        if args.output is None:
-            raise RenderError("no -o given and the render settings name no RenderProduct to write")
-        _check_format(expand_frame(args.output, frame), None)
-        return [(expand_frame(args.output, frame), None)]
-    out = []
-    for i, product in enumerate(products):
-        if product.type != "raster":
-            warn(f"{product.type} products are not written (drt writes raster images)", product.path)
-            continue
-        if i == 0 and args.output is not None:
-            out.append((expand_frame(args.output, frame), product))
-        elif not product.name:
-            raise RenderError(f"RenderProduct {product.path} has no productName (give -o)")
-        else:
-            out.append((expand_frame(product.name, frame), product))
-    if not out:
-        raise RenderError("the render settings have no raster RenderProduct to write")
+    out = [(fp.name, fp.product) for fp in frame_products(products, frame, output=args.output, warn=warn)]
     for name, product in out:
         _check_format(name, product)
     return out
@@ -214,8 +197,9 @@ class _Run:
 
     def snapshot(self) -> None:
         """Write the frame in progress, its finished tiles (the rest black), to its outputs (SIGUSR1)."""
-        from renderer.output.var_channels import write_product
         from renderer.integrator.frame import assemble
+        from renderer.output.frame import ResolvedFrame
+        from renderer.output.var_channels import write_product
 
         if self.in_progress is None:
             return
@@ -225,9 +209,11 @@ class _Run:
             sys.stderr.write("drt: snapshot: no tile finished yet\n")
             return
         sums = assemble(tiles, prep.width, prep.height)
+        resolved = ResolvedFrame(prep, sums)  # once for every product of the frame
         for path, name, product in members:
             write_product(path, prep, sums, product.vars if product else (), user_aovs=self.base.options.aovs,
-                          user_cryptomatte=self.base.options.cryptomatte, half=self.base.half, warn=self.warn)
+                          user_cryptomatte=self.base.options.cryptomatte, half=self.base.half, warn=self.warn,
+                          resolved=resolved)
             sys.stderr.write(f"drt: snapshot of {len(tiles)} tiles written to {name}\n")
         sys.stderr.flush()
 
@@ -254,6 +240,7 @@ class _Run:
     def frame(self, frame: float) -> None:
         from dataclasses import replace
 
+        from renderer.output.frame import ResolvedFrame
         from renderer.output.var_channels import UNWRITTEN, needs, unwritten, with_needs, write_product
         from renderer.film.tiles import auto_tile_size
         from renderer.integrator.frame import render_frame
@@ -301,10 +288,11 @@ class _Run:
                 self.in_progress = None
             if result.nonfinite:
                 self.warn(f"{result.nonfinite} samples had NaN/Inf radiance and were zeroed")
+            resolved = ResolvedFrame(prep, result.sums)  # once for every product of the frame
             for path, name, product in members:
                 zeroed = write_product(path, prep, result.sums, product.vars if product else (),
                                        user_aovs=base.options.aovs, user_cryptomatte=base.options.cryptomatte,
-                                       half=base.half, warn=self.warn)
+                                       half=base.half, warn=self.warn, resolved=resolved)
                 if zeroed:
                     self.warn(f"{zeroed} non-finite pixel values were zeroed in {name}")
                 self._report(name, prep, result, load)

@@ -383,14 +383,17 @@ def frame_image_task(task: FrameTask, scene: ScenePackage) -> dict:
     attributes and windows as plain values): ``{"products": [ProductImage]}`` or ``{"error"}``. The service writes
     them with the renderer's writer, so each EXR has the same bits as ``drt render``'s."""
     from renderer.errors import RenderError
+    from renderer.output.frame import ResolvedFrame
     from renderer.output.var_channels import product_image
 
     try:
         prep = prepared(task.spec, task.frame, scene, task.cache_size)
+        resolved = ResolvedFrame(prep, task.sums)  # once for every product of the frame
         out = []
         for p in local_scene(scene).products(task.spec, task.frame):
             image, halves = product_image(prep, task.sums, p.vars, user_aovs=task.spec.user_aovs,
-                                          user_cryptomatte=task.spec.user_cryptomatte, half=task.spec.request.half)
+                                          user_cryptomatte=task.spec.user_cryptomatte, half=task.spec.request.half,
+                                          resolved=resolved)
             out.append(ProductImage(p.name, p.prim, image, halves))
         return {"products": out}
     except RenderError as e:
