@@ -19,7 +19,8 @@ from renderer.errors import RenderError
 from renderer.output.names import expand_frame
 
 NOT_RASTER = "RenderProducts of a type drt does not write (it writes raster images) left out"
-OWN_VIEW = "RenderProducts with a camera or image settings of their own left out (a render of one view per frame)"
+OWN_VIEW = ("RenderProducts with a camera or image settings of their own not written (one view per frame here; drt render "
+            "writes them)")
 UNNAMED = "RenderProducts without a productName written under their prim's name"
 
 
