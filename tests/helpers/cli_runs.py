@@ -7,8 +7,9 @@ import subprocess
 import sys
 
 
-def drt(*args, cwd=None):
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+def drt(*args, cwd=None, env=None):
+    """``drt ARGS...`` in a process of its own; ``env``: variables added to this one's."""
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path), **(env or {}))
     return subprocess.run([sys.executable, "-m", "service.cli", *map(str, args)], capture_output=True, text=True,
                           cwd=cwd, env=env, timeout=300)
 

@@ -156,8 +156,10 @@ def test_without_a_matching_prebuilt_the_kernels_are_compiled(tmp_path):
         _run(tmp_path, "load", tmp_path / "other", prebuilt=tmp_path / "empty", no_compile=True)
 
 
+@pytest.mark.slow  # compiles every render module for this CPU where Warp's cache lacks them: about 2 min
 def test_drt_warmup_makes_later_renders_load_the_host_tuned_kernels(tmp_path):
-    """In Warp's own cache (where a user's renders look): the first run compiles, later ones only load."""
+    """In Warp's own cache (where a user's renders look): the first run compiles, later ones only load. (The
+    mechanism, on a tiny module, is in the default run: ``test_the_host_tuned_build_wins_once_warmed_up``.)"""
     p = subprocess.run([sys.executable, "-m", "service.cli", "warmup"], capture_output=True, text=True,
                        timeout=600, env=dict(os.environ, PYTHONPATH=str(ROOT)))
     assert p.returncode == 0, p.stderr

@@ -4,8 +4,6 @@ before the render, left-out layers named in one warning."""
 from __future__ import annotations
 
 import os
-import subprocess
-import sys
 
 import numpy as np
 import OpenImageIO as oiio
@@ -14,15 +12,10 @@ import pytest
 from pxr import Gf, UsdRender
 
 import stages
+from cli_runs import drt
 from renderer.film.exr import read_exr
 
 SIZE = ("--res", 32, 18, "--spp", 4, "--seed", 7)
-
-
-def drt(*args, cwd=None, env=None):
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path), **(env or {}))
-    return subprocess.run([sys.executable, "-m", "service.cli", *map(str, args)], capture_output=True, text=True,
-                          cwd=cwd, env=env, timeout=300)
 
 
 @pytest.fixture(scope="module")
