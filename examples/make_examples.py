@@ -354,7 +354,7 @@ def volume_grids(n=40, seed=4):
 def volumes(path):
     import sys
 
-    sys.path.insert(0, str(HERE.parent / "tests"))
+    sys.path.insert(0, str(HERE.parent / "tests" / "helpers"))
     from pxr import UsdVol
     from vdb_files import have_openvdb, write_vdb
 
