@@ -5,11 +5,14 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from service_helpers import cli_env
 
 SCRIPT = Path(__file__).resolve().parents[2] / "bench" / "load_test.py"
 
 
+@pytest.mark.slow  # 9 s: a benchmark script's smoke test
 def test_load_test_script_small():
     r = subprocess.run([sys.executable, str(SCRIPT), "--clients", "4", "--timeout", "300"], capture_output=True,
                        text=True, env=cli_env(), timeout=600)

@@ -144,6 +144,7 @@ def test_a_range_of_products_through_drt_submit_and_fetch(servers, shot, tmp_pat
                                            "time is read on the server)\n")
 
 
+@pytest.mark.slow  # 9 s of real processes; the naming rule itself is tests/renderer/output/test_frame_products.py's
 def test_a_stage_without_products_writes_one_image_named_after_the_scene(servers, card, tmp_path):  # noqa: F811
     server = servers()
     r = drt("submit", card, "--frames", "0-2x2", "--width", 16, "--height", 12, "--spp", 1, "--server", server.url,

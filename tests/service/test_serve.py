@@ -185,6 +185,7 @@ def _coordinator(server: Server) -> psutil.Process:
     return proc
 
 
+@pytest.mark.slow  # 15 s; the killed service, API process and worker process stay in the default run
 def test_a_killed_coordinator_is_started_again_and_its_job_finishes_the_same(servers, card, tmp_path):
     """The scheduler's process dies mid-job: the API keeps answering, says the cluster is unreachable and refuses
     submissions with 503 until a new coordinator has resumed the job from its checkpoints; the old one's workers
